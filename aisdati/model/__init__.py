@@ -1,0 +1,1 @@
+"""DATI and the trajectory-imitation environment (no knowledge of AIS file formats)."""

@@ -1,0 +1,1 @@
+"""Preprocessing of MarineCadastre AIS files: read, clean, segment, cluster."""
