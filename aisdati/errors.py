@@ -1,0 +1,5 @@
+"""The one exception type for user mistakes: the CLI prints its message on one line, no traceback."""
+
+
+class UserError(Exception):
+    """Bad input or options from the user (missing file, unknown family, wrong column...)."""
