@@ -1,0 +1,362 @@
+"""Exact dynamic time warping (DTW), for whole pairs of series and for two series growing together.
+
+DATI's reward compares the imitated track with the expert track by DTW. The paper's official code
+uses `fastdtw`, which is an approximation (its coarse-to-fine search can miss the optimal warping
+path); here every value is the exact DTW: the sum of point distances along the optimal warping
+path, with the recursion D[i, j] = d(a_i, b_j) + min(D[i-1, j-1], D[i-1, j], D[i, j-1]).
+
+The reward needs the DTW of the two growing prefixes at every step of an episode. Recomputing it
+from scratch costs O(t²) at step t, so O(n³) for an n-step episode. `IncrementalDTW` keeps only the
+last row and the last column of the cumulative cost matrix: when both series grow by one point it
+computes the new row and the new column from them in O(t), so a 900-step episode is O(n²) in all.
+
+Ties between predecessors are broken deterministically, in the order diagonal (i-1, j-1), then
+up (i-1, j), then left (i, j-1); `dtw_path`, `dtw_path_length` and `IncrementalDTW` all follow
+this rule, so their paths and path lengths agree. Inner loops are compiled with numba.
+
+Metrics: "euclidean" (points of any dimension) and "haversine" (points are (lon, lat) in degrees;
+great-circle distance in metres on a sphere of radius `EARTH_RADIUS_M`, as the `haversine` package).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from aisdati.geo import EARTH_RADIUS_M
+
+_METRICS = {"euclidean": 0, "haversine": 1}
+_EUCLIDEAN = 0
+_DIAG, _UP, _LEFT = 0, 1, 2
+
+
+def _metric_code(metric: str) -> int:
+    try:
+        return _METRICS[metric]
+    except (KeyError, TypeError):
+        allowed = ", ".join(repr(m) for m in _METRICS)
+        raise ValueError(f"unknown DTW metric {metric!r}; allowed: {allowed}") from None
+
+
+def _as_series(x, name: str, code: int) -> np.ndarray:
+    """Validate a series as a C-contiguous float64 array [n, d] (1-D input is read as d = 1)."""
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.shape[0] == 0:
+        raise ValueError(f"{name} must be a non-empty array [n, d], got shape {arr.shape}")
+    if code != _EUCLIDEAN and arr.shape[1] != 2:
+        raise ValueError(f"haversine DTW needs (lon, lat) points, {name} has shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def _check_pair(a, b, metric: str) -> tuple[np.ndarray, np.ndarray, int]:
+    """Validate two series; return them prepared for `_point_dist`, and the metric code."""
+    code = _metric_code(metric)
+    a, b = _as_series(a, "a", code), _as_series(b, "b", code)
+    if a.shape[1] != b.shape[1]:
+        raise ValueError(f"point dimensions differ: a is {a.shape}, b is {b.shape}")
+    return _prepare(a, code), _prepare(b, code), code
+
+
+@njit(cache=True)
+def _prepare_point(src: np.ndarray, dst: np.ndarray, code: int) -> None:
+    """Store point `src` in the form `_point_dist` reads: itself for euclidean, and
+    (lon, lat, cos lat) in radians for haversine, so each cosine is taken once per point."""
+    if code == _EUCLIDEAN:
+        dst[:] = src
+    else:
+        lat = math.radians(src[1])
+        dst[0] = math.radians(src[0])
+        dst[1] = lat
+        dst[2] = math.cos(lat)
+
+
+@njit(cache=True)
+def _prepare(x: np.ndarray, code: int) -> np.ndarray:
+    """`_prepare_point` applied to every point of a series [n, d]."""
+    out = np.empty((x.shape[0], x.shape[1] if code == _EUCLIDEAN else 3))
+    for i in range(x.shape[0]):
+        _prepare_point(x[i], out[i], code)
+    return out
+
+
+@njit(cache=True)
+def _point_dist(a: np.ndarray, i: int, b: np.ndarray, j: int, code: int) -> float:
+    """Distance between prepared points a[i] and b[j] under the metric `code`."""
+    if code == _EUCLIDEAN:
+        s = 0.0
+        for k in range(a.shape[1]):
+            diff = a[i, k] - b[j, k]
+            s += diff * diff
+        return math.sqrt(s)
+    h = (
+        math.sin((b[j, 1] - a[i, 1]) * 0.5) ** 2
+        + a[i, 2] * b[j, 2] * math.sin((b[j, 0] - a[i, 0]) * 0.5) ** 2
+    )
+    return 2.0 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(h, 0.0), 1.0)))
+
+
+@njit(cache=True)
+def _best(diag: float, up: float, left: float) -> tuple[float, int]:
+    """The smallest predecessor cost and its direction; ties prefer diagonal, then up, then left."""
+    best, move = diag, _DIAG
+    if up < best:
+        best, move = up, _UP
+    if left < best:
+        best, move = left, _LEFT
+    return best, move
+
+
+@njit(cache=True)
+def _cost_and_length(a: np.ndarray, b: np.ndarray, code: int) -> tuple[float, int]:
+    """DTW cost and optimal-path length with O(m) memory (two rolling rows)."""
+    n, m = a.shape[0], b.shape[0]
+    inf = np.inf
+    prev_d = np.full(m, inf)
+    prev_l = np.zeros(m, dtype=np.int64)
+    cur_d = np.empty(m)
+    cur_l = np.empty(m, dtype=np.int64)
+    for i in range(n):
+        for j in range(m):
+            d = _point_dist(a, i, b, j, code)
+            if i == 0 and j == 0:
+                cur_d[j], cur_l[j] = d, 1
+                continue
+            diag = prev_d[j - 1] if j > 0 else inf
+            left = cur_d[j - 1] if j > 0 else inf
+            best, move = _best(diag, prev_d[j], left)
+            cur_d[j] = d + best
+            if move == _DIAG:
+                cur_l[j] = prev_l[j - 1] + 1
+            elif move == _UP:
+                cur_l[j] = prev_l[j] + 1
+            else:
+                cur_l[j] = cur_l[j - 1] + 1
+        prev_d, cur_d = cur_d, prev_d
+        prev_l, cur_l = cur_l, prev_l
+    return prev_d[m - 1], prev_l[m - 1]
+
+
+@njit(cache=True)
+def _cost_and_path(a: np.ndarray, b: np.ndarray, code: int) -> tuple[float, np.ndarray]:
+    """DTW cost and the optimal path (k x 2), from an n x m matrix of back-pointers."""
+    n, m = a.shape[0], b.shape[0]
+    inf = np.inf
+    moves = np.empty((n, m), dtype=np.int8)
+    prev_d = np.full(m, inf)
+    cur_d = np.empty(m)
+    for i in range(n):
+        for j in range(m):
+            d = _point_dist(a, i, b, j, code)
+            if i == 0 and j == 0:
+                cur_d[j] = d
+                moves[i, j] = _DIAG
+                continue
+            diag = prev_d[j - 1] if j > 0 else inf
+            left = cur_d[j - 1] if j > 0 else inf
+            best, move = _best(diag, prev_d[j], left)
+            cur_d[j] = d + best
+            moves[i, j] = move
+        prev_d, cur_d = cur_d, prev_d
+    path = np.empty((n + m - 1, 2), dtype=np.int64)
+    i, j, k = n - 1, m - 1, 0
+    while True:
+        path[k, 0], path[k, 1] = i, j
+        k += 1
+        if i == 0 and j == 0:
+            break
+        move = moves[i, j]
+        if move == _DIAG:
+            i -= 1
+            j -= 1
+        elif move == _UP:
+            i -= 1
+        else:
+            j -= 1
+    return prev_d[m - 1], path[:k][::-1].copy()
+
+
+@njit(cache=True)
+def _extend(
+    a: np.ndarray,
+    b: np.ndarray,
+    a_point: np.ndarray,
+    b_point: np.ndarray,
+    t: int,
+    row_d: np.ndarray,
+    row_l: np.ndarray,
+    col_d: np.ndarray,
+    col_l: np.ndarray,
+    code: int,
+) -> None:
+    """Append the points as a[t], b[t] (prepared) and turn the last row/column for prefixes of
+    length t into those for length t + 1, in place.
+
+    On entry row_d[j] = D[t-1, j] and col_d[i] = D[i, t-1] for 0 <= i, j < t (with path lengths in
+    row_l/col_l); on exit they hold D[t, j] and D[i, t] for 0 <= i, j <= t.
+    """
+    _prepare_point(a_point, a[t], code)
+    _prepare_point(b_point, b[t], code)
+    if t == 0:
+        d = _point_dist(a, 0, b, 0, code)
+        row_d[0] = col_d[0] = d
+        row_l[0] = col_l[0] = 1
+        return
+    inf = np.inf
+    corner_d, corner_l = row_d[t - 1], row_l[t - 1]  # D[t-1, t-1]
+    # New row i = t, j = 0..t-1: up is the old row, left is the new row.
+    diag_d, diag_l = inf, 0
+    for j in range(t):
+        up_d, up_l = row_d[j], row_l[j]
+        left_d = row_d[j - 1] if j > 0 else inf
+        best, move = _best(diag_d, up_d, left_d)
+        d = _point_dist(a, t, b, j, code)
+        row_d[j] = d + best
+        if move == _DIAG:
+            row_l[j] = diag_l + 1
+        elif move == _UP:
+            row_l[j] = up_l + 1
+        else:
+            row_l[j] = row_l[j - 1] + 1
+        diag_d, diag_l = up_d, up_l
+    # New column j = t, i = 0..t-1: left is the old column, up is the new column.
+    diag_d, diag_l = inf, 0
+    for i in range(t):
+        left_d, left_l = col_d[i], col_l[i]
+        up_d = col_d[i - 1] if i > 0 else inf
+        best, move = _best(diag_d, up_d, left_d)
+        d = _point_dist(a, i, b, t, code)
+        col_d[i] = d + best
+        if move == _DIAG:
+            col_l[i] = diag_l + 1
+        elif move == _UP:
+            col_l[i] = col_l[i - 1] + 1
+        else:
+            col_l[i] = left_l + 1
+        diag_d, diag_l = left_d, left_l
+    # Corner (t, t): diagonal is the old corner, up is D[t-1, t], left is D[t, t-1].
+    best, move = _best(corner_d, col_d[t - 1], row_d[t - 1])
+    d = _point_dist(a, t, b, t, code)
+    if move == _DIAG:
+        length = corner_l + 1
+    elif move == _UP:
+        length = col_l[t - 1] + 1
+    else:
+        length = row_l[t - 1] + 1
+    row_d[t] = col_d[t] = d + best
+    row_l[t] = col_l[t] = length
+
+
+def dtw(a, b, metric: str = "euclidean") -> float:
+    """Exact DTW between series a [n, d] and b [m, d]: the summed point distance along the
+    optimal warping path."""
+    a, b, code = _check_pair(a, b, metric)
+    return float(_cost_and_length(a, b, code)[0])
+
+
+def dtw_path(a, b, metric: str = "euclidean") -> tuple[float, np.ndarray]:
+    """Exact DTW cost and the optimal warping path, an int array [k, 2] of (i, j) pairs running
+    from (0, 0) to (n - 1, m - 1)."""
+    a, b, code = _check_pair(a, b, metric)
+    cost, path = _cost_and_path(a, b, code)
+    return float(cost), path
+
+
+def dtw_path_length(a, b, metric: str = "euclidean") -> tuple[float, int]:
+    """Exact DTW cost and the number of cells on the optimal path (the length of `dtw_path`)."""
+    a, b, code = _check_pair(a, b, metric)
+    cost, length = _cost_and_length(a, b, code)
+    return float(cost), int(length)
+
+
+class IncrementalDTW:
+    """Exact DTW of two series that grow together, one point each per `push`.
+
+    After t pushes, `distance` equals `dtw(a[:t], b[:t])`. Each push costs O(t) work; memory is
+    O(t) (the points, plus the last row and column of the cumulative cost matrix).
+    """
+
+    def __init__(self, metric: str = "euclidean", capacity: int = 256) -> None:
+        self._code = _metric_code(metric)
+        self.metric = metric
+        self._capacity = max(int(capacity), 1)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all pushed points."""
+        self._n = 0
+        self._dim = 0
+        self._a = np.empty((0, 0))
+        self._b = np.empty((0, 0))
+        self._row_d = np.empty(self._capacity)
+        self._col_d = np.empty(self._capacity)
+        self._row_l = np.empty(self._capacity, dtype=np.int64)
+        self._col_l = np.empty(self._capacity, dtype=np.int64)
+
+    def _grow(self, size: int) -> None:
+        def bigger(arr: np.ndarray) -> np.ndarray:
+            out = np.empty((size, *arr.shape[1:]), dtype=arr.dtype)
+            out[: self._n] = arr[: self._n]
+            return out
+
+        self._a, self._b = bigger(self._a), bigger(self._b)
+        self._row_d, self._col_d = bigger(self._row_d), bigger(self._col_d)
+        self._row_l, self._col_l = bigger(self._row_l), bigger(self._col_l)
+
+    def push(self, a_point, b_point) -> float:
+        """Append one point to each series; return the DTW of the two prefixes."""
+        pa = np.asarray(a_point, dtype=np.float64).reshape(-1)
+        pb = np.asarray(b_point, dtype=np.float64).reshape(-1)
+        if self._n == 0:
+            if pa.shape != pb.shape or pa.size == 0:
+                raise ValueError(
+                    f"points must have equal non-zero size, got {pa.shape}, {pb.shape}"
+                )
+            if self._code != _EUCLIDEAN and pa.size != 2:
+                raise ValueError(f"haversine DTW needs (lon, lat) points, got {pa.size} values")
+            self._dim = pa.size
+            width = self._dim if self._code == _EUCLIDEAN else 3
+            self._a = np.empty((self._capacity, width))
+            self._b = np.empty((self._capacity, width))
+        elif pa.size != self._dim or pb.size != self._dim:
+            raise ValueError(f"points must have {self._dim} values, got {pa.size} and {pb.size}")
+        t = self._n
+        if t == self._a.shape[0]:
+            self._grow(2 * t)
+        _extend(
+            self._a,
+            self._b,
+            pa,
+            pb,
+            t,
+            self._row_d,
+            self._row_l,
+            self._col_d,
+            self._col_l,
+            self._code,
+        )
+        self._n = t + 1
+        return float(self._row_d[t])
+
+    @property
+    def n(self) -> int:
+        """Number of points pushed into each series."""
+        return self._n
+
+    @property
+    def distance(self) -> float:
+        """DTW of the two prefixes pushed so far (0 when empty)."""
+        return float(self._row_d[self._n - 1]) if self._n else 0.0
+
+    @property
+    def path_length(self) -> int:
+        """Number of cells on the optimal warping path of the prefixes (0 when empty)."""
+        return int(self._row_l[self._n - 1]) if self._n else 0
+
+    @property
+    def mean_distance(self) -> float:
+        """Mean point distance along the optimal path: distance / path_length (0 when empty)."""
+        return self.distance / self.path_length if self._n else 0.0

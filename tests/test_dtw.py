@@ -1,0 +1,150 @@
+"""Exact DTW: whole-pair forms against a naive reference, the incremental form against the
+whole-pair form, and the haversine metric against the `haversine` package."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from haversine import Unit, haversine
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from aisdati.dtw import IncrementalDTW, dtw, dtw_path, dtw_path_length
+from aisdati.geo import haversine_m
+
+COORD = st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
+# Few distinct values make exact ties between warping paths common.
+TIED = st.sampled_from([0.0, 1.0, 2.0])
+
+
+def series(max_len: int = 12) -> st.SearchStrategy[np.ndarray]:
+    return st.integers(1, max_len).flatmap(
+        lambda n: arrays(np.float64, (n, 2), elements=st.one_of(COORD, TIED))
+    )
+
+
+def point_dist(p: np.ndarray, q: np.ndarray, metric: str) -> float:
+    if metric == "euclidean":
+        return math.dist(p, q)
+    return float(haversine_m(p[0], p[1], q[0], q[1]))
+
+
+def naive_dtw(a: np.ndarray, b: np.ndarray, metric: str = "euclidean") -> float:
+    n, m = len(a), len(b)
+    cost = [[math.inf] * (m + 1) for _ in range(n + 1)]
+    cost[0][0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, m + 1):
+            best = min(cost[i - 1][j - 1], cost[i - 1][j], cost[i][j - 1])
+            cost[i][j] = point_dist(a[i - 1], b[j - 1], metric) + best
+    return cost[n][m]
+
+
+def random_track(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A (lon, lat) random walk of small steps around the Baltic."""
+    start = np.array([18.0, 57.0])
+    return start + np.cumsum(rng.normal(0.0, 0.01, size=(n, 2)), axis=0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(series(), series())
+def test_dtw_matches_naive_reference(a, b):
+    assert dtw(a, b) == pytest.approx(naive_dtw(a, b), rel=1e-9, abs=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(series(), series())
+def test_dtw_path_is_a_valid_optimal_path(a, b):
+    cost, path = dtw_path(a, b)
+    n, m = len(a), len(b)
+    assert cost == pytest.approx(dtw(a, b), rel=1e-12, abs=1e-12)
+    assert path.dtype.kind == "i" and path.shape[1] == 2
+    assert tuple(path[0]) == (0, 0) and tuple(path[-1]) == (n - 1, m - 1)
+    steps = np.diff(path, axis=0)
+    assert np.all((steps >= 0) & (steps <= 1)) and np.all(steps.sum(axis=1) >= 1)
+    along = sum(math.dist(a[i], b[j]) for i, j in path)
+    assert along == pytest.approx(cost, rel=1e-9, abs=1e-9)
+    length_cost, length = dtw_path_length(a, b)
+    assert length == len(path)
+    assert length_cost == cost
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(1, 12), st.data())
+def test_incremental_matches_whole_pair_on_random_series(n, data):
+    elements = data.draw(st.sampled_from([COORD, TIED]))
+    a = data.draw(arrays(np.float64, (n, 2), elements=elements))
+    b = data.draw(arrays(np.float64, (n, 2), elements=elements))
+    inc = IncrementalDTW(capacity=2)
+    for t in range(len(a)):
+        value = inc.push(a[t], b[t])
+        cost, length = dtw_path_length(a[: t + 1], b[: t + 1])
+        assert value == inc.distance == cost
+        assert inc.path_length == length
+        assert inc.n == t + 1
+
+
+@pytest.mark.parametrize("metric", ["euclidean", "haversine"])
+def test_incremental_matches_whole_pair_beyond_capacity(metric):
+    rng = np.random.default_rng(7)
+    n = 150
+    a, b = random_track(rng, n), random_track(rng, n)
+    # Repeated points create exact ties, which exercise the tie-breaking rule.
+    b[40:60] = b[40]
+    a[90:100] = b[90:100]
+    inc = IncrementalDTW(metric=metric, capacity=8)
+    assert inc.n == 0 and inc.distance == 0.0 and inc.path_length == 0
+    assert inc.mean_distance == 0.0
+    for t in range(n):
+        inc.push(a[t], b[t])
+        cost, length = dtw_path_length(a[: t + 1], b[: t + 1], metric=metric)
+        assert inc.distance == pytest.approx(cost, rel=1e-12)
+        assert inc.path_length == length
+        assert inc.mean_distance == pytest.approx(cost / length, rel=1e-12)
+    assert dtw(a, b, metric=metric) == pytest.approx(naive_dtw(a, b, metric), rel=1e-9)
+    inc.reset()
+    assert inc.n == 0 and inc.distance == 0.0
+    assert inc.push(a[0], b[0]) == pytest.approx(point_dist(a[0], b[0], metric), rel=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(-180.0, 180.0),
+    st.floats(-90.0, 90.0),
+    st.floats(-180.0, 180.0),
+    st.floats(-90.0, 90.0),
+)
+def test_haversine_metric_matches_haversine_package(lon1, lat1, lon2, lat2):
+    expected = haversine((lat1, lon1), (lat2, lon2), unit=Unit.METERS)
+    got = dtw([[lon1, lat1]], [[lon2, lat2]], metric="haversine")
+    assert got == pytest.approx(expected, rel=1e-9, abs=1e-6)
+
+
+@pytest.mark.parametrize("metric", ["euclidean", "haversine"])
+def test_identical_series_give_zero(metric):
+    a = random_track(np.random.default_rng(3), 40)
+    assert dtw(a, a, metric=metric) == 0.0
+    cost, path = dtw_path(a, a, metric=metric)
+    assert cost == 0.0
+    np.testing.assert_array_equal(path, np.stack([np.arange(40)] * 2, axis=1))
+    assert dtw_path_length(a, a, metric=metric) == (0.0, 40)
+    inc = IncrementalDTW(metric=metric)
+    for p in a:
+        assert inc.push(p, p) == 0.0
+    assert inc.path_length == 40
+
+
+def test_euclidean_works_in_any_dimension():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(7, 5)), rng.normal(size=(9, 5))
+    assert dtw(a, b) == pytest.approx(naive_dtw(a, b), rel=1e-12)
+
+
+def test_unknown_metric_raises():
+    with pytest.raises(ValueError, match="euclidean"):
+        dtw([[0.0, 0.0]], [[1.0, 1.0]], metric="manhattan")
+    with pytest.raises(ValueError, match="haversine"):
+        IncrementalDTW(metric="cosine")
