@@ -1,0 +1,180 @@
+"""Filter and clean: sentinels and ranges, region of interest and SOG, duplicates, position
+outliers, and SOG/COG for sources that only give positions.
+
+Two kinds of stage. `check_values` and `filter_area_speed` look at one row at a time, so they run
+on every record batch as it is read (vectorised, cheap, and they drop most rows early).
+`clean_vessels` needs each vessel's reports in time order, so it runs on a partition that holds
+whole vessels. Every function returns a rejection code per row (see `report.REASONS`) instead of
+dropping rows, so each dropped row is counted under one reason.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import pyarrow as pa
+
+from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg
+from aisdati.preprocess.report import CODE
+from aisdati.preprocess.roi import in_roi
+from aisdati.preprocess.settings import IngestSettings
+
+SENTINEL_LAT = 91.0
+SENTINEL_LON = 181.0
+SENTINEL_SOG = 102.3
+SENTINEL_COG = 360.0
+MAX_VALID_SOG = 102.2
+"""AIS encodes 'not available' as LAT 91, LON 181, SOG 102.3, COG 360 (and heading 511; heading is
+not read, since the pipeline does not use it, so it rejects nothing)."""
+
+POSITION_TOLERANCE_M = 50.0
+"""Slack on the implied-speed test: GPS noise and whole-second timestamps make two honest
+reports a few seconds apart look faster than they are."""
+
+KNOT_MPS = 1852.0 / 3600.0
+
+
+def _mark(codes: np.ndarray, mask: np.ndarray, reason: str) -> None:
+    """Give `reason` to the rows of `mask` that no earlier check rejected."""
+    codes[(codes == 0) & mask] = CODE[reason]
+
+
+def _col(table: pa.Table, name: str) -> np.ndarray:
+    return table.column(name).to_numpy()
+
+
+def check_values(table: pa.Table, codes: np.ndarray) -> pa.Table:
+    """Reject sentinels and out-of-range values; return the table with COG normalised into
+    [0, 360) (some sources write -60.6 for 299.4)."""
+    lat, lon, sog, cog = (_col(table, c) for c in ("lat", "lon", "sog", "cog"))
+    with np.errstate(invalid="ignore"):
+        _mark(codes, lat == SENTINEL_LAT, "sentinel_lat")
+        _mark(codes, lon == SENTINEL_LON, "sentinel_lon")
+        _mark(codes, sog == SENTINEL_SOG, "sentinel_sog")
+        _mark(codes, cog == SENTINEL_COG, "sentinel_cog")
+        bad = (np.abs(lat) > 90) | (np.abs(lon) > 180) | (sog < 0) | (sog > MAX_VALID_SOG)
+        _mark(codes, bad | (cog <= -360) | (cog > 360), "out_of_range")
+        cog = np.mod(cog, 360.0)
+    cog[cog >= 360.0] = 0.0  # np.mod(-1e-15, 360) rounds to 360
+    return table.set_column(table.schema.get_field_index("cog"), "cog", pa.array(cog))
+
+
+def filter_area_speed(table: pa.Table, codes: np.ndarray, roi, settings: IngestSettings) -> None:
+    """Reject reports outside the region of interest (when there is one) and at or below
+    `min_sog_kn`. Rows whose SOG is still to be derived are judged after derivation."""
+    if roi is not None:
+        idx = np.flatnonzero(codes == 0)
+        inside = in_roi(roi, _col(table, "lon")[idx], _col(table, "lat")[idx])
+        codes[idx[~inside]] = CODE["outside_roi"]
+    with np.errstate(invalid="ignore"):
+        _mark(codes, _col(table, "sog") <= settings.min_sog_kn, "slow")
+
+
+@numba.njit(cache=True)
+def _implied_speed_outliers(mmsi, time_us, lon, lat, max_mps, tolerance_m, reset_us):
+    """Mask of reports too far from the previous *kept* report of the same vessel to be reached
+    at `max_mps`. Sequential by nature (a rejected report must not become the reference), so
+    compiled. After a gap longer than `reset_us` the next report is trusted again, so one bad
+    reference cannot reject the rest of a vessel's history."""
+    n = mmsi.shape[0]
+    reject = np.zeros(n, dtype=np.bool_)
+    last = -1
+    to_rad = math.pi / 180.0
+    for i in range(n):
+        if last < 0 or mmsi[i] != mmsi[last] or time_us[i] - time_us[last] > reset_us:
+            last = i
+            continue
+        lat1 = lat[last] * to_rad
+        lat2 = lat[i] * to_rad
+        a = (
+            math.sin((lat2 - lat1) / 2) ** 2
+            + math.cos(lat1) * math.cos(lat2) * math.sin((lon[i] - lon[last]) * to_rad / 2) ** 2
+        )
+        dist = 2 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(a, 0.0), 1.0)))
+        dt_s = (time_us[i] - time_us[last]) / 1e6
+        if dist > max_mps * dt_s + tolerance_m:
+            reject[i] = True
+        else:
+            last = i
+    return reject
+
+
+def clean_vessels(table: pa.Table, settings: IngestSettings) -> tuple[pa.Table, np.ndarray]:
+    """Per-vessel cleaning of a partition holding whole vessels: sort by (MMSI, time), reject
+    exact duplicates and repeated timestamps, then position outliers by implied speed, then derive
+    missing SOG/COG from the kept positions and apply the SOG filter to them.
+    Returns the sorted table (with SOG/COG filled in) and one code per row."""
+    order = np.lexsort((_col(table, "time").view(np.int64), _col(table, "mmsi")))
+    table = table.take(pa.array(order))
+    mmsi = _col(table, "mmsi")
+    time_us = _col(table, "time").view(np.int64)
+    lon, lat, sog, cog = (_col(table, c).copy() for c in ("lon", "lat", "sog", "cog"))
+    codes = np.zeros(len(mmsi), dtype=np.uint8)
+    if len(mmsi) == 0:
+        return table, codes
+
+    first = np.r_[True, (mmsi[1:] != mmsi[:-1]) | (time_us[1:] != time_us[:-1])]
+    head = np.maximum.accumulate(np.where(first, np.arange(len(first)), 0))
+    same = (lon == lon[head]) & (lat == lat[head])
+    for v in (sog, cog):
+        same &= (v == v[head]) | (np.isnan(v) & np.isnan(v[head]))
+    _mark(codes, ~first & same, "duplicate")
+    _mark(codes, ~first, "repeated_timestamp")
+
+    kept = np.flatnonzero(codes == 0)
+    outliers = _implied_speed_outliers(
+        mmsi[kept],
+        time_us[kept],
+        lon[kept],
+        lat[kept],
+        settings.max_speed_kn * KNOT_MPS,
+        POSITION_TOLERANCE_M,
+        int(settings.stop_gap_s * 1e6),
+    )
+    codes[kept[outliers]] = CODE["implied_speed"]
+
+    kept = np.flatnonzero(codes == 0)
+    need_sog = np.isnan(sog[kept])
+    need_cog = np.isnan(cog[kept])
+    if need_sog.any() or need_cog.any():
+        d_sog, d_cog = derive_sog_cog(mmsi[kept], time_us[kept], lon[kept], lat[kept], settings)
+        sog[kept[need_sog]] = d_sog[need_sog]
+        cog[kept[need_cog]] = d_cog[need_cog]
+        slow = kept[need_sog & (d_sog <= settings.min_sog_kn)]
+        codes[slow] = CODE["slow"]
+    table = table.set_column(4, "sog", pa.array(sog)).set_column(5, "cog", pa.array(cog))
+    return table, codes
+
+
+def derive_sog_cog(
+    mmsi: np.ndarray,
+    time_us: np.ndarray,
+    lon: np.ndarray,
+    lat: np.ndarray,
+    settings: IngestSettings,
+) -> tuple[np.ndarray, np.ndarray]:
+    """SOG (knots) and COG (degrees) from consecutive positions of each vessel, sorted by time:
+    from the previous report when it is of the same vessel and less than a stop gap earlier, else
+    towards the next one; a report with neither neighbour is at rest (SOG 0)."""
+    n = len(mmsi)
+    step_sog = np.zeros(max(n - 1, 0))
+    step_cog = np.zeros(max(n - 1, 0))
+    linked = np.zeros(max(n - 1, 0), dtype=bool)
+    if n > 1:
+        dt_s = (time_us[1:] - time_us[:-1]) / 1e6
+        linked = (mmsi[1:] == mmsi[:-1]) & (dt_s > 0) & (dt_s <= settings.stop_gap_s)
+        dist = haversine_m(lon[:-1], lat[:-1], lon[1:], lat[1:])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step_sog = np.where(linked, dist / np.where(dt_s > 0, dt_s, 1.0) / KNOT_MPS, 0.0)
+        step_cog = initial_bearing_deg(lon[:-1], lat[:-1], lon[1:], lat[1:])
+    sog = np.zeros(n)
+    cog = np.zeros(n)
+    back = np.r_[False, linked]  # row i has a step from i-1
+    fwd = np.r_[linked, False] & ~back  # otherwise use the step to i+1
+    sog[back] = step_sog[back[1:]]
+    cog[back] = step_cog[back[1:]]
+    sog[fwd] = step_sog[fwd[:-1]]
+    cog[fwd] = step_cog[fwd[:-1]]
+    return sog, cog

@@ -1,0 +1,172 @@
+"""The ingest outputs (DESIGN.md's data contracts) and how they reach the disk: every file is
+written under a temporary name in the output folder and renamed only once the run succeeded, so
+an interrupted or failed run never leaves a half-written `points.parquet`."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import shapely
+
+from aisdati.geo import haversine_m
+from aisdati.preprocess.cluster import cluster_tracks
+
+UTC_US = pa.timestamp("us", tz="UTC")
+POINTS_SCHEMA = pa.schema(
+    [
+        ("track_id", pa.int64()),
+        ("mmsi", pa.int64()),
+        ("time", UTC_US),
+        ("lon", pa.float64()),
+        ("lat", pa.float64()),
+        ("sog", pa.float32()),
+        ("cog", pa.float32()),
+    ]
+)
+TRACKS_SCHEMA = pa.schema(
+    [
+        ("track_id", pa.int64()),
+        ("mmsi", pa.int64()),
+        ("start", UTC_US),
+        ("end", UTC_US),
+        ("n_points", pa.int64()),
+        ("length_km", pa.float64()),
+        ("cluster", pa.string()),
+        ("lon0", pa.float64()),
+        ("lat0", pa.float64()),
+        ("stage", pa.string()),
+        ("geometry", pa.binary()),
+    ]
+)
+REJECTS_SCHEMA = pa.schema(
+    [
+        ("source", pa.string()),
+        ("reason", pa.string()),
+        ("mmsi", pa.int64()),
+        ("time", UTC_US),
+        ("lon", pa.float64()),
+        ("lat", pa.float64()),
+        ("sog", pa.float64()),
+        ("cog", pa.float64()),
+        ("raw", pa.string()),
+    ]
+)
+GEO_METADATA = {
+    "version": "1.1.0",
+    "primary_column": "geometry",
+    "columns": {"geometry": {"encoding": "WKB", "geometry_types": ["LineString"]}},
+}
+"""GeoParquet metadata of tracks.parquet; no `crs` means OGC:CRS84 (WGS84 lon/lat)."""
+
+
+def build_tracks(
+    points: pa.Table, track: np.ndarray, first_track_id: int
+) -> tuple[pa.Table, pa.Table]:
+    """The kept reports of one partition (sorted by MMSI and time, each with its 0-based track
+    index in the partition; at least one report) as rows of points.parquet and tracks.parquet."""
+    n_tracks = int(track.max()) + 1
+    lon = points.column("lon").to_numpy()
+    lat = points.column("lat").to_numpy()
+    time_us = points.column("time").to_numpy().view(np.int64)
+    cog = points.column("cog").to_numpy()
+    track_id = track + first_track_id
+    out_points = pa.table(
+        [
+            track_id,
+            points.column("mmsi"),
+            points.column("time"),
+            lon,
+            lat,
+            points.column("sog").cast(pa.float32()),
+            _cog32(cog),
+        ],
+        schema=POINTS_SCHEMA,
+    )
+    first = np.flatnonzero(np.r_[True, track[1:] != track[:-1]])
+    last = np.r_[first[1:] - 1, len(track) - 1]
+    same = track[1:] == track[:-1]
+    steps = np.where(same, haversine_m(lon[:-1], lat[:-1], lon[1:], lat[1:]), 0.0)
+    length_m = np.bincount(track[1:], weights=steps, minlength=n_tracks)
+    lines = shapely.linestrings(np.column_stack([lon, lat]), indices=track)
+    out_tracks = pa.table(
+        [
+            np.arange(n_tracks, dtype=np.int64) + first_track_id,
+            points.column("mmsi").take(pa.array(first)),
+            pa.array(time_us[first]).view(UTC_US),
+            pa.array(time_us[last]).view(UTC_US),
+            np.bincount(track, minlength=n_tracks).astype(np.int64),
+            length_m / 1000.0,
+            pa.array(cluster_tracks(track, cog, n_tracks), pa.string()),
+            lon[first],
+            lat[first],
+            pa.array(["cluster"] * n_tracks, pa.string()),
+            pa.array(shapely.to_wkb(lines), pa.binary()),
+        ],
+        schema=TRACKS_SCHEMA,
+    )
+    return out_points, out_tracks
+
+
+def _cog32(cog: np.ndarray) -> np.ndarray:
+    """COG as float32, still in [0, 360): 359.99999 would round up to 360."""
+    out = cog.astype(np.float32)
+    out[out >= 360.0] = 0.0
+    return out
+
+
+class StagedFile:
+    """A file written under a temporary name next to its final one, renamed by `commit`."""
+
+    def __init__(self, final: Path) -> None:
+        self.final = final
+        self.tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+
+    def commit(self) -> None:
+        os.replace(self.tmp, self.final)
+
+    def discard(self) -> None:
+        self.tmp.unlink(missing_ok=True)
+
+
+class StagedParquet(StagedFile):
+    """A parquet file written batch by batch (constant memory), then renamed."""
+
+    def __init__(self, final: Path, schema: pa.Schema) -> None:
+        super().__init__(final)
+        self.writer = pq.ParquetWriter(self.tmp, schema, compression="zstd")
+        self.rows = 0
+
+    def write(self, table: pa.Table) -> None:
+        if table.num_rows:
+            self.writer.write_table(table)
+            self.rows += table.num_rows
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+    def discard(self) -> None:
+        self.close()
+        super().discard()
+
+
+def write_tracks(final: Path, tables: list[pa.Table]) -> StagedFile:
+    """tracks.parquet as GeoParquet (the track geometry as a WKB LineString)."""
+    staged = StagedFile(final)
+    table = pa.concat_tables(tables) if tables else TRACKS_SCHEMA.empty_table()
+    table = table.replace_schema_metadata({"geo": json.dumps(GEO_METADATA)})
+    pq.write_table(table, staged.tmp, compression="zstd")
+    return staged
+
+
+def write_json(final: Path, doc: dict[str, Any]) -> StagedFile:
+    staged = StagedFile(final)
+    staged.tmp.write_text(json.dumps(doc, indent=2, default=str) + "\n", encoding="utf-8")
+    return staged

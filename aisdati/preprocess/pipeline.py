@@ -1,0 +1,269 @@
+"""`aisdati ingest` end to end: read -> clean and filter (per batch) -> partition by vessel ->
+clean per vessel -> segment -> cluster -> write.
+
+Memory is bounded twice over: the row-wise stages see one record batch at a time, and the
+per-vessel stages one partition at a time (partitions are sized from the input so that each
+holds at most about `settings.rows_per_bucket` rows). Every stage is a function of a pyarrow
+table holding whole vessels, so a distributed engine could map the same functions over
+partitions.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+import zipfile
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import zstandard
+from rich.progress import Progress
+
+from aisdati.errors import UserError
+from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
+from aisdati.preprocess.output import (
+    POINTS_SCHEMA,
+    REJECTS_SCHEMA,
+    StagedFile,
+    StagedParquet,
+    build_tracks,
+    write_json,
+    write_tracks,
+)
+from aisdati.preprocess.partition import VesselPartitions
+from aisdati.preprocess.read import (
+    PARTITION_SCHEMA,
+    Source,
+    SourceReader,
+    describe_read_error,
+    sources_of,
+    to_canonical,
+)
+from aisdati.preprocess.report import REASONS, IngestCounts
+from aisdati.preprocess.segment import segment
+from aisdati.preprocess.settings import IngestSettings
+
+MAX_PARTITIONS = 256
+READ_ERRORS = (
+    zipfile.BadZipFile,
+    EOFError,
+    OSError,
+    zlib.error,
+    zstandard.ZstdError,
+    pa.ArrowException,
+)
+"""What a corrupt or truncated file raises while it is being read (bad CRC, truncated stream)."""
+
+
+@dataclass
+class IngestResult:
+    """What a run did: counts per reason, tracks per cluster, files written."""
+
+    counts: IngestCounts
+    settings: IngestSettings
+    roi: str
+    outputs: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            **self.counts.as_dict(),
+            "settings": self.settings.as_dict(),
+            "roi": self.roi,
+            "outputs": self.outputs,
+            "seconds": round(self.seconds, 3),
+        }
+
+
+def ingest(
+    inputs: list[Path],
+    out_dir: Path,
+    settings: IngestSettings,
+    roi: Any,
+    roi_name: str,
+    progress: Progress | None = None,
+) -> IngestResult:
+    """Run the whole pipeline on local files and write points.parquet, tracks.parquet,
+    ingest_report.json (and rejects.parquet) into `out_dir`. Raises `UserError` for bad input;
+    nothing is left under a final name unless the run succeeded."""
+    started = time.perf_counter()
+    if settings.min_points < 2:
+        raise UserError("--min-points must be at least 2 (a track is a line)")
+    sources = [s for path in inputs for s in sources_of(path)]
+    readers = [SourceReader(s) for s in sources]  # every header checked before any work
+    counts = IngestCounts()
+    n_parts = _partition_count(sources, settings)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    staged: list[StagedFile] = []
+    try:
+        with tempfile.TemporaryDirectory(dir=out_dir, prefix=".ingest-") as tmp:
+            rejects = (
+                StagedParquet(out_dir / "rejects.parquet", REJECTS_SCHEMA)
+                if settings.keep_rejects
+                else None
+            )
+            if rejects:
+                staged.append(rejects)
+            parts = VesselPartitions(Path(tmp), n_parts, PARTITION_SCHEMA)
+            for src, reader in enumerate(readers):
+                _read_source(reader, src, parts, counts, settings, roi, rejects, progress)
+            parts.close()
+            if counts.rows_read == 0:
+                raise UserError(
+                    "no data rows in the input (only headers?): "
+                    + ", ".join(s.label for s in sources)
+                )
+            points = StagedParquet(out_dir / "points.parquet", POINTS_SCHEMA)
+            staged.append(points)
+            labels = [s.label for s in sources]
+            tracks = _vessel_stages(parts, counts, settings, points, rejects, labels, progress)
+            points.close()
+            if rejects:
+                rejects.close()
+            staged.append(write_tracks(out_dir / "tracks.parquet", tracks))
+        result = IngestResult(counts, settings, roi_name, seconds=time.perf_counter() - started)
+        result.outputs = {f.final.stem: str(f.final) for f in staged}
+        result.outputs["ingest_report"] = str(out_dir / "ingest_report.json")
+        if not counts.balanced():
+            raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
+        staged.append(write_json(out_dir / "ingest_report.json", result.as_dict()))
+    except BaseException:
+        for f in staged:
+            f.discard()
+        raise
+    for f in staged:
+        f.commit()
+    return result
+
+
+def _partition_count(sources: list[Source], settings: IngestSettings) -> int:
+    rows = sum(s.estimated_rows() for s in sources)
+    return max(1, min(MAX_PARTITIONS, math.ceil(rows / settings.rows_per_bucket)))
+
+
+def _read_source(
+    reader: SourceReader,
+    src: int,
+    parts: VesselPartitions,
+    counts: IngestCounts,
+    settings: IngestSettings,
+    roi: Any,
+    rejects: StagedParquet | None,
+    progress: Progress | None,
+) -> None:
+    """Row-wise stages over one source, batch by batch; survivors go to the vessel partitions."""
+    label = reader.source.label
+    task = progress.add_task(f"read {label}", total=reader.total) if progress else None
+    rows = 0
+    try:
+        for batch in reader.batches():
+            table, codes = to_canonical(batch, reader.columns, src)
+            table = check_values(table, codes)
+            filter_area_speed(table, codes, roi, settings)
+            rows += len(codes)
+            counts.add_codes(codes)
+            parts.write(table.filter(pa.array(codes == 0)))
+            if rejects:
+                rejects.write(_reject_rows(table, codes, label))
+            if task is not None:
+                progress.update(task, completed=reader.done)
+    except READ_ERRORS as exc:
+        raise describe_read_error(reader.source, exc) from None
+    malformed = len(reader.malformed)
+    counts.rows_read += rows + malformed
+    counts.add("malformed_row", malformed)
+    if rejects and malformed:
+        rejects.write(_malformed_rows(reader.malformed, label))
+    counts.files.append(
+        {
+            "source": label,
+            "rows": rows + malformed,
+            "columns": reader.columns,
+            "derived": [c for c in ("sog", "cog") if c not in reader.columns],
+        }
+    )
+    if task is not None:
+        progress.update(task, completed=reader.total)
+
+
+def _vessel_stages(
+    parts: VesselPartitions,
+    counts: IngestCounts,
+    settings: IngestSettings,
+    points: StagedParquet,
+    rejects: StagedParquet | None,
+    labels: list[str],
+    progress: Progress | None,
+) -> list[pa.Table]:
+    """Per-vessel cleaning, segmentation and clustering, one partition at a time; points are
+    written as they come, track summaries returned (one row per track: small)."""
+    task = progress.add_task("clean, segment, cluster", total=len(parts)) if progress else None
+    tracks: list[pa.Table] = []
+    next_track_id = 0
+    for table in parts:
+        table, codes = clean_vessels(table, settings)
+        kept = np.flatnonzero(codes == 0)
+        time_us = table.column("time").to_numpy().view(np.int64)
+        mmsi = table.column("mmsi").to_numpy()
+        track, seg_codes, n_short = segment(
+            mmsi[kept], time_us[kept], settings.stop_gap_s, settings.min_points
+        )
+        codes[kept] = seg_codes
+        counts.add_codes(codes)
+        counts.short_segments += n_short
+        if rejects:
+            rejects.write(_reject_rows(table, codes, labels))
+        in_track = track >= 0
+        if in_track.any():
+            rows = table.take(pa.array(kept[in_track]))
+            out_points, out_tracks = build_tracks(rows, track[in_track], next_track_id)
+            points.write(out_points)
+            tracks.append(out_tracks)
+            next_track_id += out_tracks.num_rows
+            counts.kept_points += out_points.num_rows
+            for name in out_tracks.column("cluster").to_pylist():
+                counts.tracks[name] += 1
+        if task is not None:
+            progress.advance(task)
+    return tracks
+
+
+_REASON_NAMES = np.array([""] + [reason for _, reason, _ in REASONS.values()], dtype=object)
+
+
+def _reject_rows(table: pa.Table, codes: np.ndarray, source: str | list[str]) -> pa.Table:
+    """The rejected rows of a table, with their reason and source, in the rejects schema."""
+    idx = np.flatnonzero(codes != 0)
+    rows = table.take(pa.array(idx))
+    if isinstance(source, str):
+        sources = pa.array([source] * len(idx), pa.string())
+    else:
+        sources = pa.array(np.array(source, dtype=object)[rows.column("src").to_numpy()])
+    return pa.table(
+        [
+            sources,
+            pa.array(_REASON_NAMES[codes[idx]], pa.string()),
+            rows.column("mmsi"),
+            rows.column("time"),
+            rows.column("lon"),
+            rows.column("lat"),
+            rows.column("sog"),
+            rows.column("cog"),
+            pa.nulls(len(idx), pa.string()),
+        ],
+        schema=REJECTS_SCHEMA,
+    )
+
+
+def _malformed_rows(texts: list[str], source: str) -> pa.Table:
+    n = len(texts)
+    columns = {name: pa.nulls(n, REJECTS_SCHEMA.field(name).type) for name in REJECTS_SCHEMA.names}
+    columns["source"] = pa.array([source] * n, pa.string())
+    columns["reason"] = pa.array(["malformed_row"] * n, pa.string())
+    columns["raw"] = pa.array(texts, pa.string())
+    return pa.table(columns, schema=REJECTS_SCHEMA)

@@ -1,0 +1,104 @@
+"""Reasons a row can be rejected, and the per-stage counts that prove nothing vanished.
+
+Every stage marks each row it looks at with a reason code (0 = kept). Counting those codes is
+cheap (one `bincount` per batch) and gives the invariant the tests check:
+rows read == sum of rejected rows + kept points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from rich.table import Table
+
+KEPT = 0
+
+# code -> (stage, reason, description); the order is the order in which checks are applied.
+REASONS: dict[int, tuple[str, str, str]] = {
+    1: ("read", "malformed_row", "too many or too few fields"),
+    2: ("read", "missing_value", "blank MMSI, time, position, SOG or COG"),
+    3: ("read", "bad_number", "non-numeric LAT, LON, SOG or COG"),
+    4: ("read", "bad_mmsi", "MMSI not a positive integer"),
+    5: ("read", "bad_time", "unparsable time"),
+    6: ("clean", "sentinel_lat", "LAT 91 (not available)"),
+    7: ("clean", "sentinel_lon", "LON 181 (not available)"),
+    8: ("clean", "sentinel_sog", "SOG 102.3 (not available)"),
+    9: ("clean", "sentinel_cog", "COG 360 (not available)"),
+    10: ("clean", "out_of_range", "LAT/LON/SOG/COG outside their valid ranges"),
+    11: ("filter", "outside_roi", "outside the region of interest"),
+    12: ("filter", "slow", "SOG at or below --min-sog"),
+    13: ("vessel", "duplicate", "exact duplicate of another report"),
+    14: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
+    15: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
+    16: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
+}
+CODE = {reason: code for code, (_, reason, _) in REASONS.items()}
+N_CODES = max(REASONS) + 1
+
+
+@dataclass
+class IngestCounts:
+    """Row counts per rejection reason, plus what was kept; summed over batches and partitions."""
+
+    rows_read: int = 0
+    rejected: np.ndarray = field(default_factory=lambda: np.zeros(N_CODES, dtype=np.int64))
+    files: list[dict[str, Any]] = field(default_factory=list)
+    kept_points: int = 0
+    short_segments: int = 0
+    tracks: dict[str, int] = field(default_factory=lambda: {"up": 0, "down": 0, "other": 0})
+
+    def add_codes(self, codes: np.ndarray) -> None:
+        """Count the rejection codes of one batch (code 0, kept, is not counted here)."""
+        counts = np.bincount(codes, minlength=N_CODES)
+        counts[KEPT] = 0
+        self.rejected += counts
+
+    def add(self, reason: str, n: int) -> None:
+        self.rejected[CODE[reason]] += n
+
+    @property
+    def total_rejected(self) -> int:
+        return int(self.rejected.sum())
+
+    def rejected_by_reason(self) -> dict[str, int]:
+        return {reason: int(self.rejected[code]) for code, (_, reason, _) in REASONS.items()}
+
+    def balanced(self) -> bool:
+        """True when every row read is accounted for, as kept or under one reason."""
+        return self.rows_read == self.total_rejected + self.kept_points
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "rows_read": self.rows_read,
+            "rejected": self.rejected_by_reason(),
+            "rejected_total": self.total_rejected,
+            "kept_points": self.kept_points,
+            "short_segments_dropped": self.short_segments,
+            "tracks": {**self.tracks, "total": sum(self.tracks.values())},
+            "files": self.files,
+        }
+
+
+def summary_table(counts: IngestCounts) -> Table:
+    """The per-stage summary: rows read, rejected per stage and reason, kept, tracks per cluster."""
+    table = Table(title="aisdati ingest", show_lines=False)
+    table.add_column("stage")
+    table.add_column("reason")
+    table.add_column("rows", justify="right")
+    table.add_column("what", style="dim")
+    table.add_row("read", "rows read", f"{counts.rows_read:,}", f"{len(counts.files)} file(s)")
+    for code, (stage, reason, description) in REASONS.items():
+        n = int(counts.rejected[code])
+        if n:
+            table.add_row(stage, reason, f"-{n:,}", description)
+    table.add_row("[bold]kept", "points", f"[bold]{counts.kept_points:,}", "in tracks")
+    total = sum(counts.tracks.values())
+    table.add_row(
+        "[bold]cluster",
+        "tracks",
+        f"[bold]{total:,}",
+        ", ".join(f"{name} {n:,}" for name, n in counts.tracks.items()),
+    )
+    return table

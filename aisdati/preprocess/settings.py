@@ -1,0 +1,43 @@
+"""Settings of `aisdati ingest`, with the paper's values (section 6) as defaults."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from aisdati.errors import UserError
+
+
+@dataclass(frozen=True)
+class IngestSettings:
+    """Thresholds of the filter, clean and segment stages.
+
+    Defaults are the paper's: SOG > 3 kn, a stop is a gap of more than one hour, tracks keep at
+    least 900 reports. `max_speed_kn` bounds the implied speed between consecutive kept reports of
+    one vessel (position outliers); 50 kn is above any merchant vessel's top speed.
+    """
+
+    min_sog_kn: float = 3.0
+    max_speed_kn: float = 50.0
+    stop_gap_s: float = 3600.0
+    min_points: int = 900
+    keep_rejects: bool = False
+    rows_per_bucket: int = 2_000_000
+    """Upper bound on the rows of one on-disk vessel partition; keeps memory bounded."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+_UNITS_S = {"s": 1.0, "sec": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def parse_duration(text: str) -> float:
+    """'1h', '90min', '3600s', '1.5h' -> seconds (for --stop-gap)."""
+    match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*(s|sec|m|min|h|d)\s*", text.lower())
+    if not match or float(match[1]) <= 0:
+        raise UserError(
+            f"--stop-gap {text!r}: expected a positive duration such as 1h, 90min, 600s"
+        )
+    return float(match[1]) * _UNITS_S[match[2]]
