@@ -108,13 +108,14 @@ def ingest(
     area = load_roi(roi)
     remote = marinecadastre_files(year, months, days, zone) if year is not None else []
     local = expand_inputs(inputs) if inputs else []
+    bar_console = err_console if as_json else console
     progress = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         DownloadColumn(),
         TimeRemainingColumn(),
-        console=err_console if as_json else console,
-        disable=quiet,
+        console=bar_console,
+        disable=quiet or not bar_console.is_terminal,
         transient=True,
     )
     with progress:

@@ -13,15 +13,12 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-import zipfile
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import zstandard
 from rich.progress import Progress
 
 from aisdati.errors import UserError
@@ -38,6 +35,7 @@ from aisdati.preprocess.output import (
 from aisdati.preprocess.partition import VesselPartitions
 from aisdati.preprocess.read import (
     PARTITION_SCHEMA,
+    READ_ERRORS,
     Source,
     SourceReader,
     describe_read_error,
@@ -49,15 +47,6 @@ from aisdati.preprocess.segment import segment
 from aisdati.preprocess.settings import IngestSettings
 
 MAX_PARTITIONS = 256
-READ_ERRORS = (
-    zipfile.BadZipFile,
-    EOFError,
-    OSError,
-    zlib.error,
-    zstandard.ZstdError,
-    pa.ArrowException,
-)
-"""What a corrupt or truncated file raises while it is being read (bad CRC, truncated stream)."""
 
 
 @dataclass

@@ -13,6 +13,7 @@ import csv
 import glob
 import re
 import zipfile
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +25,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
+import zstandard
 
 from aisdati.errors import UserError
 from aisdati.preprocess.report import CODE
@@ -210,11 +212,14 @@ class SourceReader:
         return counter
 
     def _header(self) -> list[str]:
-        stream = self._open_binary()
         try:
-            chunk = stream.read(1 << 20)
-        finally:
-            stream.close()
+            stream = self._open_binary()
+            try:
+                chunk = stream.read(1 << 20)
+            finally:
+                stream.close()
+        except READ_ERRORS as exc:
+            raise describe_read_error(self.source, exc) from None
         first = chunk.split(b"\n", 1)[0].rstrip(b"\r")
         if not first.strip():
             raise UserError(f"{self.source.label}: the file is empty (no header line)")
@@ -290,6 +295,17 @@ class _Decompressed:
         self.closed = True
         self.stream.close()
         self.counter.close()
+
+
+READ_ERRORS = (
+    zipfile.BadZipFile,
+    EOFError,
+    OSError,
+    zlib.error,
+    zstandard.ZstdError,
+    pa.ArrowException,
+)
+"""What a corrupt or truncated file raises while it is being read (bad CRC, truncated stream)."""
 
 
 def describe_read_error(source: Source, exc: BaseException) -> UserError:

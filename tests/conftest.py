@@ -1,0 +1,32 @@
+"""Shared fixtures of the test suite."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.fixture
+def data() -> Path:
+    """Folder of the small real AIS files (see tests/data/PROVENANCE.md)."""
+    return DATA
+
+
+@pytest.fixture
+def cli():
+    """`cli("ingest", "--input", ...)` runs `aisdati` in-process and returns click's Result."""
+    from aisdati.cli import app
+
+    def run(*args: str):
+        args_list = [str(a) for a in args]
+        # Typer collapses an app with a single command into that command.
+        if not hasattr(typer.main.get_command(app), "commands"):
+            args_list = args_list[1:]
+        return CliRunner().invoke(app, args_list)
+
+    return run

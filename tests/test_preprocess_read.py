@@ -1,0 +1,90 @@
+"""Reading: column matching, type coercion, per-row rejection of bad values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from aisdati.errors import UserError
+from aisdati.preprocess.read import Source, SourceReader, resolve_columns, to_canonical
+from aisdati.preprocess.report import CODE
+
+
+def test_columns_match_case_underscores_and_spellings():
+    cols = resolve_columns(
+        ["base_date_time", "Latitude", "LONGITUDE", "mmsi", "SOG", "cog", "TranscieverClass"], "x"
+    )
+    assert cols == {
+        "time": "base_date_time",
+        "lat": "Latitude",
+        "lon": "LONGITUDE",
+        "mmsi": "mmsi",
+        "sog": "SOG",
+        "cog": "cog",
+    }
+
+
+def test_missing_required_column_is_named():
+    with pytest.raises(UserError, match="LAT"):
+        resolve_columns(["MMSI", "BaseDateTime", "LON", "SOG", "COG"], "f.csv")
+
+
+def test_positions_only_columns_are_enough():
+    assert set(resolve_columns(["MMSI", "BaseDateTime", "LAT", "LON"], "x")) == {
+        "mmsi",
+        "time",
+        "lat",
+        "lon",
+    }
+
+
+def _batch(**cols):
+    return pa.record_batch({k: pa.array(v, pa.string()) for k, v in cols.items()})
+
+
+def test_bad_values_are_rejected_per_row_with_their_reason():
+    batch = _batch(
+        MMSI=["367000001", "367000002", "367000003", "367000004.0", None, "x1"],
+        BaseDateTime=["2022-01-03T00:00:00", "not a time", "2022-01-03 00:01:00"]
+        + ["2022-01-03T00:00:00"] * 3,
+        LAT=["25.1", "25.1", "north", "25.1", "25.1", "25.1"],
+        LON=["-80.1"] * 6,
+        SOG=["10.0"] * 6,
+        COG=["-60.6"] * 6,
+    )
+    cols = {
+        "mmsi": "MMSI",
+        "time": "BaseDateTime",
+        "lat": "LAT",
+        "lon": "LON",
+        "sog": "SOG",
+        "cog": "COG",
+    }
+    table, codes = to_canonical(batch, cols, src=0)
+    assert list(codes) == [
+        0,
+        CODE["bad_time"],
+        CODE["bad_number"],
+        0,
+        CODE["missing_value"],
+        CODE["bad_mmsi"],
+    ]
+    assert table.column("mmsi")[3].as_py() == 367000004  # "367000004.0" is an integer
+    assert table.schema.field("time").type == pa.timestamp("us", tz="UTC")
+
+
+def test_floats_in_integer_fields_2023_sample(data):
+    reader = SourceReader(Source(data / "noaa_2023-01-11_1000rows.csv"))
+    batches = list(reader.batches())
+    table, codes = to_canonical(batches[0], reader.columns, 0)
+    assert sum(b.num_rows for b in batches) == 1000
+    assert (codes == 0).sum() > 990
+    assert table.column("mmsi").to_numpy().min() > 0
+
+
+def test_reordered_columns_and_misspelt_header_ny_hour(data):
+    reader = SourceReader(Source(data / "NYHarbor_2020_06_30_first_hour.csv"))
+    assert reader.columns["lon"] == "LON" and reader.columns["mmsi"] == "MMSI"
+    table, _ = to_canonical(next(iter(reader.batches())), reader.columns, 0)
+    assert np.nanmin(table.column("cog").to_numpy()) < 0  # raw negative COG, normalised later
