@@ -58,6 +58,7 @@ class IngestResult:
     roi: str
     outputs: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
+    stage_seconds: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -66,6 +67,7 @@ class IngestResult:
             "roi": self.roi,
             "outputs": self.outputs,
             "seconds": round(self.seconds, 3),
+            "stage_seconds": self.stage_seconds,
         }
 
 
@@ -102,6 +104,7 @@ def ingest(
             for src, reader in enumerate(readers):
                 _read_source(reader, src, parts, counts, settings, roi, rejects, progress)
             parts.close()
+            stage_seconds = {"read_clean_filter": time.perf_counter() - started}
             if counts.rows_read == 0:
                 raise UserError(
                     "no data rows in the input (only headers?): "
@@ -112,10 +115,14 @@ def ingest(
             labels = [s.label for s in sources]
             tracks = _vessel_stages(parts, counts, settings, points, rejects, labels, progress)
             points.close()
+            stage_seconds["vessel_segment_cluster"] = (
+                time.perf_counter() - started - stage_seconds["read_clean_filter"]
+            )
             if rejects:
                 rejects.close()
             staged.append(write_tracks(out_dir / "tracks.parquet", tracks))
         result = IngestResult(counts, settings, roi_name, seconds=time.perf_counter() - started)
+        result.stage_seconds = {k: round(v, 3) for k, v in stage_seconds.items()}
         result.outputs = {f.final.stem: str(f.final) for f in staged}
         result.outputs["ingest_report"] = str(out_dir / "ingest_report.json")
         if not counts.balanced():
