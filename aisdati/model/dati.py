@@ -1,0 +1,407 @@
+"""DATI: the cycle-consistent Wasserstein actor-critic of section 4, trained as a batched ensemble.
+
+One `DATITrainer` trains E independent members (one per seed, each with its own environment,
+replay buffer, noise and random streams) in lockstep: every layer holds the E members' weights,
+losses are summed over members, and one Adam per role over the stacked parameters behaves as E
+independent optimisers because Adam is elementwise. E = 1 is a plain single run; E = 40 trains the
+paper's 4 families x 10 seeds at once. Members that stop early are dropped from the ensemble so
+their compute is not wasted.
+
+Per environment step and member (section 4 and appendix A.2):
+1. one batch of 64 transitions (ŝ_t, â_t, a_t, r_t, η_t, t) from the replay buffer;
+2. 5 critic updates on it: WGAN-GP for c→ (real: perfect decisions a_t, fake: π→(ŝ_t, η_t, t))
+   and c← (real: the agent's own states ŝ_t, fake: π←(â_t, η_t, t)), λ = 10;
+3. one adversarial update of both actors (maximise their critics' values), then one update of
+   the L1 terms, weight 10 each: ‖π←(π→(ŝ)) − ŝ‖₁ + ‖π→(ŝ) − a‖₁ + ‖π→(π←(â)) − â‖₁;
+4. the forward actor acts from ŝ_t with fresh latent noise, the environment moves it and reveals
+   the reference's next point, and the transition is stored.
+Early stopping watches each member's own per-episode mean total loss (patience 10) and keeps the
+forward actor (with its Time2Vec) of the best episode.
+
+Choices where the paper is silent (all configurable, see `DATIConfig`): the gradient penalty
+interpolates between real samples and the *current* actor's fakes (Gulrajani et al.); the L1 terms
+use Adam with its default β = (0.9, 0.999), as the paper's code does; the replay buffer starts
+with `batch_size` near-perfect decisions on the member's first reference (the paper's code warms
+up this way), their latent noise drawn like the real noise.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from aisdati.model.env import TrajectoryImitationEnv
+from aisdati.model.networks import DATINetworks, NetworkConfig
+
+WARMUP_SPREAD = 5.0 / 180.0
+"""Spread of the warm-up decisions around the perfect ones, in scaled units (5° of heading)."""
+
+
+@dataclass(frozen=True)
+class DATIConfig:
+    """Hyperparameters of DATI; every default is the paper's (appendix A.2) unless noted."""
+
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    episodes: int = 100
+    batch_size: int = 64
+    buffer_capacity: int = 50_000
+    critic_steps: int = 5
+    gradient_penalty: float = 10.0
+    l1_weight: float = 10.0
+    lr_actor: float = 1e-4
+    lr_critic: float = 1e-5
+    lr_l1: float = 1e-3
+    betas: tuple[float, float] = (0.5, 0.9)
+    l1_betas: tuple[float, float] = (0.9, 0.999)
+    """Not stated in the paper; its code leaves Adam's defaults for the L1 terms."""
+    noise: str = "gaussian"
+    """Latent noise process: "gaussian" or "ou" (Ornstein-Uhlenbeck); the paper picks the better."""
+    noise_sigma: float = 0.3
+    ou_theta: float = 0.15
+    ou_dt: float = 1e-2
+    patience: int = 10
+    """Early stopping on the episode's total loss; 0 disables it."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> DATIConfig:
+        data = dict(data)
+        net = NetworkConfig(**data.pop("network", {}))
+        for key in ("betas", "l1_betas"):
+            if key in data:
+                data[key] = tuple(data[key])
+        return cls(network=net, **data)
+
+    def with_network(self, **changes: Any) -> DATIConfig:
+        return replace(self, network=replace(self.network, **changes))
+
+
+@dataclass
+class EpisodeLog:
+    """What one member did in one training episode."""
+
+    member: int
+    seed: int
+    episode: int
+    steps: int
+    mean_reward: float
+    final_dtw: float
+    mean_loss: float
+    stopped: bool
+
+
+class LatentNoise:
+    """Per-member latent noise η_t ([E, 1, latent]), Gaussian or Ornstein-Uhlenbeck, each member
+    drawing from its own generator and reset at the start of its episodes."""
+
+    def __init__(self, cfg: DATIConfig, generators: list[torch.Generator]):
+        self.cfg = cfg
+        self.generators = generators
+        self.state = torch.zeros(len(generators), 1, cfg.network.latent_dim)
+
+    def draw(self, k: int) -> Tensor:
+        """A [1, latent] draw of N(0, σ²) from member k's generator."""
+        shape = (1, self.cfg.network.latent_dim)
+        return torch.randn(shape, generator=self.generators[k]) * self.cfg.noise_sigma
+
+    def reset(self, k: int) -> None:
+        self.state[k].zero_()
+
+    def sample(self) -> Tensor:
+        c = self.cfg
+        for k in range(len(self.generators)):
+            if c.noise == "ou":
+                x = self.state[k]
+                step = self.draw(k) * np.sqrt(c.ou_dt)
+                self.state[k] = x - c.ou_theta * x * c.ou_dt + step
+            else:
+                self.state[k] = self.draw(k)
+        return self.state.clone()
+
+    def keep(self, idx: list[int]) -> None:
+        self.generators = [self.generators[i] for i in idx]
+        self.state = self.state[idx]
+
+
+class EnsembleReplayBuffer:
+    """A ring buffer per member, stored as [E, capacity, dim] tensors."""
+
+    FIELDS = ("state", "action", "perfect", "reward", "noise", "time")
+
+    def __init__(self, members: int, capacity: int, dims: dict[str, int]):
+        self.capacity = capacity
+        self.data = {k: torch.zeros(members, capacity, dims[k]) for k in self.FIELDS}
+        self.size = 0
+        self.ptr = 0
+
+    def add(self, **batch: Tensor) -> None:
+        """Append one transition per member; each value is [E, dim]."""
+        for key in self.FIELDS:
+            self.data[key][:, self.ptr] = batch[key]
+        self.ptr = (self.ptr + 1) % self.capacity
+        self.size = min(self.size + 1, self.capacity)
+
+    def sample(self, batch_size: int, generators: list[torch.Generator]) -> dict[str, Tensor]:
+        idx = torch.stack([torch.randint(self.size, (batch_size,), generator=g) for g in generators])
+        rows = torch.arange(len(generators))[:, None]
+        return {k: v[rows, idx] for k, v in self.data.items()}
+
+    def keep(self, idx: list[int]) -> None:
+        self.data = {k: v[idx] for k, v in self.data.items()}
+
+
+def _gradient_penalty(
+    critic: Callable[..., Tensor],
+    real: Tensor,
+    fake: Tensor,
+    reward: Tensor,
+    t: list[Tensor],
+    u: Tensor,
+) -> Tensor:
+    """Per-member mean of (‖∇_x c(x̂)‖₂ − 1)² at x̂ = u·real + (1−u)·fake, one u per sample."""
+    x = (u * real + (1 - u) * fake).requires_grad_(True)
+    (grad,) = torch.autograd.grad(critic(x, reward, t).sum(), x, create_graph=True)
+    return ((grad.norm(dim=-1) - 1) ** 2).mean(dim=1)
+
+
+class DATITrainer:
+    """Trains E DATI members, one per (environment, seed) pair, as one batched ensemble."""
+
+    def __init__(
+        self,
+        envs: Sequence[TrajectoryImitationEnv],
+        seeds: Sequence[int],
+        config: DATIConfig | None = None,
+    ):
+        if len(envs) != len(seeds) or not envs:
+            raise ValueError("give one environment per seed, at least one")
+        self.cfg = config or DATIConfig()
+        self.seeds = [int(s) for s in seeds]
+        self.state_dim = envs[0].observation_space.shape[0] - 1
+        self.decision_dim = envs[0].action_space.shape[0]
+        torch.manual_seed(self.seeds[0])  # nothing should draw from it; fixed all the same
+        self.nets = DATINetworks(self.state_dim, self.decision_dim, self.cfg.network, self.seeds)
+        self.final = copy.deepcopy(self.nets)  # receives each member's best forward actor
+        self._build_optimizers()
+        # member-indexed state, compacted together when members leave the ensemble
+        self.active = list(range(len(seeds)))
+        self.envs = list(envs)
+        self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
+        self.noise = LatentNoise(self.cfg, self.generators)
+        dims = {"state": self.state_dim, "action": self.decision_dim, "perfect": self.decision_dim,
+                "reward": 1, "noise": self.cfg.network.latent_dim, "time": 1}
+        self.buffer = EnsembleReplayBuffer(len(seeds), self.cfg.buffer_capacity, dims)
+        n = len(seeds)
+        self.episode = [0] * n
+        self.best_loss = [float("inf")] * n
+        self.wait = [0] * n
+        self.best_episode = [0] * n
+        self.history: list[EpisodeLog] = []
+        self._obs = [env.reset(seed=s)[0] for env, s in zip(self.envs, self.seeds, strict=True)]
+        self._episode_loss = [0.0] * n
+        self._episode_reward = [0.0] * n
+        self._episode_steps = [0] * n
+        self._warmup()
+
+    # ------------------------------------------------------------------ setup
+    def _build_optimizers(self) -> None:
+        c, nets = self.cfg, self.nets
+        actors = [*nets.forward_actor.parameters(), *nets.backward_actor.parameters(), *nets._t2v()]
+        self.opt_critic = torch.optim.Adam(nets.critic_parameters(), lr=c.lr_critic, betas=c.betas, fused=True)
+        self.opt_actor = torch.optim.Adam(actors, lr=c.lr_actor, betas=c.betas, fused=True)
+        self.opt_l1 = torch.optim.Adam(actors, lr=c.lr_l1, betas=c.l1_betas, fused=True)
+
+    def _warmup(self) -> None:
+        """Seed each member's buffer with `batch_size` near-perfect decisions on its first
+        reference, so that training can start at the first step."""
+        b = self.cfg.batch_size
+        rows: dict[str, list[Tensor]] = {k: [] for k in EnsembleReplayBuffer.FIELDS}
+        for k, env in enumerate(self.envs):
+            gen = self.generators[k]
+            ref = env.reference
+            perm = torch.randperm(ref.steps, generator=gen)
+            steps = torch.cat([torch.tensor([0]), perm[perm != 0]])[:b]
+            steps = steps.repeat(-(-b // len(steps)))[:b]
+            perfect = torch.as_tensor(env.perfect_actions[steps.numpy()], dtype=torch.float32)
+            spread = torch.randn(perfect.shape, generator=gen) * WARMUP_SPREAD
+            spread[0] = 0.0
+            states = env.state_scaler.scale(ref.positions[steps.numpy()])
+            rows["state"].append(torch.as_tensor(states, dtype=torch.float32))
+            rows["action"].append((perfect + spread).clamp(-1, 1))
+            rows["perfect"].append(perfect)
+            ok = spread.abs().amax(dim=1, keepdim=True) < WARMUP_SPREAD
+            rows["reward"].append(torch.where(ok, 1.0, -1.0))
+            rows["noise"].append(torch.cat([self.noise.draw(k) for _ in range(b)]))
+            rows["time"].append(steps[:, None].float())
+        stacked = {key: torch.stack(v) for key, v in rows.items()}
+        for i in range(b):
+            self.buffer.add(**{key: v[:, i] for key, v in stacked.items()})
+
+    # --------------------------------------------------------------- training
+    def _train_batch(self) -> Tensor:
+        """One training batch per member; returns each member's total loss [E]."""
+        c, nets = self.cfg, self.nets
+        batch = self.buffer.sample(c.batch_size, self.generators)
+        s, a_hat, a_real = batch["state"], batch["action"], batch["perfect"]
+        r, eta, step = batch["reward"], batch["noise"], batch["time"]
+
+        for p in nets.critic_parameters():
+            p.requires_grad_(True)
+        for _ in range(c.critic_steps):
+            t = nets.time_features(step)
+            with torch.no_grad():
+                fake_a = nets.forward_actor(s, eta, t)
+                fake_s = nets.backward_actor(a_hat, eta, t)
+            u_f = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
+            u_b = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
+            cf, cb = nets.forward_critic, nets.backward_critic
+            loss_f = (cf(fake_a, r, t).mean(1) - cf(a_real, r, t).mean(1)).squeeze(-1)
+            loss_b = (cb(fake_s, r, t).mean(1) - cb(s, r, t).mean(1)).squeeze(-1)
+            loss_f = loss_f + c.gradient_penalty * _gradient_penalty(cf, a_real, fake_a, r, t, u_f)
+            loss_b = loss_b + c.gradient_penalty * _gradient_penalty(cb, s, fake_s, r, t, u_b)
+            critic_loss = loss_f + loss_b
+            self.opt_critic.zero_grad(set_to_none=True)
+            critic_loss.sum().backward()
+            self.opt_critic.step()
+            nets.project_()
+
+        for p in nets.critic_parameters():
+            p.requires_grad_(False)
+        if nets.time2vec is not None:
+            nets.time2vec.requires_grad_(True)
+        t = nets.time_features(step)
+        gen_a = nets.forward_actor(s, eta, t)
+        gen_s = nets.backward_actor(a_hat, eta, t)
+        adv = -(nets.forward_critic(gen_a, r, t).mean(1) + nets.backward_critic(gen_s, r, t).mean(1))
+        adv = adv.squeeze(-1)
+        self.opt_actor.zero_grad(set_to_none=True)
+        adv.sum().backward()
+        self.opt_actor.step()
+
+        t = nets.time_features(step)
+        fa = nets.forward_actor(s, eta, t)
+        back = nets.backward_actor(a_hat, eta, t)
+        l1 = (
+            (nets.backward_actor(fa, eta, t) - s).abs().mean(dim=(1, 2))
+            + (fa - a_real).abs().mean(dim=(1, 2))
+            + (nets.forward_actor(back, eta, t) - a_hat).abs().mean(dim=(1, 2))
+        ) * c.l1_weight
+        self.opt_l1.zero_grad(set_to_none=True)
+        l1.sum().backward()
+        self.opt_l1.step()
+        return critic_loss.detach() + adv.detach() + l1.detach()
+
+    def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        obs = torch.as_tensor(np.stack(self._obs), dtype=torch.float32)[:, None, :]
+        state, t = obs[..., : self.state_dim], obs[..., self.state_dim :]
+        eta = self.noise.sample()
+        with torch.no_grad():
+            action = self.nets.forward_actor(state, eta, self.nets.time_features(t))
+        return state[:, 0], action[:, 0], eta[:, 0], t[:, 0]
+
+    def step(self) -> list[EpisodeLog]:
+        """One environment step of every active member (with its training batch first)."""
+        losses = self._train_batch()
+        state, action, eta, t = self._act()
+        rewards, perfect, ended = [], [], []
+        for k, env in enumerate(self.envs):
+            obs, reward, terminated, truncated, info = env.step(action[k].numpy())
+            self._obs[k] = obs
+            rewards.append(reward)
+            perfect.append(info["perfect_action"])
+            self._episode_loss[k] += float(losses[k])
+            self._episode_reward[k] += reward
+            self._episode_steps[k] += 1
+            if terminated or truncated:
+                ended.append((k, info["dtw_smoothed"]))
+        self.buffer.add(
+            state=state,
+            action=action,
+            perfect=torch.as_tensor(np.stack(perfect)),
+            reward=torch.tensor(rewards, dtype=torch.float32)[:, None],
+            noise=eta,
+            time=t,
+        )
+        logs = [self._end_episode(k, dtw) for k, dtw in ended]
+        self._drop([log.member for log in logs if log.stopped])
+        return logs
+
+    def _end_episode(self, k: int, final_dtw: float) -> EpisodeLog:
+        member = self.active[k]
+        steps = self._episode_steps[k]
+        mean_loss = self._episode_loss[k] / steps
+        self.episode[member] += 1
+        if mean_loss < self.best_loss[member]:
+            self.best_loss[member] = mean_loss
+            self.best_episode[member] = self.episode[member]
+            self.wait[member] = 0
+            self._save_best(k)
+        else:
+            self.wait[member] += 1
+        patience_out = 0 < self.cfg.patience <= self.wait[member]
+        stopped = patience_out or self.episode[member] >= self.cfg.episodes
+        log = EpisodeLog(member, self.seeds[member], self.episode[member], steps,
+                         self._episode_reward[k] / steps, final_dtw, mean_loss, stopped)
+        self.history.append(log)
+        self._episode_loss[k], self._episode_reward[k], self._episode_steps[k] = 0.0, 0.0, 0
+        if not stopped:
+            self._obs[k] = self.envs[k].reset()[0]
+            self.noise.reset(k)
+        return log
+
+    def _save_best(self, k: int) -> None:
+        """Copy member k's forward actor and Time2Vec into the final networks."""
+        member = self.active[k]
+        live = dict(self.nets.named_parameters())
+        with torch.no_grad():
+            for name, p in self.final.named_parameters():
+                if name.startswith(("forward_actor.", "time2vec.")):
+                    p[member].copy_(live[name][k])
+
+    def _drop(self, leaving: list[int]) -> None:
+        """Remove stopped members from the ensemble: slice weights, optimiser state, buffers."""
+        if not leaving:
+            return
+        keep = [k for k in range(len(self.active)) if k not in leaving]
+        self.active = [self.active[k] for k in keep]
+        if not keep:
+            return
+        params = list(self.nets.parameters())
+        for opt in (self.opt_critic, self.opt_actor, self.opt_l1):
+            for p in params:
+                st = opt.state.get(p)
+                if st:
+                    for key in ("exp_avg", "exp_avg_sq"):
+                        st[key] = st[key][keep].clone()
+        with torch.no_grad():
+            for p in params:
+                p.data = p.data[keep].clone()
+                p.grad = None
+        self.envs = [self.envs[k] for k in keep]
+        self._obs = [self._obs[k] for k in keep]
+        self.generators = [self.generators[k] for k in keep]
+        self.noise.keep(keep)
+        self.buffer.keep(keep)
+        for lst in (self._episode_loss, self._episode_reward, self._episode_steps):
+            lst[:] = [lst[k] for k in keep]
+
+    @property
+    def done(self) -> bool:
+        return not self.active
+
+    def train(self, on_step: Callable[[list[EpisodeLog]], None] | None = None) -> DATINetworks:
+        """Run until every member has stopped; returns the networks holding each member's best
+        forward actor."""
+        while not self.done:
+            logs = self.step()
+            if on_step is not None:
+                on_step(logs)
+        return self.final

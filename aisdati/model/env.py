@@ -1,0 +1,178 @@
+"""The trajectory-imitation game ("mouse and hidden cheese", section 3.2) as a Gymnasium env.
+
+Each episode draws one reference trajectory. The agent starts on its first point and, at every
+step, chooses a decision (scaled into [-1, 1]); the known update rule g moves it; the reference's
+next point is then revealed and the agent is rewarded +1 when the exponentially smoothed DTW
+between its own prefix and the reference prefix (including the point just revealed) is below ε,
+else -1. A move that would leave the region keeps the agent where it is ("sticking").
+
+Observation: (x, y) of the agent scaled into [0, 1] by the region's box, and the step index t.
+The references, the region and the DTW normalisation come from a `ReferenceSource`, so the same
+environment serves the synthetic families and real AIS tracks.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from aisdati.dtw import IncrementalDTW
+from aisdati.model.families import Family, get_family
+from aisdati.model.rules import BoxScaler, PlanarRule, UpdateRule
+
+ENV_ID = "aisdati/TrajectoryImitation-v0"
+
+
+@dataclass(frozen=True)
+class Reference:
+    """One reference trajectory: n + 1 positions, the n real time steps between them, a label."""
+
+    positions: np.ndarray
+    dts: np.ndarray
+    label: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        return len(self.positions) - 1
+
+
+class ReferenceSource(ABC):
+    """Where references come from, the region they live in, and how DTW is normalised."""
+
+    rule: UpdateRule
+    bounds: tuple[np.ndarray, np.ndarray]
+    max_steps: int
+
+    @abstractmethod
+    def sample(self, rng: np.random.Generator) -> Reference: ...
+
+    @abstractmethod
+    def normalize(self, distance: float, path_length: int) -> float:
+        """The DTW value compared with ε (synthetic: DTW / diameter)."""
+
+    def contains(self, position: np.ndarray) -> bool:
+        """Whether a position lies in the region; the default region is the bounding box."""
+        lo, hi = self.bounds
+        return bool(np.all(position >= lo) and np.all(position <= hi))
+
+
+class FamilySource(ReferenceSource):
+    """References drawn from a synthetic family, α uniform in its interval per episode."""
+
+    def __init__(self, family: Family) -> None:
+        self.family = family
+        self.rule = PlanarRule(dt=family.dt, max_speed=family.max_speed)
+        self.bounds = family.bounds
+        self.max_steps = family.steps
+
+    def reference(self, alpha: float) -> Reference:
+        dts = np.full(self.family.steps, self.family.dt)
+        return Reference(self.family.reference(alpha), dts, {"alpha": alpha})
+
+    def sample(self, rng: np.random.Generator) -> Reference:
+        return self.reference(self.family.sample_alpha(rng))
+
+    def normalize(self, distance: float, path_length: int) -> float:
+        return distance / self.family.diameter
+
+
+class TrajectoryImitationEnv(gym.Env):
+    """Gymnasium environment of the trajectory-imitation task."""
+
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (Gymnasium's convention)
+
+    def __init__(
+        self,
+        source: ReferenceSource,
+        rule: UpdateRule | None = None,
+        epsilon: float = 0.1,
+        smoothing: float = 0.9,
+    ) -> None:
+        self.source = source
+        self.rule = rule or source.rule
+        self.epsilon = epsilon
+        self.smoothing = smoothing
+        self.state_scaler = BoxScaler(*source.bounds, unit_low=0.0)
+        self.decision_scaler = self.rule.decision_scaler
+        n_decisions = len(self.rule.decision_names)
+        self.observation_space = gym.spaces.Box(
+            low=np.array([0.0, 0.0, 0.0], dtype=np.float32),
+            high=np.array([1.0, 1.0, float(source.max_steps)], dtype=np.float32),
+            dtype=np.float32,
+        )
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n_decisions,), dtype=np.float32)
+        self._dtw = IncrementalDTW(metric=self.rule.metric, capacity=source.max_steps + 1)
+        self.reference: Reference | None = None
+        self.position = np.zeros(2)
+        self.t = 0
+        self.smoothed = 0.0
+        self._perfect = np.zeros((0, n_decisions))
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a new episode; `options={"reference": Reference}` pins the reference."""
+        super().reset(seed=seed)
+        options = options or {}
+        ref = options.get("reference") or self.source.sample(self.np_random)
+        self.reference = ref
+        self._perfect = np.clip(
+            self.decision_scaler.scale(self.rule.perfect_decisions(ref.positions, ref.dts)), -1, 1
+        )
+        self.position = ref.positions[0].astype(np.float64).copy()
+        self.t = 0
+        self.smoothed = 0.0
+        self._dtw.reset()
+        self._dtw.push(self.position, ref.positions[0])
+        return self._observation(), {"reference": ref}
+
+    @property
+    def perfect_actions(self) -> np.ndarray:
+        """The scaled perfect decisions a_0..a_{n-1} of the current reference (definition 3.2)."""
+        return self._perfect
+
+    @property
+    def horizon(self) -> int:
+        return self.reference.steps if self.reference is not None else self.source.max_steps
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self.reference is None:
+            raise RuntimeError("call reset() before step()")
+        decision = self.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
+        proposed = self.rule.step(self.position, decision)
+        stuck = not (np.all(np.isfinite(proposed)) and self.source.contains(proposed))
+        if not stuck:
+            self.position = proposed
+        self.t += 1
+        revealed = self.reference.positions[self.t]
+        distance = self._dtw.push(self.position, revealed)
+        value = self.source.normalize(distance, self._dtw.path_length)
+        self.smoothed = self.smoothing * value + (1.0 - self.smoothing) * self.smoothed
+        reward = 1.0 if self.smoothed < self.epsilon else -1.0
+        terminated = self.t >= self.reference.steps
+        info = {
+            "dtw": distance,
+            "dtw_normalized": value,
+            "dtw_smoothed": self.smoothed,
+            "stuck": stuck,
+            "perfect_action": self._perfect[self.t - 1].astype(np.float32),
+        }
+        return self._observation(), reward, terminated, False, info
+
+    def _observation(self) -> np.ndarray:
+        scaled = np.clip(self.state_scaler.scale(self.position), 0.0, 1.0)
+        return np.array([scaled[0], scaled[1], self.t], dtype=np.float32)
+
+
+def make_family_env(family: str | Family = "circles", **kwargs: Any) -> TrajectoryImitationEnv:
+    """Environment over a synthetic family, by name or object (the entry point of `ENV_ID`)."""
+    fam = get_family(family) if isinstance(family, str) else family
+    return TrajectoryImitationEnv(FamilySource(fam), **kwargs)
+
+
+if ENV_ID not in gym.registry:
+    gym.register(id=ENV_ID, entry_point=make_family_env)
