@@ -10,6 +10,7 @@ from typing import Any
 
 import typer
 from rich.console import Console
+from rich.table import Table
 
 from aisdati.errors import UserError
 
@@ -32,13 +33,47 @@ def user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return func(*args, **kwargs)
         except UserError as exc:
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False)
+            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
             err_console.print("[yellow]interrupted[/]")
             raise typer.Exit(130) from None
 
     return wrapper
+
+
+def ensure_writable_dir(path: Path) -> None:
+    """Fail early, in one line, when an output folder cannot be created or written."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".aisdati-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise UserError(f"cannot write to output folder {path}: {exc.strerror or exc}") from None
+
+
+def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
+    """Ours beside the paper's Table 1 (lower is better)."""
+    table = Table(
+        title=f"DATI self-test: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
+    )
+    for col in ("family", "best (paper's metric)", "paper", "median", "IQM [95% CI]", "episodes"):
+        table.add_column(col, justify="left" if col == "family" else "right")
+    for r in rows:
+        paper = "-" if r["paper_best"] is None else f"{r['paper_best']:.3f}"
+        style = (
+            "green" if r["paper_best"] is not None and r["best"] <= r["paper_best"] else "yellow"
+        )
+        table.add_row(
+            r["family"],
+            f"[{style}]{r['best']:.3f}[/]",
+            paper,
+            f"{r['median']:.3f}",
+            f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
+            f"{r['mean_episodes']:.1f}",
+        )
+    return table
 
 
 @app.command()
@@ -126,3 +161,85 @@ def ingest(
     elif not quiet:
         console.print(summary_table(result.counts))
         console.print(f"wrote {', '.join(result.outputs.values())}", highlight=False)
+
+
+@app.command()
+@user_errors
+def selftest(
+    family: list[str] = typer.Option(
+        ["all"],
+        "--family",
+        "-f",
+        help="Family to run (repeatable or comma-separated); 'all' = the paper's four.",
+    ),
+    seeds: int = typer.Option(10, help="Training seeds per family (paper: 10)."),
+    episodes: int = typer.Option(100, help="Maximum training episodes per seed (paper: 100)."),
+    steps: int | None = typer.Option(
+        None, help="Steps per episode τ (default: the family's, 200)."
+    ),
+    references: int = typer.Option(10, help="Unseen test references per family (paper: 10)."),
+    workers: int = typer.Option(2, help="Processes to share the members out over (one per core)."),
+    noise: str = typer.Option("gaussian", help="Latent noise process: gaussian or ou."),
+    time_embedding: bool = typer.Option(True, help="Time2Vec input (off: Table 2 ablation)."),
+    reward_input: bool = typer.Option(True, help="Reward input to the critics (off: ablation)."),
+    quick: bool = typer.Option(
+        False, "--quick", help="Smoke check: 2 seeds x 3 episodes x 40 steps."
+    ),
+    out: Path | None = typer.Option(None, help="Output folder (default runs/selftest-<time>)."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar or table."),
+    as_json: bool = typer.Option(False, "--json", help="Print the results as JSON on stdout."),
+) -> None:
+    """Train DATI on the paper's synthetic families and compare with its Table 1."""
+    import json
+    from datetime import datetime
+
+    from aisdati.model.dati import DATIConfig
+    from aisdati.model.families import FAMILIES
+    from aisdati.model.selftest import (
+        PAPER_FAMILIES,
+        QUICK,
+        SelftestSettings,
+        result_rows,
+        run_selftest,
+        write_outputs,
+    )
+    from aisdati.progress import EpisodeProgress
+
+    names = [n.strip().lower() for item in family for n in item.split(",") if n.strip()]
+    names = list(PAPER_FAMILIES) if names in ([], ["all"]) else names
+    for name in names:
+        if name not in FAMILIES:
+            raise UserError(f"unknown family {name!r}; choose from {', '.join(FAMILIES)}")
+    if quick:
+        seeds, references, steps, episodes = (
+            QUICK[k] for k in ("seeds", "references", "steps", "episodes")
+        )
+    for label, value in (
+        ("--seeds", seeds),
+        ("--episodes", episodes),
+        ("--references", references),
+        ("--workers", workers),
+    ):
+        if value < 1:
+            raise UserError(f"{label} must be at least 1, got {value}")
+    if steps is not None and steps < 2:
+        raise UserError(f"--steps must be at least 2, got {steps}")
+    if noise not in ("gaussian", "ou"):
+        raise UserError(f"--noise must be gaussian or ou, got {noise!r}")
+    out = out or Path("runs") / f"selftest-{datetime.now():%Y%m%d-%H%M%S}"
+    ensure_writable_dir(out)
+
+    config = DATIConfig(episodes=episodes, noise=noise).with_network(
+        time_embedding=time_embedding, reward_input=reward_input
+    )
+    settings = SelftestSettings(tuple(names), seeds, references, steps, workers, config=config)
+    total = len(names) * seeds
+    with EpisodeProgress(total, episodes, "training DATI", disable=quiet or as_json) as progress:
+        result = run_selftest(settings, progress.update)
+    files = write_outputs(result, out)
+    rows = result_rows(result)
+    if as_json:
+        print(json.dumps({"results": rows, "wall_seconds": result.wall_seconds, "out": str(out)}))
+    elif not quiet:
+        console.print(selftest_table(rows, result.wall_seconds))
+        console.print(f"wrote {', '.join(f.name for f in files)} to [bold]{out}[/]")

@@ -16,16 +16,27 @@ NM_PER_DEGREE = 60.0
 """Nautical miles per degree of latitude, the paper's conversion factor (appendix A.3)."""
 
 
+def _radians(*degrees) -> list[np.ndarray]:
+    return [np.radians(np.asarray(v, dtype=np.float64)) for v in degrees]
+
+
 def haversine_m(lon1, lat1, lon2, lat2):
     """Great-circle distance in metres between points given in degrees (numpy broadcasting)."""
-    lon1, lat1, lon2, lat2 = (np.radians(np.asarray(v, dtype=np.float64)) for v in (lon1, lat1, lon2, lat2))
-    a = np.sin((lat2 - lat1) / 2) ** 2 + np.cos(lat1) * np.cos(lat2) * np.sin((lon2 - lon1) / 2) ** 2
+    lon1, lat1, lon2, lat2 = (
+        np.radians(np.asarray(v, dtype=np.float64)) for v in (lon1, lat1, lon2, lat2)
+    )
+    a = (
+        np.sin((lat2 - lat1) / 2) ** 2
+        + np.cos(lat1) * np.cos(lat2) * np.sin((lon2 - lon1) / 2) ** 2
+    )
     return 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
 
 
 def initial_bearing_deg(lon1, lat1, lon2, lat2):
     """Course from point 1 to point 2 in degrees clockwise from north, in [0, 360)."""
-    lon1, lat1, lon2, lat2 = (np.radians(np.asarray(v, dtype=np.float64)) for v in (lon1, lat1, lon2, lat2))
+    lon1, lat1, lon2, lat2 = (
+        np.radians(np.asarray(v, dtype=np.float64)) for v in (lon1, lat1, lon2, lat2)
+    )
     dlon = lon2 - lon1
     x = np.sin(dlon) * np.cos(lat2)
     y = np.cos(lat1) * np.sin(lat2) - np.sin(lat1) * np.cos(lat2) * np.cos(dlon)

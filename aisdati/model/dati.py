@@ -150,7 +150,9 @@ class EnsembleReplayBuffer:
         self.size = min(self.size + 1, self.capacity)
 
     def sample(self, batch_size: int, generators: list[torch.Generator]) -> dict[str, Tensor]:
-        idx = torch.stack([torch.randint(self.size, (batch_size,), generator=g) for g in generators])
+        idx = torch.stack(
+            [torch.randint(self.size, (batch_size,), generator=g) for g in generators]
+        )
         rows = torch.arange(len(generators))[:, None]
         return {k: v[rows, idx] for k, v in self.data.items()}
 
@@ -196,8 +198,14 @@ class DATITrainer:
         self.envs = list(envs)
         self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
         self.noise = LatentNoise(self.cfg, self.generators)
-        dims = {"state": self.state_dim, "action": self.decision_dim, "perfect": self.decision_dim,
-                "reward": 1, "noise": self.cfg.network.latent_dim, "time": 1}
+        dims = {
+            "state": self.state_dim,
+            "action": self.decision_dim,
+            "perfect": self.decision_dim,
+            "reward": 1,
+            "noise": self.cfg.network.latent_dim,
+            "time": 1,
+        }
         self.buffer = EnsembleReplayBuffer(len(seeds), self.cfg.buffer_capacity, dims)
         n = len(seeds)
         self.episode = [0] * n
@@ -215,7 +223,9 @@ class DATITrainer:
     def _build_optimizers(self) -> None:
         c, nets = self.cfg, self.nets
         actors = [*nets.forward_actor.parameters(), *nets.backward_actor.parameters(), *nets._t2v()]
-        self.opt_critic = torch.optim.Adam(nets.critic_parameters(), lr=c.lr_critic, betas=c.betas, fused=True)
+        self.opt_critic = torch.optim.Adam(
+            nets.critic_parameters(), lr=c.lr_critic, betas=c.betas, fused=True
+        )
         self.opt_actor = torch.optim.Adam(actors, lr=c.lr_actor, betas=c.betas, fused=True)
         self.opt_l1 = torch.optim.Adam(actors, lr=c.lr_l1, betas=c.l1_betas, fused=True)
 
@@ -280,7 +290,9 @@ class DATITrainer:
         t = nets.time_features(step)
         gen_a = nets.forward_actor(s, eta, t)
         gen_s = nets.backward_actor(a_hat, eta, t)
-        adv = -(nets.forward_critic(gen_a, r, t).mean(1) + nets.backward_critic(gen_s, r, t).mean(1))
+        adv = -(
+            nets.forward_critic(gen_a, r, t).mean(1) + nets.backward_critic(gen_s, r, t).mean(1)
+        )
         adv = adv.squeeze(-1)
         self.opt_actor.zero_grad(set_to_none=True)
         adv.sum().backward()
@@ -348,8 +360,16 @@ class DATITrainer:
             self.wait[member] += 1
         patience_out = 0 < self.cfg.patience <= self.wait[member]
         stopped = patience_out or self.episode[member] >= self.cfg.episodes
-        log = EpisodeLog(member, self.seeds[member], self.episode[member], steps,
-                         self._episode_reward[k] / steps, final_dtw, mean_loss, stopped)
+        log = EpisodeLog(
+            member,
+            self.seeds[member],
+            self.episode[member],
+            steps,
+            self._episode_reward[k] / steps,
+            final_dtw,
+            mean_loss,
+            stopped,
+        )
         self.history.append(log)
         self._episode_loss[k], self._episode_reward[k], self._episode_steps[k] = 0.0, 0.0, 0
         if not stopped:

@@ -48,7 +48,9 @@ def rollout(
     scores = np.full((members, refs), np.nan)
     alive = np.ones((members, refs), dtype=bool)
     noises = [
-        LatentNoise(config, [torch.Generator().manual_seed(seed * 7919 + 31 * e + r) for r in range(refs)])
+        LatentNoise(
+            config, [torch.Generator().manual_seed(seed * 7919 + 31 * e + r) for r in range(refs)]
+        )
         for e in range(members)
     ]
     while alive.any():
@@ -90,5 +92,6 @@ def summarize(scores: np.ndarray, resamples: int = 2000, seed: int = 0) -> Summa
     rng = np.random.default_rng(seed)
     boots = [interquartile_mean(rng.choice(x, size=len(x))) for _ in range(resamples)]
     low, high = np.percentile(boots, [2.5, 97.5])
-    return Summary(float(x.min()), float(np.median(x)), interquartile_mean(x), float(low),
-                   float(high), len(x))
+    return Summary(
+        float(x.min()), float(np.median(x)), interquartile_mean(x), float(low), float(high), len(x)
+    )

@@ -153,7 +153,9 @@ def _ribbons() -> Family:
     )
 
 
-FAMILIES: dict[str, Family] = {f.name: f for f in (_fixed_start(), _u_shaped(), _circles(), _ribbons())}
+FAMILIES: dict[str, Family] = {
+    f.name: f for f in (_fixed_start(), _u_shaped(), _circles(), _ribbons())
+}
 """The registry of families by lower-case name; the paper's four come first."""
 
 PAPER_DATI = {"fixedstart": 0.065, "ushaped": 0.231, "circles": 0.058, "ribbons": 0.033}

@@ -64,7 +64,6 @@ class EnsembleLinear(nn.Module):
         return torch.baddbmm(self.bias, x, self.weight)
 
 
-
 class SplitLinear(nn.Module):
     """A linear layer over the concatenation of several feature blocks, holding one weight block
     per input block: the same function (initialised as one Glorot draw over the whole fan-in)
@@ -137,7 +136,10 @@ class MLPTrunk(nn.Module):
     """The hidden layers: a `SplitLinear` over the input blocks, then hidden_layers - 1 more."""
 
     def __init__(
-        self, widths: Sequence[int], cfg: NetworkConfig, gens: Sequence[torch.Generator],
+        self,
+        widths: Sequence[int],
+        cfg: NetworkConfig,
+        gens: Sequence[torch.Generator],
         act: nn.Module,
     ):
         super().__init__()

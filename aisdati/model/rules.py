@@ -28,7 +28,10 @@ class BoxScaler:
 
     def unscale(self, u: np.ndarray) -> np.ndarray:
         span = self.high - self.low
-        return self.low + (np.asarray(u, dtype=np.float64) - self.unit_low) / (1.0 - self.unit_low) * span
+        return (
+            self.low
+            + (np.asarray(u, dtype=np.float64) - self.unit_low) / (1.0 - self.unit_low) * span
+        )
 
 
 class UpdateRule(ABC):
