@@ -243,3 +243,85 @@ def selftest(
     elif not quiet:
         console.print(selftest_table(rows, result.wall_seconds))
         console.print(f"wrote {', '.join(f.name for f in files)} to [bold]{out}[/]")
+
+
+# ------------------------------------------------------------------------------------ train
+@app.command()
+@user_errors
+def train(
+    cluster: str = typer.Option(
+        ..., "--cluster", "-c", help="Cluster to learn: up, down or other."
+    ),
+    data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
+    out: Path = typer.Option(Path("models"), "--out", help="Model folder."),
+    episodes: int = typer.Option(170, help="Maximum training episodes, one track each (paper)."),
+    seed: int = typer.Option(0, help="Random seed (networks, noise, track order, downsampling)."),
+    max_tracks: int = typer.Option(
+        170, help="Downsample the cluster to this many tracks (paper: 170); 0 keeps all."
+    ),
+    patience: int = typer.Option(10, help="Early stopping patience in episodes; 0 disables."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
+    as_json: bool = typer.Option(False, "--json", help="Print the model card as JSON on stdout."),
+) -> None:
+    """Train DATI on one cluster's tracks: writes <out>/<cluster>.pt (weights only), the model
+    card <cluster>.json and the training log <cluster>.log.jsonl, after every episode."""
+    import json
+
+    from aisdati.model.ais import TrainSettings, train_ais
+    from aisdati.progress import TrainingProgress
+    from aisdati.trackdata import read_track_table, select_cluster
+
+    select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
+    ensure_writable_dir(out)
+    settings = TrainSettings(
+        data_dir=data,
+        cluster=cluster.strip().lower(),
+        out_dir=out,
+        episodes=episodes,
+        seed=seed,
+        max_tracks=max_tracks or None,
+        patience=patience,
+    )
+    with TrainingProgress(
+        episodes, f"training {settings.cluster}", disable=quiet or as_json
+    ) as bar:
+
+        def on_step(trainer: Any, logs: list[Any]) -> None:
+            for log in logs:
+                bar.episode_done(log.episode, log.mean_reward, log.final_dtw)
+            if trainer.done:
+                return
+            env = trainer.envs[0]
+            n = max(trainer._episode_steps[0], 1)
+            bar.step(
+                trainer.episode[0] + 1,
+                env.t,
+                env.horizon,
+                trainer._episode_reward[0] / n,
+                env.smoothed,
+            )
+
+        result = train_ais(settings, on_step)
+    card = result.card
+    if as_json:
+        print(json.dumps({"model": str(result.model), "card": card}, default=str))
+        return
+    if quiet:
+        return
+    tr = card["training"]
+    used = card["data"]["tracks_used"]
+    table = Table(title=f"DATI model of cluster {settings.cluster!r}")
+    table.add_column("item")
+    table.add_column("value", justify="right")
+    rows = [
+        ("training tracks", f"{used} of {card['data']['tracks_in_cluster']}"),
+        ("episodes run", f"{tr['episodes_run']} (best: {tr['best_episode']})"),
+        ("mean reward, last episode", f"{tr['mean_reward'][-1]:+.3f}"),
+        ("smoothed DTW at horizon, last", f"{tr['final_dtw_m'][-1]:,.0f} m"),
+        ("steps/s", f"{tr['steps_per_second']}"),
+        ("wall time", f"{result.wall_seconds:.1f} s"),
+    ]
+    for row in rows:
+        table.add_row(*row)
+    console.print(table)
+    console.print(f"wrote [bold]{result.model}[/] and its card and log", highlight=False)

@@ -46,3 +46,54 @@ class EpisodeProgress:
         tb: TracebackType | None,
     ) -> None:
         self.progress.stop()
+
+
+class TrainingProgress:
+    """Two bars for one training run: episodes, and the steps of the current episode with its
+    running mean reward and smoothed DTW (metres)."""
+
+    def __init__(self, episodes: int, label: str, disable: bool = False, every: int = 10):
+        self.every = every
+        self.calls = 0
+        self.progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[info]}"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            disable=disable,
+        )
+        self.episodes = self.progress.add_task(label, total=episodes, info="episodes")
+        self.steps = self.progress.add_task("episode 1", total=None, info="")
+
+    def episode_done(self, episode: int, mean_reward: float, final_dtw: float) -> None:
+        self.progress.update(
+            self.episodes,
+            completed=episode,
+            info=f"episodes  last: reward {mean_reward:+.2f}, DTW {final_dtw:,.0f} m",
+        )
+
+    def step(self, episode: int, step: int, horizon: int, reward: float, dtw: float) -> None:
+        self.calls += 1
+        if self.calls % self.every:
+            return
+        self.progress.update(
+            self.steps,
+            description=f"episode {episode}",
+            completed=step,
+            total=horizon,
+            info=f"steps  reward {reward:+.2f}  DTW {dtw:,.0f} m",
+        )
+
+    def __enter__(self) -> TrainingProgress:
+        self.progress.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.progress.stop()
