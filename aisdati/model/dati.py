@@ -189,7 +189,6 @@ class DATITrainer:
         self.seeds = [int(s) for s in seeds]
         self.state_dim = envs[0].observation_space.shape[0] - 1
         self.decision_dim = envs[0].action_space.shape[0]
-        torch.manual_seed(self.seeds[0])  # nothing should draw from it; fixed all the same
         self.nets = DATINetworks(self.state_dim, self.decision_dim, self.cfg.network, self.seeds)
         self.final = copy.deepcopy(self.nets)  # receives each member's best forward actor
         self._build_optimizers()

@@ -37,7 +37,7 @@ def rollout(
     seed: int = 0,
 ) -> Rollouts:
     """Roll out member e on references[e][r] in env_grid[e][r], all members and references in
-    one batched forward pass per step; each member draws its noise from its own generator."""
+    one batched forward pass per step; each (member, reference) pair has its own noise stream."""
     members, refs = len(env_grid), len(env_grid[0])
     state_dim = env_grid[0][0].observation_space.shape[0] - 1
     obs = np.zeros((members, refs, state_dim + 1), dtype=np.float32)
@@ -48,10 +48,8 @@ def rollout(
     scores = np.full((members, refs), np.nan)
     alive = np.ones((members, refs), dtype=bool)
     noises = [
-        LatentNoise(
-            config, [torch.Generator().manual_seed(seed * 7919 + 31 * e + r) for r in range(refs)]
-        )
-        for e in range(members)
+        LatentNoise(config, [_generator(seed, member_seed, r) for r in range(refs)])
+        for member_seed in nets.seeds
     ]
     while alive.any():
         x = torch.as_tensor(obs)
@@ -67,6 +65,13 @@ def rollout(
                 alive[e, r] = False
                 scores[e, r] = info["dtw_smoothed"]
     return Rollouts([[np.asarray(p) for p in row] for row in paths], scores)
+
+
+def _generator(*key: int) -> torch.Generator:
+    """A generator keyed by (evaluation seed, member seed, reference index), so a member's
+    rollouts do not depend on which ensemble or worker it was trained in."""
+    state = np.random.SeedSequence([int(k) for k in key]).generate_state(1)[0]
+    return torch.Generator().manual_seed(int(state))
 
 
 @dataclass(frozen=True)
