@@ -107,3 +107,28 @@ def test_positions_only_rows_get_sog_and_cog_then_the_speed_filter():
     out, codes = clean_vessels(t, IngestSettings())
     assert list(codes) == [0, 0, 0, CODE["slow"]]  # the last report did not move
     assert np.allclose(out.column("sog").to_numpy()[:3], 10.08, atol=0.05)
+
+
+def test_bad_first_report_does_not_reject_the_rest_of_the_track():
+    # the first report is 2 degrees off; the following ones agree with each other
+    lat = [27.0, 25.0, 25.0028, 25.0056, 25.0084, 25.0112]
+    _, codes = clean_vessels(
+        _table([1] * 6, [0, 60, 120, 180, 240, 300], [-80.0] * 6, lat), IngestSettings()
+    )
+    assert list(codes) == [CODE["implied_speed"], 0, 0, 0, 0, 0]
+
+
+def test_two_consecutive_outliers_stay_rejected():
+    lat = [25.0, 25.0028, 27.0, 27.0001, 25.0084, 25.0112]
+    _, codes = clean_vessels(
+        _table([1] * 6, [0, 60, 120, 180, 240, 300], [-80.0] * 6, lat), IngestSettings()
+    )
+    assert list(codes) == [0, 0, CODE["implied_speed"], CODE["implied_speed"], 0, 0]
+
+
+def test_a_confirmed_reference_stays_when_the_track_jumps_for_good():
+    lat = [25.0, 25.0028, 27.0, 27.0028, 27.0056]
+    _, codes = clean_vessels(
+        _table([1] * 5, [0, 60, 120, 180, 240], [-80.0] * 5, lat), IngestSettings()
+    )
+    assert list(codes) == [0, 0, 0, 0, 0]

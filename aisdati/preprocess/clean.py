@@ -72,32 +72,59 @@ def filter_area_speed(table: pa.Table, codes: np.ndarray, roi, settings: IngestS
         _mark(codes, _col(table, "sog") <= settings.min_sog_kn, "slow")
 
 
+REANCHOR_RUN = 3
+"""Consecutive rejected reports that agree with each other and outvote the reference: then the
+reference was the outlier (a bad first report), and those reports are kept from then on."""
+
+
+@numba.njit(cache=True)
+def _too_fast(i, j, time_us, lon, lat, max_mps, tolerance_m):
+    """Whether report j cannot be reached from report i at `max_mps` (plus GPS tolerance)."""
+    to_rad = math.pi / 180.0
+    lat1 = lat[i] * to_rad
+    lat2 = lat[j] * to_rad
+    a = (
+        math.sin((lat2 - lat1) / 2) ** 2
+        + math.cos(lat1) * math.cos(lat2) * math.sin((lon[j] - lon[i]) * to_rad / 2) ** 2
+    )
+    dist = 2 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(a, 0.0), 1.0)))
+    return dist > max_mps * abs(time_us[j] - time_us[i]) / 1e6 + tolerance_m
+
+
 @numba.njit(cache=True)
 def _implied_speed_outliers(mmsi, time_us, lon, lat, max_mps, tolerance_m, reset_us):
     """Mask of reports too far from the previous *kept* report of the same vessel to be reached
     at `max_mps`. Sequential by nature (a rejected report must not become the reference), so
-    compiled. After a gap longer than `reset_us` the next report is trusted again, so one bad
-    reference cannot reject the rest of a vessel's history."""
+    compiled. After a gap longer than `reset_us` the next report is trusted again; and when
+    `REANCHOR_RUN` consecutive rejected reports agree with each other, they are kept and the last
+    becomes the reference; the old reference is rejected too when nothing had confirmed it (a
+    vessel's first report). So one bad report cannot reject the rest of a vessel's history."""
     n = mmsi.shape[0]
     reject = np.zeros(n, dtype=np.bool_)
     last = -1
-    to_rad = math.pi / 180.0
+    confirmed = False  # whether the reference was reached from an earlier kept report
+    run_start = -1  # first of the current run of consecutive, mutually consistent rejections
     for i in range(n):
         if last < 0 or mmsi[i] != mmsi[last] or time_us[i] - time_us[last] > reset_us:
             last = i
+            confirmed = False
+            run_start = -1
             continue
-        lat1 = lat[last] * to_rad
-        lat2 = lat[i] * to_rad
-        a = (
-            math.sin((lat2 - lat1) / 2) ** 2
-            + math.cos(lat1) * math.cos(lat2) * math.sin((lon[i] - lon[last]) * to_rad / 2) ** 2
-        )
-        dist = 2 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(a, 0.0), 1.0)))
-        dt_s = (time_us[i] - time_us[last]) / 1e6
-        if dist > max_mps * dt_s + tolerance_m:
-            reject[i] = True
-        else:
+        if not _too_fast(last, i, time_us, lon, lat, max_mps, tolerance_m):
             last = i
+            confirmed = True
+            run_start = -1
+            continue
+        reject[i] = True
+        if run_start >= 0 and not _too_fast(i - 1, i, time_us, lon, lat, max_mps, tolerance_m):
+            if i - run_start + 1 >= REANCHOR_RUN:
+                reject[run_start : i + 1] = False
+                reject[last] = reject[last] or not confirmed
+                last = i
+                confirmed = True
+                run_start = -1
+        else:
+            run_start = i
     return reject
 
 
