@@ -1,0 +1,162 @@
+"""`aisdati selftest` end to end on tiny runs, and its one-line errors on bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pandas as pd
+import pytest
+import torch
+
+TINY = ("--seeds", "2", "--episodes", "2", "--steps", "20", "--references", "2")
+FILES = ("results.csv", "results.json", "scores.csv", "families.png", "rollouts.png")
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Two cores, possibly shared with a training job: keep torch to one thread."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def selftest(cli, out, *args):
+    return cli("selftest", "--out", out, "--quiet", *args)
+
+
+def check_outputs(out, families, seeds, references):
+    for name in FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary files
+    doc = json.loads((out / "results.json").read_text())
+    rows = doc["results"]
+    assert [r["family"] for r in rows] == list(families)
+    for r in rows:
+        assert math.isfinite(r["best"]) and r["best"] >= 0
+        assert r["best"] <= r["median"] and r["iqm_ci_low"] <= r["iqm"] <= r["iqm_ci_high"]
+        assert r["n_scores"] == seeds * references
+        assert 1 <= r["mean_episodes"] <= 2
+    csv = pd.read_csv(out / "results.csv")
+    assert list(csv["family"]) == list(families)
+    scores = pd.read_csv(out / "scores.csv")
+    assert len(scores) == len(families) * seeds * references
+    assert set(scores["family"]) == set(families)
+    assert scores["score"].notna().all()
+    for r in rows:
+        mine = scores[scores["family"] == r["family"]]
+        assert r["best"] == pytest.approx(mine["score"].min())
+    assert (out / "families.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    return doc
+
+
+def test_tiny_selftest_writes_its_files(cli, tmp_path):
+    out = tmp_path / "run"
+    result = selftest(cli, out, "--family", "circles", *TINY, "--workers", "1")
+    assert result.exit_code == 0, result.output
+    doc = check_outputs(out, ["circles"], seeds=2, references=2)
+    assert len(doc["results"]) == 1
+    settings = doc["settings"]
+    assert settings["families"] == ["circles"] and settings["seeds"] == 2
+    assert settings["steps"] == 20 and settings["references"] == 2
+    net = settings["config"]["network"]
+    assert net["time_embedding"] is True and net["reward_input"] is True
+    assert settings["config"]["episodes"] == 2
+
+
+def test_tiny_selftest_json_on_stdout(cli, tmp_path):
+    out = tmp_path / "run"
+    result = cli(
+        "selftest", "--family", "ushaped", "--seeds", "1", "--episodes", "1", "--steps", "10",
+        "--references", "2", "--workers", "1", "--out", out, "--json",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    assert doc["out"] == str(out) and doc["results"][0]["family"] == "ushaped"
+    assert math.isfinite(doc["results"][0]["best"])
+
+
+def test_two_workers_two_families(cli, tmp_path):
+    out = tmp_path / "run"
+    result = selftest(
+        cli, out, "--family", "circles,ushaped", "--seeds", "1", "--episodes", "2",
+        "--steps", "20", "--references", "2", "--workers", "2",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    check_outputs(out, ["circles", "ushaped"], seeds=1, references=2)
+
+
+def test_ablation_flags_turn_things_off(cli, tmp_path):
+    out = tmp_path / "run"
+    result = selftest(
+        cli, out, "--family", "circles", "--seeds", "1", "--episodes", "1", "--steps", "10",
+        "--references", "2", "--workers", "1", "--no-time-embedding", "--no-reward-input",
+        "--noise", "ou",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    config = json.loads((out / "results.json").read_text())["settings"]["config"]
+    assert config["network"]["time_embedding"] is False
+    assert config["network"]["reward_input"] is False
+    assert config["noise"] == "ou"
+
+
+def test_a_boolean_flag_does_not_read_false_as_true(cli, tmp_path):
+    """`--time-embedding False` must never run with the embedding on."""
+    out = tmp_path / "run"
+    for spelling in (("--time-embedding", "False"), ("--time-embedding=False",)):
+        result = selftest(
+            cli, out, "--family", "circles", "--seeds", "1", "--episodes", "1", "--steps", "5",
+            "--references", "1", "--workers", "1", *spelling,
+        )  # fmt: skip
+        if result.exit_code == 0:
+            config = json.loads((out / "results.json").read_text())["settings"]["config"]
+            assert config["network"]["time_embedding"] is False, spelling
+        else:
+            assert result.exit_code == 2 and "Traceback" not in result.output, spelling
+            assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--family", "nosuchfamily"), "unknown family"),
+        (("--family", "circles,nosuchfamily"), "unknown family"),
+        (("--family", "circles", "--seeds", "0"), "--seeds"),
+        (("--family", "circles", "--episodes", "0"), "--episodes"),
+        (("--family", "circles", "--references", "0"), "--references"),
+        (("--family", "circles", "--workers", "0"), "--workers"),
+        (("--family", "circles", "--steps", "1"), "--steps"),
+        (("--family", "circles", "--noise", "bogus"), "--noise"),
+    ],
+    ids=[
+        "family",
+        "one-bad-family",
+        "seeds",
+        "episodes",
+        "references",
+        "workers",
+        "steps",
+        "noise",
+    ],
+)
+def test_bad_options_are_one_line_errors(cli, tmp_path, args, message):
+    out = tmp_path / "run"
+    result = selftest(cli, out, *args)
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.stderr
+    assert message in lines[0]
+    assert not out.exists()  # checked before anything is written
+
+
+def test_unwritable_out_is_a_one_line_error(cli, tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    result = selftest(cli, blocker / "run", "--family", "circles", *TINY)
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "cannot write to output folder" in lines[0], result.stderr
+    assert blocker.read_text() == "not a folder"
