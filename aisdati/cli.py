@@ -53,22 +53,77 @@ def ensure_writable_dir(path: Path) -> None:
         raise UserError(f"cannot write to output folder {path}: {exc.strerror or exc}") from None
 
 
+def _ours(value: float, paper: float | None) -> str:
+    style = "green" if paper is not None and value <= paper else "yellow"
+    return f"[{style}]{value:.3f}[/]"
+
+
+def _paper(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
 def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
-    """Ours beside the paper's Table 1 (lower is better)."""
+    """Ours beside the paper's Table 1 (lower is better); one row per method x family."""
+    from aisdati.model.selftest import METHODS
+
+    methods = list(dict.fromkeys(r.get("method", "dati") for r in rows))
+    name = "DATI" if methods == ["dati"] else "Table 1"
     table = Table(
-        title=f"DATI self-test: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
+        title=f"{name} self-test: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
     )
-    for col in ("family", "best (paper's metric)", "paper", "median", "IQM [95% CI]", "episodes"):
-        table.add_column(col, justify="left" if col == "family" else "right")
+    cols = (
+        "method",
+        "family",
+        "best (paper's metric)",
+        "paper",
+        "median",
+        "IQM [95% CI]",
+        "episodes",
+    )
+    for col in cols:
+        table.add_column(col, justify="left" if col in ("method", "family") else "right")
     for r in rows:
-        paper = "-" if r["paper_best"] is None else f"{r['paper_best']:.3f}"
-        style = (
-            "green" if r["paper_best"] is not None and r["best"] <= r["paper_best"] else "yellow"
-        )
+        method = r.get("method", "dati")
         table.add_row(
+            METHODS.get(method, method),
             r["family"],
-            f"[{style}]{r['best']:.3f}[/]",
-            paper,
+            _ours(r["best"], r["paper_best"]),
+            _paper(r["paper_best"]),
+            f"{r['median']:.3f}",
+            f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
+            f"{r['mean_episodes']:.1f}",
+        )
+    return table
+
+
+def ablation_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
+    """Ours beside the paper's Table 2: top-1 and top-2 per DATI variant (lower is better)."""
+    from aisdati.model.selftest import METHODS
+
+    table = Table(
+        title=f"DATI ablation: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
+    )
+    cols = (
+        "variant",
+        "family",
+        "top-1",
+        "paper",
+        "top-2",
+        "paper",
+        "median",
+        "IQM [95% CI]",
+        "episodes",
+    )
+    for col in cols:
+        table.add_column(col, justify="left" if col in ("variant", "family") else "right")
+    for r in rows:
+        table.add_row(
+            METHODS.get(r["method"], r["method"]),
+            r["family"],
+            _ours(r["best"], r["paper_best"]),
+            _paper(r["paper_best"]),
+            _ours(r["second_best"], r["paper_second_best"]),
+            _paper(r["paper_second_best"]),
             f"{r['median']:.3f}",
             f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
             f"{r['mean_episodes']:.1f}",
@@ -172,6 +227,19 @@ def selftest(
         "-f",
         help="Family to run (repeatable or comma-separated); 'all' = the paper's four.",
     ),
+    methods: str = typer.Option(
+        "dati",
+        "--methods",
+        "-m",
+        help="Methods to compare, comma-separated: dati, bc, ddpg-ti (Table 1: all three), "
+        "dati-no-time-embedding, dati-no-reward-input.",
+    ),
+    ablation: bool = typer.Option(
+        False,
+        "--ablation",
+        help="Table 2: DATI, DATI without time embedding and without reward input, everything "
+        "else equal (default family: circles).",
+    ),
     seeds: int = typer.Option(10, help="Training seeds per family (paper: 10)."),
     episodes: int = typer.Option(100, help="Maximum training episodes per seed (paper: 100)."),
     steps: int | None = typer.Option(
@@ -189,16 +257,21 @@ def selftest(
     quiet: bool = typer.Option(False, "--quiet", help="No progress bar or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON on stdout."),
 ) -> None:
-    """Train DATI on the paper's synthetic families and compare with its Table 1."""
+    """Train DATI (and the baselines or ablations) on the paper's synthetic families and compare
+    with its Tables 1 and 2."""
     import json
+    from dataclasses import replace
     from datetime import datetime
 
+    from aisdati.model.baselines import BCConfig, DDPGTIConfig
     from aisdati.model.dati import DATIConfig
     from aisdati.model.families import FAMILIES
     from aisdati.model.selftest import (
+        ABLATION,
         PAPER_FAMILIES,
         QUICK,
         SelftestSettings,
+        parse_methods,
         result_rows,
         run_selftest,
         write_outputs,
@@ -206,7 +279,11 @@ def selftest(
     from aisdati.progress import EpisodeProgress
 
     names = [n.strip().lower() for item in family for n in item.split(",") if n.strip()]
-    names = list(PAPER_FAMILIES) if names in ([], ["all"]) else names
+    default_families = ["circles"] if ablation else list(PAPER_FAMILIES)
+    names = default_families if names in ([], ["all"]) else names
+    if ablation and methods.strip().lower() != "dati":
+        raise UserError("--ablation runs the three DATI variants itself; leave out --methods")
+    method_names = ABLATION if ablation else parse_methods(methods)
     for name in names:
         if name not in FAMILIES:
             raise UserError(f"unknown family {name!r}; choose from {', '.join(FAMILIES)}")
@@ -232,16 +309,28 @@ def selftest(
     config = DATIConfig(episodes=episodes, noise=noise).with_network(
         time_embedding=time_embedding, reward_input=reward_input
     )
-    settings = SelftestSettings(tuple(names), seeds, references, steps, workers, config=config)
-    total = len(names) * seeds
-    with EpisodeProgress(total, episodes, "training DATI", disable=quiet or as_json) as progress:
+    settings = SelftestSettings(
+        tuple(names),
+        seeds,
+        references,
+        steps,
+        workers,
+        config=config,
+        methods=tuple(method_names),
+        bc=replace(BCConfig(), episodes=episodes),
+        ddpg=replace(DDPGTIConfig(), episodes=episodes),
+    )
+    total = len(method_names) * len(names) * seeds
+    label = "training DATI" if list(method_names) == ["dati"] else "training"
+    with EpisodeProgress(total, episodes, label, disable=quiet or as_json) as progress:
         result = run_selftest(settings, progress.update)
     files = write_outputs(result, out)
     rows = result_rows(result)
     if as_json:
         print(json.dumps({"results": rows, "wall_seconds": result.wall_seconds, "out": str(out)}))
     elif not quiet:
-        console.print(selftest_table(rows, result.wall_seconds))
+        make_table = ablation_table if ablation else selftest_table
+        console.print(make_table(rows, result.wall_seconds))
         console.print(f"wrote {', '.join(f.name for f in files)} to [bold]{out}[/]")
 
 
@@ -325,3 +414,117 @@ def train(
         table.add_row(*row)
     console.print(table)
     console.print(f"wrote [bold]{result.model}[/] and its card and log", highlight=False)
+
+
+# ----------------------------------------------------------------------------------- detect
+def detection_table(scores: Any, limit: int = 15) -> Table:
+    """The flagged tracks (or, if none, the top of the ranking) with where they deviate most."""
+    flagged = scores[scores["flagged"]].sort_values("rank")
+    shown = flagged if len(flagged) else scores.sort_values("rank")
+    title = (
+        f"{len(flagged)} of {len(scores)} test tracks flagged"
+        if len(flagged)
+        else f"no track flagged among {len(scores)}; the highest scores"
+    )
+    table = Table(title=title)
+    cols = ["rank", "track", "mmsi", "points", "score", "mean dist", "max dev", "at (lat, lon)"]
+    several = scores["model"].nunique() > 1
+    if several:
+        cols.insert(3, "model")
+    for col in cols:
+        table.add_column(
+            col, justify="left" if col in ("model", "at (lat, lon)") else "right", no_wrap=True
+        )
+    for r in shown.head(limit).itertuples():
+        row = [
+            str(r.rank),
+            str(r.track_id),
+            str(r.mmsi),
+            str(r.n_points),
+            f"[{'red' if r.flagged else 'white'}]{r.score:.3f}[/]",
+            f"{r.score_m:,.0f} m",
+            f"{r.max_dev_m:,.0f} m",
+            f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
+        ]
+        if several:
+            row.insert(3, r.model)
+        table.add_row(*row)
+    if len(shown) > limit:
+        table.caption = f"... and {len(shown) - limit} more in scores.parquet"
+    return table
+
+
+@app.command()
+@user_errors
+def detect(
+    data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
+    models_dir: Path = typer.Option(Path("models"), "--models", help="Model folder."),
+    model: list[str] = typer.Option(
+        None, "--model", "-m", help="Model name in --models (repeatable); default: all."
+    ),
+    out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
+    cluster: str = typer.Option(
+        "other", "--cluster", help="Test tracks' cluster: up, down, other or all."
+    ),
+    track: list[int] = typer.Option(
+        None, "--track", help="Judge these track ids instead (repeatable)."
+    ),
+    rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts per track (paper: 1)."),
+    threshold: float = typer.Option(0.75, help="Flag normalised scores above this, in (0, 1]."),
+    top_percent: float | None = typer.Option(
+        None, "--top-percent", help="Flag this percentage of highest scores instead."
+    ),
+    near_km: float = typer.Option(
+        10.0, "--near-km", help="Test tracks start within this distance of a training start."
+    ),
+    seed: int = typer.Option(0, help="Seed of the rollouts' latent noise."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No table."),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON on stdout."),
+) -> None:
+    """Score test tracks against trained models: writes scores.parquet, anomalies.geojson,
+    map.png and report.json to --out and prints the flagged tracks."""
+    import json
+    from datetime import datetime
+
+    from aisdati.detect import DetectSettings, check_settings, report_dict, write_outputs
+    from aisdati.detect import detect as run_detect
+
+    settings = DetectSettings(
+        data_dir=data,
+        models_dir=models_dir,
+        out_dir=out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
+        models=tuple(model or ()),
+        cluster=cluster.strip().lower(),
+        track_ids=tuple(track or ()),
+        rollouts=rollouts,
+        threshold=threshold,
+        top_percent=top_percent,
+        near_km=near_km,
+        seed=seed,
+    )
+    check_settings(settings)
+    ensure_writable_dir(settings.out_dir)
+    status = err_console if as_json else console
+    with status.status("rolling out and scoring", spinner="dots") if not quiet else _null():
+        result = run_detect(settings)
+        files = write_outputs(result, settings.out_dir)
+    if as_json:
+        doc = report_dict(result)
+        doc["files"] = [str(f) for f in files]
+        print(json.dumps(doc, default=str))
+        return
+    if quiet:
+        return
+    console.print(detection_table(result.scores))
+    t = result.timings
+    console.print(
+        f"rollouts {t['rollout_s']:.1f} s, scoring {t['score_s']:.1f} s; "
+        f"wrote {', '.join(f.name for f in files)} to [bold]{settings.out_dir}[/]",
+        highlight=False,
+    )
+
+
+def _null() -> Any:
+    import contextlib
+
+    return contextlib.nullcontext()

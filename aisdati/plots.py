@@ -66,3 +66,73 @@ def plot_best_rollouts(
         ax.legend(fontsize=8, loc="best")
     fig.suptitle("Best rollout per family (normalised smoothed DTW in brackets)")
     _save(fig, path)
+
+
+def land_geometry():
+    """Offline land basemap: Natural Earth 1:110m, the Americas (see aisdati/data/README.md)."""
+    import json
+    from importlib.resources import files
+
+    from shapely.geometry import shape
+
+    doc = json.loads((files("aisdati") / "data" / "land_110m_americas.geojson").read_text())
+    return shape(doc["features"][0]["geometry"])
+
+
+def _draw_land(ax: plt.Axes) -> None:
+    from shapely.geometry import MultiPolygon, Polygon
+
+    land = land_geometry()
+    polys = land.geoms if isinstance(land, MultiPolygon) else [land]
+    for poly in polys:
+        if isinstance(poly, Polygon):
+            x, y = poly.exterior.xy
+            ax.fill(x, y, color="#e8e4d8", ec="#b8b09a", lw=0.6, zorder=0)
+
+
+def plot_detection_map(
+    tracks: Sequence[np.ndarray],
+    rollouts: Sequence[np.ndarray],
+    flagged: np.ndarray,
+    max_dev: np.ndarray,
+    regions: Sequence[tuple[np.ndarray, np.ndarray]],
+    path: Path,
+    title: str = "",
+) -> None:
+    """Test tracks grey, flagged tracks red with their nearest rollout blue and a cross where they
+    deviate most, the models' regions dashed, over an offline land basemap (lon/lat, the
+    longitude axis stretched by 1/cos(latitude) so that shapes are true)."""
+    fig, ax = plt.subplots(figsize=(9, 7.5))
+    _draw_land(ax)
+    for xy, f in zip(tracks, flagged, strict=True):
+        if not f:
+            ax.plot(xy[:, 0], xy[:, 1], color="0.55", lw=0.6, alpha=0.7, zorder=1)
+    for xy, roll, f in zip(tracks, rollouts, flagged, strict=True):
+        if f:
+            ax.plot(roll[:, 0], roll[:, 1], color="tab:blue", lw=1.0, zorder=2)
+            ax.plot(xy[:, 0], xy[:, 1], color="tab:red", lw=1.4, zorder=3)
+            ax.plot(*xy[0], "o", color="tab:red", ms=3, zorder=3)
+    if flagged.any():
+        ax.plot(max_dev[flagged, 0], max_dev[flagged, 1], "kx", ms=7, mew=1.6, zorder=4)
+    for lo, hi in regions:
+        ax.plot([lo[0], hi[0], hi[0], lo[0], lo[0]], [lo[1], lo[1], hi[1], hi[1], lo[1]],
+                "k--", lw=0.8, zorder=1)  # fmt: skip
+    allpts = np.concatenate([*tracks, *[np.stack([lo, hi]) for lo, hi in regions]])
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    pad = np.maximum((hi - lo) * 0.04, 0.01)
+    ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
+    ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
+    ax.set_aspect(1.0 / np.cos(np.radians((lo[1] + hi[1]) / 2)))
+    ax.set_facecolor("#eef4f8")
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("latitude (deg)")
+    handles = [
+        plt.Line2D([], [], color="0.55", lw=1, label="test track"),
+        plt.Line2D([], [], color="tab:red", lw=1.4, label="flagged track"),
+        plt.Line2D([], [], color="tab:blue", lw=1, label="nearest rollout"),
+        plt.Line2D([], [], color="k", marker="x", ls="", label="largest deviation"),
+        plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
+    ]
+    ax.legend(handles=handles, fontsize=8, loc="best")
+    ax.set_title(title or "DATI anomalies")
+    _save(fig, path)

@@ -1,0 +1,471 @@
+"""Detection of abnormal tracks (section 6.2 of the paper): rollouts -> scores -> flags -> outputs.
+
+For each test track, the model that learnt the traffic entering where the track enters is rolled
+out K times from the track's first point, for as many steps as the track has (the agent acts with
+its own latent noise, through the spherical rule, sticking at its region's box). A rollout's
+distance to the track is the great-circle DTW divided by the number of cells on the optimal
+warping path: the mean distance in metres between matched points, so long and short tracks
+compare (the same reading as ε in training). A track's raw score is the smallest of its K
+distances (K = 1 is the paper's protocol; the agent is stochastic, so more rollouts give a fairer
+"could the model have generated this?"). Raw scores are divided by their maximum over the test
+set, as in the paper, and tracks above `threshold` (paper: Λ = 0.75), or in the top `top_percent`,
+are flagged. For every track the point of maximum local distance along the best warping path
+tells where it deviates most.
+
+Default test set (section 6.2): tracks of the `other` cluster, not used in training, whose first
+point lies within `near_km` (default 10 km) of some training track's first point: a model of `up`
+traffic judges tracks that enter from the same boundary. With several models, each track goes to
+the model with the nearest training start.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import torch
+
+from aisdati.dtw import dtw_path, dtw_path_length
+from aisdati.errors import UserError
+from aisdati.geo import haversine_m
+from aisdati.model.checkpoint import atomic_write_bytes, load_networks
+from aisdati.model.dati import DATIConfig
+from aisdati.model.networks import DATINetworks
+from aisdati.model.rules import BoxScaler, SphericalRule
+from aisdati.trackdata import CLUSTERS, Track, load_tracks, read_track_table
+
+SCORES_SCHEMA = pa.schema(
+    [
+        ("track_id", pa.int64()),
+        ("mmsi", pa.int64()),
+        ("model", pa.string()),
+        ("n_points", pa.int64()),
+        ("score_m", pa.float64()),
+        ("score", pa.float64()),
+        ("flagged", pa.bool_()),
+        ("rank", pa.int64()),
+        ("max_dev_m", pa.float64()),
+        ("max_dev_lon", pa.float64()),
+        ("max_dev_lat", pa.float64()),
+        ("max_dev_index", pa.int64()),
+    ]
+)
+"""scores.parquet, one row per test track, sorted by rank (1 = most abnormal). score_m: best-of-K
+mean great-circle distance along the warping path (metres); score: score_m / max over the test
+set; max_dev_*: the track point with the largest distance to its matched rollout point."""
+
+
+@dataclass
+class AISModel:
+    name: str
+    nets: DATINetworks
+    config: DATIConfig
+    card: dict[str, Any]
+
+    @property
+    def rule(self) -> SphericalRule:
+        r = self.card["rule"]
+        return SphericalRule(max_sog=float(r["max_sog_kn"]), max_dt_h=float(r["max_dt_h"]))
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        reg = self.card["region"]
+        return (
+            np.array([reg["lon"][0], reg["lat"][0]], np.float64),
+            np.array([reg["lon"][1], reg["lat"][1]], np.float64),
+        )
+
+    @property
+    def start_points(self) -> np.ndarray:
+        return np.asarray(self.card["data"]["start_points"], np.float64).reshape(-1, 2)
+
+    @property
+    def training_ids(self) -> set[int]:
+        return {int(i) for i in self.card["data"]["track_ids"]}
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds
+        return np.all((points >= lo) & (points <= hi), axis=-1)
+
+
+@dataclass(frozen=True)
+class DetectSettings:
+    data_dir: Path
+    models_dir: Path
+    out_dir: Path
+    models: tuple[str, ...] = ()
+    """Model names (<models_dir>/<name>.pt/.json); empty: every model in the folder."""
+    cluster: str = "other"
+    """Cluster of the test tracks: up, down, other or all."""
+    track_ids: tuple[int, ...] = ()
+    """Explicit test tracks (overrides the cluster and the start rule)."""
+    rollouts: int = 10
+    threshold: float = 0.75
+    top_percent: float | None = None
+    near_km: float = 10.0
+    seed: int = 0
+
+
+@dataclass
+class Detection:
+    scores: pd.DataFrame
+    tracks: list[Track]
+    rollouts: list[np.ndarray]
+    """The best rollout per track, in the order of `tracks`."""
+    models: list[AISModel]
+    timings: dict[str, float] = field(default_factory=dict)
+    settings: DetectSettings | None = None
+
+
+# ------------------------------------------------------------------------------------ models
+def load_ais_model(stem: Path) -> AISModel:
+    weights = stem.with_suffix(".pt")
+    if weights.is_file():
+        with weights.open("rb") as fh:
+            if fh.read(2) != b"PK":  # torch.save writes a zip archive
+                raise UserError(f"{weights} is not a model weights file (damaged or foreign)")
+    nets, config, card = load_networks(stem)
+    needed = ("rule", "region", "data")
+    if card.get("kind") != "ais" or any(k not in card for k in needed):
+        raise UserError(f"{stem}.json is not an AIS model card (train one with `aisdati train`)")
+    if nets.members != 1 or card.get("decision_dim", 3) != 3:
+        raise UserError(f"{stem}: expected a single-member model with 3 decisions")
+    return AISModel(stem.name, nets, config, card)
+
+
+def load_models(models_dir: Path, names: Sequence[str]) -> list[AISModel]:
+    if names:
+        stems = [models_dir / n for n in names]
+    else:
+        stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
+        stems = [s for s in stems if s.with_suffix(".pt").is_file()]
+        if not stems:
+            raise UserError(f"no models in {models_dir}: run `aisdati train --cluster up` first")
+    return [load_ais_model(s) for s in stems]
+
+
+# --------------------------------------------------------------------------------- test set
+def select_test_tracks(
+    settings: DetectSettings, models: Sequence[AISModel]
+) -> tuple[list[int], list[int]]:
+    """Test track ids and, for each, the index of the model that judges it."""
+    table = read_track_table(settings.data_dir)
+    if settings.track_ids:
+        missing = set(settings.track_ids) - set(table["track_id"])
+        if missing:
+            raise UserError(f"tracks not in {settings.data_dir}: {sorted(missing)[:5]}")
+        table = table[table["track_id"].isin(settings.track_ids)]
+    elif settings.cluster != "all":
+        if settings.cluster not in CLUSTERS:
+            raise UserError(
+                f"unknown cluster {settings.cluster!r}; choose from {', '.join(CLUSTERS)} or all"
+            )
+        table = table[table["cluster"] == settings.cluster]
+        if table.empty:
+            raise UserError(f"no tracks in cluster {settings.cluster!r} in {settings.data_dir}")
+    ids = table["track_id"].to_numpy()
+    starts = table[["lon0", "lat0"]].to_numpy(np.float64) if "lon0" in table else None
+    if starts is None:
+        starts = np.array([t.positions[0] for t in load_tracks(settings.data_dir, ids)])
+    # distance from each start to each model's nearest training start (km)
+    near = np.full((len(ids), len(models)), np.inf)
+    for m, model in enumerate(models):
+        sp = model.start_points
+        for lo in range(0, len(sp), 256):
+            chunk = sp[lo : lo + 256]
+            d = haversine_m(starts[:, None, 0], starts[:, None, 1], chunk[:, 0], chunk[:, 1])
+            near[:, m] = np.minimum(near[:, m], d.min(axis=1) / 1000.0)
+        if not settings.track_ids:
+            trained = np.isin(ids, list(model.training_ids))
+            near[trained, m] = np.inf  # a model does not judge its own training tracks
+    inside = np.zeros(len(ids), dtype=bool)
+    for model in models:
+        inside |= model.contains(starts)
+    if not inside.any():
+        lo, hi = models[0].bounds
+        raise UserError(
+            f"no test track starts inside the model's region (lon {lo[0]:.2f}..{hi[0]:.2f}, "
+            f"lat {lo[1]:.2f}..{hi[1]:.2f}): is the model from another region?"
+        )
+    best = near.argmin(axis=1)
+    dist = near[np.arange(len(ids)), best]
+    keep = np.ones(len(ids), dtype=bool) if settings.track_ids else dist <= settings.near_km
+    if not keep.any():
+        raise UserError(
+            f"no test tracks start within {settings.near_km:g} km of the training tracks' starts "
+            "(training tracks are never test tracks); raise --near-km or pass --cluster all"
+        )
+    return [int(i) for i in ids[keep]], [int(b) for b in best[keep]]
+
+
+# ---------------------------------------------------------------------------------- rollouts
+def generate(
+    model: AISModel,
+    starts: np.ndarray,
+    horizons: np.ndarray,
+    rollouts: int,
+    seed: int = 0,
+) -> np.ndarray:
+    """K rollouts from each start, all in one batch: positions [N * K, max horizon + 1, 2], rollout
+    k of start i at row i * K + k; rows past their horizon hold the last position."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small matmuls: extra threads cost 10x on 2 busy cores
+    try:
+        return _generate(model, starts, horizons, rollouts, seed)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _generate(
+    model: AISModel, starts: np.ndarray, horizons: np.ndarray, rollouts: int, seed: int
+) -> np.ndarray:
+    nets, cfg, rule = model.nets, model.config, model.rule
+    lo, hi = model.bounds
+    scaler = BoxScaler(lo, hi, unit_low=0.0)
+    n = len(starts) * rollouts
+    pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
+    steps = int(np.max(horizons))
+    out = np.empty((n, steps + 1, 2))
+    out[:, 0] = pos
+    gen = torch.Generator().manual_seed(int(seed))
+    latent = cfg.network.latent_dim
+    eta = torch.zeros(1, n, latent)
+    limit = np.repeat(np.asarray(horizons), rollouts)
+    for t in range(steps):
+        draw = torch.randn((1, n, latent), generator=gen) * cfg.noise_sigma
+        if cfg.noise == "ou":
+            eta = eta - cfg.ou_theta * eta * cfg.ou_dt + draw * math.sqrt(cfg.ou_dt)
+        else:
+            eta = draw
+        state = torch.as_tensor(np.clip(scaler.scale(pos), 0.0, 1.0), dtype=torch.float32)[None]
+        tt = torch.full((1, n, 1), float(t))
+        with torch.no_grad():
+            action = nets.forward_actor(state, eta, nets.time_features(tt))[0].numpy()
+        decision = rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
+        proposed = rule.step(pos, decision)
+        ok = np.all(np.isfinite(proposed), axis=1) & np.all(
+            (proposed >= lo) & (proposed <= hi), axis=1
+        )
+        ok &= t < limit
+        pos = np.where(ok[:, None], proposed, pos)
+        out[:, t + 1] = pos
+    return out
+
+
+def mean_dtw_m(a: np.ndarray, b: np.ndarray) -> float:
+    """Great-circle DTW / warping-path length: the mean distance (m) between matched points."""
+    cost, length = dtw_path_length(a, b, "haversine")
+    return cost / length
+
+
+def max_deviation(rollout: np.ndarray, track: np.ndarray) -> tuple[float, int]:
+    """The largest local distance (m) along the optimal warping path, and the track index."""
+    _, path = dtw_path(rollout, track, "haversine")
+    d = haversine_m(
+        rollout[path[:, 0], 0], rollout[path[:, 0], 1], track[path[:, 1], 0], track[path[:, 1], 1]
+    )
+    k = int(np.argmax(d))
+    return float(d[k]), int(path[k, 1])
+
+
+def flag(scores: np.ndarray, threshold: float, top_percent: float | None) -> np.ndarray:
+    if top_percent is not None:
+        count = math.ceil(len(scores) * top_percent / 100.0)
+        order = np.argsort(-scores, kind="stable")
+        flagged = np.zeros(len(scores), dtype=bool)
+        flagged[order[:count]] = True
+        return flagged
+    return scores > threshold
+
+
+def check_settings(settings: DetectSettings) -> None:
+    if not (0.0 < settings.threshold <= 1.0):
+        raise UserError(f"--threshold must be in (0, 1], got {settings.threshold:g}")
+    if settings.top_percent is not None and not (0.0 < settings.top_percent <= 100.0):
+        raise UserError(f"--top-percent must be in (0, 100], got {settings.top_percent:g}")
+    if settings.rollouts < 1:
+        raise UserError(f"--rollouts must be at least 1, got {settings.rollouts}")
+    if settings.near_km <= 0:
+        raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
+
+
+def detect(settings: DetectSettings) -> Detection:
+    """Score the test tracks; see the module docstring."""
+    check_settings(settings)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    models = load_models(settings.models_dir, settings.models)
+    ids, owner = select_test_tracks(settings, models)
+    tracks = load_tracks(settings.data_dir, ids)
+    timings["load_s"] = time.perf_counter() - t0
+    n = len(tracks)
+    k = settings.rollouts
+    raw = np.full(n, np.nan)
+    best_rollouts: list[np.ndarray] = [np.empty((0, 2))] * n
+    t1 = time.perf_counter()
+    gen_s = 0.0
+    for m, model in enumerate(models):
+        idx = [i for i in range(n) if owner[i] == m]
+        if not idx:
+            continue
+        starts = np.array([tracks[i].positions[0] for i in idx])
+        horizons = np.array([tracks[i].steps for i in idx])
+        tg = time.perf_counter()
+        paths = generate(model, starts, horizons, k, settings.seed + m)
+        gen_s += time.perf_counter() - tg
+        for j, i in enumerate(idx):
+            h = horizons[j]
+            dists = [mean_dtw_m(paths[j * k + r, : h + 1], tracks[i].positions) for r in range(k)]
+            best = int(np.argmin(dists))
+            raw[i] = dists[best]
+            best_rollouts[i] = paths[j * k + best, : h + 1].copy()
+    timings["rollout_s"] = gen_s
+    timings["score_s"] = time.perf_counter() - t1 - gen_s
+    top = float(np.max(raw)) if n else 1.0
+    norm = raw / top if top > 0 else np.zeros(n)
+    flagged = flag(norm, settings.threshold, settings.top_percent)
+    order = np.argsort(-norm, kind="stable")
+    rank = np.empty(n, dtype=np.int64)
+    rank[order] = np.arange(1, n + 1)
+    devs = [max_deviation(best_rollouts[i], tracks[i].positions) for i in range(n)]
+    scores = pd.DataFrame(
+        {
+            "track_id": [t.track_id for t in tracks],
+            "mmsi": [t.mmsi for t in tracks],
+            "model": [models[o].name for o in owner],
+            "n_points": [len(t.positions) for t in tracks],
+            "score_m": raw,
+            "score": norm,
+            "flagged": flagged,
+            "rank": rank,
+            "max_dev_m": [d for d, _ in devs],
+            "max_dev_lon": [tracks[i].positions[j, 0] for i, (_, j) in enumerate(devs)],
+            "max_dev_lat": [tracks[i].positions[j, 1] for i, (_, j) in enumerate(devs)],
+            "max_dev_index": [j for _, j in devs],
+        }
+    )
+    timings["total_s"] = time.perf_counter() - t0
+    return Detection(scores, tracks, best_rollouts, models, timings, settings)
+
+
+# ----------------------------------------------------------------------------------- outputs
+def _line(coords: np.ndarray) -> dict[str, Any]:
+    return {"type": "LineString", "coordinates": np.round(coords, 6).tolist()}
+
+
+def anomalies_geojson(result: Detection) -> dict[str, Any]:
+    """Flagged tracks (kind=track), their nearest rollouts (kind=rollout) and the points of
+    largest deviation (kind=max_deviation), as one FeatureCollection in lon/lat (WGS84)."""
+    features = []
+    by_id = {t.track_id: (t, r) for t, r in zip(result.tracks, result.rollouts, strict=True)}
+    for row in result.scores[result.scores["flagged"]].sort_values("rank").itertuples():
+        track, roll = by_id[row.track_id]
+        props = {
+            "track_id": int(row.track_id),
+            "mmsi": int(row.mmsi),
+            "model": row.model,
+            "rank": int(row.rank),
+            "score": float(row.score),
+            "score_m": float(row.score_m),
+            "max_dev_m": float(row.max_dev_m),
+            "start": str(track.start),
+        }
+        features.append(
+            {
+                "type": "Feature",
+                "properties": {"kind": "track", **props},
+                "geometry": _line(track.positions),
+            }
+        )
+        features.append(
+            {
+                "type": "Feature",
+                "properties": {"kind": "rollout", "track_id": props["track_id"]},
+                "geometry": _line(roll),
+            }
+        )
+        point = {
+            "type": "Point",
+            "coordinates": [round(row.max_dev_lon, 6), round(row.max_dev_lat, 6)],
+        }
+        features.append(
+            {
+                "type": "Feature",
+                "properties": {
+                    "kind": "max_deviation",
+                    "track_id": props["track_id"],
+                    "distance_m": props["max_dev_m"],
+                },
+                "geometry": point,
+            }
+        )
+    return {"type": "FeatureCollection", "features": features}
+
+
+def write_outputs(result: Detection, out: Path) -> list[Path]:
+    from aisdati.plots import plot_detection_map
+
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    table = pa.Table.from_pandas(
+        result.scores.sort_values("rank").reset_index(drop=True),
+        schema=SCORES_SCHEMA,
+        preserve_index=False,
+    )
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    path = out / "scores.parquet"
+    atomic_write_bytes(path, sink.getvalue().to_pybytes())
+    files.append(path)
+    path = out / "anomalies.geojson"
+    atomic_write_bytes(path, json.dumps(anomalies_geojson(result)).encode())
+    files.append(path)
+    path = out / "map.png"
+    flagged = result.scores["flagged"].to_numpy()
+    plot_detection_map(
+        [t.positions for t in result.tracks],
+        result.rollouts,
+        flagged,
+        result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy(),
+        [m.bounds for m in result.models],
+        path,
+        title=_map_title(result),
+    )
+    files.append(path)
+    path = out / "report.json"
+    atomic_write_bytes(path, json.dumps(report_dict(result), indent=2, default=str).encode())
+    files.append(path)
+    return files
+
+
+def _map_title(result: Detection) -> str:
+    s = result.settings
+    n, f = len(result.scores), int(result.scores["flagged"].sum())
+    rule = f"top {s.top_percent:g}%" if s and s.top_percent else f"score > {s.threshold:g}"
+    return f"DATI anomalies: {f} of {n} test tracks flagged ({rule})"
+
+
+def report_dict(result: Detection) -> dict[str, Any]:
+    s = result.settings
+    sc = result.scores
+    return {
+        "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in s.__dict__.items()}
+        if s
+        else {},
+        "models": [m.name for m in result.models],
+        "test_tracks": len(sc),
+        "flagged": int(sc["flagged"].sum()),
+        "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
+        "timings": {k: round(v, 3) for k, v in result.timings.items()},
+        "score_definition": "best of K rollouts of great-circle DTW / warping-path length (m), "
+        "divided by the maximum over the test set",
+    }
