@@ -1,9 +1,14 @@
-"""`aisdati selftest`: the paper's synthetic protocol (Table 1, DATI column).
+"""`aisdati selftest`: the paper's synthetic protocol (Table 1 and the Table 2 ablation).
 
-Every (family, seed) pair is one member of a batched DATI ensemble; the members are shared out
-over `workers` processes (one per core), trained with early stopping, then each member's best
-forward actor is rolled out from the first point of the same unseen references of its family.
-The paper's metric is the lowest normalised smoothed DTW over seeds x references.
+Every (method, family, seed) triple is one member. The members are shared out over `workers`
+processes (one per core); inside a process the DATI members of one variant train as one batched
+ensemble (with early stopping), the BC members as one ensemble, and the DDPG-TI members one SB3
+model after another. Then each member's policy is rolled out from the first point of the same
+unseen references of its family. The paper's metric is the lowest normalised smoothed DTW over
+seeds x references (Table 2 adds the second lowest).
+
+Methods: `dati`, `bc`, `ddpg-ti` (Table 1) and the ablated DATI variants
+`dati-no-time-embedding`, `dati-no-reward-input` (Table 2, with `dati`: `ABLATION`).
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -22,6 +27,16 @@ import pandas as pd
 import torch
 
 from aisdati import __version__
+from aisdati.errors import UserError
+from aisdati.model.baselines import (
+    BCConfig,
+    BCTrainer,
+    DDPGTIConfig,
+    bc_act,
+    ddpg_ti_act,
+    rollout_policy,
+    train_ddpg_ti,
+)
 from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import FamilySource, Reference, TrajectoryImitationEnv
@@ -30,6 +45,53 @@ from aisdati.model.families import PAPER_DATI, Family, get_family
 from aisdati.plots import plot_best_rollouts, plot_families
 
 PAPER_FAMILIES = ("fixedstart", "ushaped", "circles", "ribbons")
+
+METHODS = {
+    "dati": "DATI",
+    "bc": "BC",
+    "ddpg-ti": "DDPG-TI",
+    "dati-no-time-embedding": "DATI, no time embedding",
+    "dati-no-reward-input": "DATI, no reward input",
+}
+"""Method names accepted by `--methods`, with their display labels."""
+
+TABLE1 = ("dati", "bc", "ddpg-ti")
+ABLATION = ("dati", "dati-no-time-embedding", "dati-no-reward-input")
+
+PAPER_TABLE1 = {
+    "dati": PAPER_DATI,
+    "bc": {"fixedstart": 0.124, "ushaped": 0.365, "circles": 0.106, "ribbons": 0.113},
+    "ddpg-ti": {"fixedstart": 0.489, "ushaped": 2.138, "circles": 0.972, "ribbons": 0.172},
+}
+"""Table 1 of the paper: best normalised smoothed DTW over 10 seeds x 10 references."""
+
+PAPER_ABLATION = {
+    "dati": (0.058, 0.074),
+    "dati-no-time-embedding": (1.829, 1.976),
+    "dati-no-reward-input": (0.305, 0.451),
+}
+"""Table 2 of the paper (Circles): top-1 and top-2 normalised smoothed DTW."""
+
+
+def parse_methods(text: str | Sequence[str]) -> tuple[str, ...]:
+    """'dati,bc' -> ('dati', 'bc'); an unknown name is a one-line `UserError`."""
+    items = text.split(",") if isinstance(text, str) else [n for t in text for n in t.split(",")]
+    names = tuple(dict.fromkeys(n.strip().lower() for n in items if n.strip()))
+    if not names:
+        raise UserError(f"no method given; choose from {', '.join(METHODS)}")
+    for name in names:
+        if name not in METHODS:
+            raise UserError(f"unknown method {name!r}; choose from {', '.join(METHODS)}")
+    return names
+
+
+def paper_numbers(method: str, family: str) -> tuple[float | None, float | None]:
+    """The paper's (top-1, top-2) for a method and family, where it reports them."""
+    top2 = PAPER_ABLATION.get(method) if family == "circles" else None
+    top1 = PAPER_TABLE1.get(method, {}).get(family)
+    if top1 is None and top2 is not None:
+        top1 = top2[0]
+    return top1, (top2[1] if top2 else None)
 
 
 @dataclass(frozen=True)
@@ -44,6 +106,17 @@ class SelftestSettings:
     workers: int = 1
     eval_seed: int = 2024
     config: DATIConfig = field(default_factory=DATIConfig)
+    methods: tuple[str, ...] = ("dati",)
+    bc: BCConfig = field(default_factory=BCConfig)
+    ddpg: DDPGTIConfig = field(default_factory=DDPGTIConfig)
+
+    def dati_config(self, method: str) -> DATIConfig:
+        """DATI's configuration for a DATI method name (the ablations switch one input off)."""
+        if method == "dati-no-time-embedding":
+            return self.config.with_network(time_embedding=False)
+        if method == "dati-no-reward-input":
+            return self.config.with_network(reward_input=False)
+        return self.config
 
 
 QUICK = {"seeds": 2, "references": 3, "steps": 40, "episodes": 3}
@@ -58,6 +131,7 @@ class MemberResult:
     scores: np.ndarray
     alphas: np.ndarray
     paths: list[np.ndarray]
+    method: str = "dati"
 
 
 @dataclass
@@ -69,6 +143,9 @@ class FamilyResult:
     best_reference: np.ndarray
     best_rollout: np.ndarray
     members: list[MemberResult]
+    method: str = "dati"
+    second_best: float = float("nan")
+    paper_second: float | None = None
 
 
 @dataclass
@@ -90,44 +167,101 @@ def evaluation_references(fam: Family, count: int, seed: int) -> list[Reference]
     return [source.reference(fam.sample_alpha(rng)) for _ in range(count)]
 
 
+Member = tuple[int, str, str, int]
+"""(index, method, family, seed)."""
+
+
 def _run_members(
-    members: list[tuple[int, str, int]],
+    members: list[Member],
     settings: SelftestSettings,
     report: Callable[[int, int, bool], None],
 ) -> list[MemberResult]:
-    """Train and evaluate a group of (index, family, seed) members as one ensemble."""
+    """Train and evaluate a group of members: one ensemble per DATI variant, one BC ensemble,
+    one SB3 model per DDPG-TI member."""
     torch.set_num_threads(1)
-    fams = {name: family_for(name, settings.steps) for _, name, _ in members}
-    envs = [TrajectoryImitationEnv(FamilySource(fams[name])) for _, name, _ in members]
-    trainer = DATITrainer(envs, [seed for _, _, seed in members], settings.config)
+    results: list[MemberResult] = []
+    for method in dict.fromkeys(m for _, m, _, _ in members):
+        group = [(i, name, seed) for i, m, name, seed in members if m == method]
+        run = {"bc": _run_bc, "ddpg-ti": _run_ddpg_ti}.get(method, _run_dati)
+        out = run(method, group, settings, report)
+        for r in out:
+            r.method = method
+        results.extend(out)
+    return results
 
-    def on_step(logs: list) -> None:
-        for log in logs:
-            report(members[log.member][0], log.episode, log.stopped)
 
-    nets = trainer.train(on_step)
+def _grid(group, settings, fams):
+    """The unseen references of each member's family and one evaluation env per reference."""
     refs = {
         n: evaluation_references(f, settings.references, settings.eval_seed)
         for n, f in fams.items()
     }
     grid = [
         [TrajectoryImitationEnv(FamilySource(fams[name])) for _ in range(settings.references)]
-        for _, name, _ in members
+        for _, name, _ in group
     ]
-    out = rollout(
-        nets, grid, [refs[name] for _, name, _ in members], settings.config, seed=settings.eval_seed
-    )
+    return refs, grid
+
+
+def _results(group, refs, episodes, scores, paths) -> list[MemberResult]:
     return [
         MemberResult(
             name,
             seed,
-            trainer.episode[k],
-            out.scores[k],
+            episodes[k],
+            scores[k],
             np.array([r.label["alpha"] for r in refs[name]]),
-            out.paths[k],
+            paths[k],
         )
-        for k, (_, name, seed) in enumerate(members)
+        for k, (_, name, seed) in enumerate(group)
     ]
+
+
+def _run_dati(method, group, settings, report) -> list[MemberResult]:
+    config = settings.dati_config(method)
+    fams = {name: family_for(name, settings.steps) for _, name, _ in group}
+    envs = [TrajectoryImitationEnv(FamilySource(fams[name])) for _, name, _ in group]
+    trainer = DATITrainer(envs, [seed for _, _, seed in group], config)
+
+    def on_step(logs: list) -> None:
+        for log in logs:
+            report(group[log.member][0], log.episode, log.stopped)
+
+    nets = trainer.train(on_step)
+    refs, grid = _grid(group, settings, fams)
+    out = rollout(nets, grid, [refs[name] for _, name, _ in group], config, seed=settings.eval_seed)
+    return _results(group, refs, trainer.episode, out.scores, out.paths)
+
+
+def _run_bc(method, group, settings, report) -> list[MemberResult]:
+    cfg = settings.bc
+    fams = {name: family_for(name, settings.steps) for _, name, _ in group}
+    envs = [TrajectoryImitationEnv(FamilySource(fams[name])) for _, name, _ in group]
+    trainer = BCTrainer(envs, [seed for _, _, seed in group], cfg)
+
+    def on_episode(episode: int) -> None:
+        for i, _, _ in group:
+            report(i, episode, episode >= cfg.episodes)
+
+    policy = trainer.train(on_episode)
+    refs, grid = _grid(group, settings, fams)
+    act = bc_act(policy, settings.references, settings.eval_seed)
+    paths, scores = rollout_policy(act, grid, [refs[name] for _, name, _ in group])
+    return _results(group, refs, [trainer.episode] * len(group), scores, paths)
+
+
+def _run_ddpg_ti(method, group, settings, report) -> list[MemberResult]:
+    cfg = settings.ddpg
+    fams = {name: family_for(name, settings.steps) for _, name, _ in group}
+    refs, grid = _grid(group, settings, fams)
+    results = []
+    for k, (i, name, seed) in enumerate(group):
+        env = TrajectoryImitationEnv(FamilySource(fams[name]))
+        model = train_ddpg_ti(env, seed, cfg, lambda ep, i=i: report(i, ep, ep >= cfg.episodes))
+        act = ddpg_ti_act([model], [seed], settings.references, cfg, settings.eval_seed)
+        paths, scores = rollout_policy(act, [grid[k]], [refs[name]])
+        results += _results([(i, name, seed)], refs, [cfg.episodes], scores, paths)
+    return results
 
 
 def _worker(members, settings, queue) -> None:  # pragma: no cover - runs in a child process
@@ -145,14 +279,18 @@ def run_selftest(
 ) -> SelftestResult:
     """Run the protocol; `report(member_index, episode, stopped)` follows training progress."""
     report = report or (lambda i, ep, stop: None)
+    parse_methods(list(settings.methods))  # unknown names fail before any work starts
+    for name in settings.families:
+        get_family(name)
     members = [
-        (i, name, seed)
-        for i, (name, seed) in enumerate(
-            (name, seed) for name in settings.families for seed in range(settings.seeds)
+        (i, method, name, seed)
+        for i, (method, name, seed) in enumerate(
+            (method, name, seed)
+            for method in settings.methods
+            for name in settings.families
+            for seed in range(settings.seeds)
         )
     ]
-    for name in settings.families:
-        get_family(name)  # unknown names fail before any work starts
     start = time.perf_counter()
     workers = max(1, min(settings.workers, len(members)))
     if workers == 1:
@@ -196,24 +334,34 @@ def _run_in_processes(members, settings, workers, report) -> list[MemberResult]:
 
 
 def _aggregate(settings: SelftestSettings, results: list[MemberResult]) -> list[FamilyResult]:
+    """One result per (method, family), methods in the order asked, then families."""
     out = []
-    for name in settings.families:
-        fam = family_for(name, settings.steps)
-        mine = sorted((r for r in results if r.family == name), key=lambda r: r.seed)
-        scores = np.stack([r.scores for r in mine])
-        k, j = np.unravel_index(np.nanargmin(scores), scores.shape)
-        best_ref = fam.reference(float(mine[k].alphas[j]))
-        out.append(
-            FamilyResult(
-                name,
-                summarize(scores),
-                PAPER_DATI.get(name),
-                float(np.mean([r.episodes for r in mine])),
-                best_ref,
-                mine[k].paths[j],
-                mine,
+    for method in settings.methods:
+        for name in settings.families:
+            fam = family_for(name, settings.steps)
+            mine = sorted(
+                (r for r in results if r.family == name and r.method == method),
+                key=lambda r: r.seed,
             )
-        )
+            scores = np.stack([r.scores for r in mine])
+            k, j = np.unravel_index(np.nanargmin(scores), scores.shape)
+            best_ref = fam.reference(float(mine[k].alphas[j]))
+            finite = np.sort(scores[np.isfinite(scores)])
+            top1, top2 = paper_numbers(method, name)
+            out.append(
+                FamilyResult(
+                    name,
+                    summarize(scores),
+                    top1,
+                    float(np.mean([r.episodes for r in mine])),
+                    best_ref,
+                    mine[k].paths[j],
+                    mine,
+                    method,
+                    float(finite[1]) if len(finite) > 1 else float("nan"),
+                    top2,
+                )
+            )
     return out
 
 
@@ -221,13 +369,16 @@ def result_rows(result: SelftestResult) -> list[dict]:
     """One row per family: the paper's metric, robust statistics and the paper's number."""
     return [
         {
+            "method": f.method,
             "family": f.family,
             "best": f.summary.best,
+            "second_best": f.second_best,
             "median": f.summary.median,
             "iqm": f.summary.iqm,
             "iqm_ci_low": f.summary.iqm_low,
             "iqm_ci_high": f.summary.iqm_high,
             "paper_best": f.paper,
+            "paper_second_best": f.paper_second,
             "n_scores": f.summary.n,
             "mean_episodes": f.mean_episodes,
         }
@@ -242,6 +393,7 @@ def write_outputs(result: SelftestResult, out_dir: Path) -> list[Path]:
     scores = pd.DataFrame(
         [
             {
+                "method": m.method,
                 "family": m.family,
                 "seed": m.seed,
                 "reference": j,
@@ -259,18 +411,56 @@ def write_outputs(result: SelftestResult, out_dir: Path) -> list[Path]:
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "aisdati_version": __version__,
         "wall_seconds": result.wall_seconds,
-        "settings": {**asdict(s), "config": s.config.to_dict()},
+        "settings": {
+            **asdict(s),
+            "config": s.config.to_dict(),
+            "bc": s.bc.to_dict(),
+            "ddpg": s.ddpg.to_dict(),
+        },
         "results": rows,
     }
     written = [out_dir / "results.csv", out_dir / "results.json", out_dir / "scores.csv"]
     atomic_write_bytes(written[0], pd.DataFrame(rows).to_csv(index=False).encode())
     atomic_write_bytes(written[1], json.dumps(doc, indent=2, default=float).encode())
     atomic_write_bytes(written[2], scores.to_csv(index=False).encode())
-    fams = [family_for(f.family, s.steps) for f in result.families]
+    fams = [family_for(name, s.steps) for name in dict.fromkeys(f.family for f in result.families)]
     plot_families(fams, out_dir / "families.png")
-    panels = [
-        (f.family, f.best_reference, {"DATI": f.best_rollout}, {"DATI": f.summary.best})
-        for f in result.families
-    ]
-    plot_best_rollouts(panels, out_dir / "rollouts.png")
+    plot_best_rollouts(rollout_panels(result), out_dir / "rollouts.png")
     return [*written, out_dir / "families.png", out_dir / "rollouts.png"]
+
+
+def rollout_panels(result: SelftestResult) -> list[tuple]:
+    """Per family, one panel of the paper's Fig. 2. With one method: its best rollout and the
+    reference it was best on. With several: the reference on which the first method did best,
+    and every method's best rollout (over seeds) on that same reference, with its score there
+    (all methods are evaluated on the same references)."""
+    panels = []
+    by_family: dict[str, list[FamilyResult]] = {}
+    for f in result.families:
+        by_family.setdefault(f.family, []).append(f)
+    for name, entries in by_family.items():
+        first = entries[0]
+        if len(entries) == 1:
+            label = METHODS.get(first.method, first.method)
+            panels.append(
+                (
+                    name,
+                    first.best_reference,
+                    {label: first.best_rollout},
+                    {label: first.summary.best},
+                )
+            )
+            continue
+        scores = np.stack([m.scores for m in first.members])
+        j = int(np.unravel_index(np.nanargmin(scores), scores.shape)[1])
+        reference = family_for(name, result.settings.steps).reference(
+            float(first.members[0].alphas[j])
+        )
+        rollouts, values = {}, {}
+        for f in entries:
+            col = np.array([m.scores[j] for m in f.members])
+            k = int(np.nanargmin(col))
+            label = METHODS.get(f.method, f.method)
+            rollouts[label], values[label] = f.members[k].paths[j], float(col[k])
+        panels.append((name, reference, rollouts, values))
+    return panels

@@ -1,0 +1,440 @@
+"""The paper's two baselines (section 3.3-3.4, 5.1 and appendix A.2): BC and DDPG-TI.
+
+Both are trained on the same budget as DATI (episodes of τ steps, one reference drawn from the
+family per episode) and rolled out like it: from an unseen reference's first point, on their own
+predictions ŝ_t through the known rule g (`rollout_policy`).
+
+**BC** (behavioural cloning, written in torch; the `imitation` library pins old gymnasium/SB3):
+maximum likelihood of the perfect decisions a_t given the reference state s_t (scaled into
+[0, 1]) and the step index t. Policy: a 156-unit feature extractor (80 tanh features of the state
+and a Time2Vec embedding of t of dimension 76, the same extractor as DDPG-TI's), 4 x 32 tanh
+hidden layers, and linear heads for the mean and the diagonal log standard deviation of a Gaussian.
+Loss: −log p(a_t | s_t, t) − 10⁻³ · entropy, Adam 10⁻³. Choices where the paper is silent: each
+episode adds its reference's τ (s_t, t, a_t) pairs to the member's data set and is followed by τ
+updates on batches of 64 drawn from everything seen so far (one update per transition, as DATI
+has one training batch per environment step); log σ is clamped to [−7, 2]; no early stopping.
+At inference the policy is stochastic by default (a sample of the Gaussian, as `imitation`'s
+policies roll out), `BCConfig.deterministic` uses the mean. All seeds train at once as an
+ensemble (every layer holds E members' weights, `aisdati.model.networks`), which is the same
+function as E separate runs.
+
+**DDPG-TI**: Stable-Baselines3's own `DDPG` on `TrajectoryImitationEnv` (it observes the agent's
+ŝ_t and t, and is rewarded ±1 by the smoothed normalised DTW), with `Time2VecExtractor` (80 tanh
+state features + Time2Vec(76) = 156) shared by actor and critic, 4 x 32 hidden layers, γ = 0.9,
+τ = 10⁻³, Adam 10⁻⁴ (actor) and 2·10⁻⁴ (critic), Ornstein-Uhlenbeck action noise (σ = 0.3,
+θ = 0.15, dt = 10⁻², SB3's; reset each episode). SB3 uses one learning-rate schedule for both
+optimisers, so `DDPGTI` (a subclass that changes nothing else) overrides the schedule update to
+give the critic its own rate. Choices where the paper is silent: batch 64, replay 50 000, one
+gradient step per environment step after 64 random-policy steps, tanh hidden units (as DATI's
+actors), no early stopping. At inference the actor's decision plus the OU noise is rolled out, as
+the paper writes it (ŝ_{t+1} = g(ŝ_t, π(ŝ_t, t) + η_t)); `DDPGTIConfig.inference_noise=False`
+rolls out the bare actor. One SB3 model per seed; `aisdati selftest` spreads them over processes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from aisdati.model.env import Reference, TrajectoryImitationEnv
+from aisdati.model.networks import EnsembleLinear, MLPTrunk, NetworkConfig, Time2Vec
+
+Act = Callable[[np.ndarray], np.ndarray]
+"""A batched policy: observations [E, R, obs] -> scaled decisions [E, R, k]."""
+
+
+def seed_generator(*key: int) -> torch.Generator:
+    """A torch generator keyed by a tuple of integers (evaluation seed, member seed, ...)."""
+    state = np.random.SeedSequence([int(k) for k in key]).generate_state(1)[0]
+    return torch.Generator().manual_seed(int(state))
+
+
+def rollout_policy(
+    act: Act,
+    env_grid: Sequence[Sequence[TrajectoryImitationEnv]],
+    references: Sequence[Sequence[Reference]],
+) -> tuple[list[list[np.ndarray]], np.ndarray]:
+    """Roll `act` out for member e on references[e][r] in env_grid[e][r] from the reference's
+    first point, on its own predictions; returns the paths [E][R] and final smoothed DTW [E, R]."""
+    members, refs = len(env_grid), len(env_grid[0])
+    obs = np.stack(
+        [
+            [env_grid[e][r].reset(options={"reference": references[e][r]})[0] for r in range(refs)]
+            for e in range(members)
+        ]
+    ).astype(np.float32)
+    paths = [[[env_grid[e][r].position.copy()] for r in range(refs)] for e in range(members)]
+    scores = np.full((members, refs), np.nan)
+    alive = np.ones((members, refs), dtype=bool)
+    while alive.any():
+        actions = act(obs)
+        for e, r in zip(*np.nonzero(alive), strict=True):
+            env = env_grid[e][r]
+            obs[e, r], _, terminated, truncated, info = env.step(actions[e, r])
+            paths[e][r].append(env.position.copy())
+            if terminated or truncated:
+                alive[e, r] = False
+                scores[e, r] = info["dtw_smoothed"]
+    return [[np.asarray(p) for p in row] for row in paths], scores
+
+
+# ------------------------------------------------------------------------------------------ BC
+@dataclass(frozen=True)
+class BCConfig:
+    """Hyperparameters of the BC baseline; the paper's where it gives them (appendix A.2)."""
+
+    episodes: int = 100
+    state_features: int = 80
+    time_embedding_dim: int = 76
+    """80 + 76 = the paper's 156-unit feature extractor."""
+    hidden_units: int = 32
+    hidden_layers: int = 4
+    lr: float = 1e-3
+    entropy_weight: float = 1e-3
+    batch_size: int = 64
+    updates_per_episode: int | None = None
+    """Gradient updates after each episode; None: one per step of the episode (τ)."""
+    log_std_range: tuple[float, float] = (-7.0, 2.0)
+    deterministic: bool = False
+    """Roll out the Gaussian's mean instead of a sample."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class BCPolicy(nn.Module):
+    """E Gaussian policies p(a | s, t) as one ensemble: [E, B, ·] in, mean and log σ out."""
+
+    def __init__(self, state_dim: int, decision_dim: int, cfg: BCConfig, seeds: Sequence[int]):
+        super().__init__()
+        self.cfg = cfg
+        self.seeds = [int(s) for s in seeds]
+        gens = [torch.Generator().manual_seed(s) for s in self.seeds]
+        net = NetworkConfig(hidden_units=cfg.hidden_units, hidden_layers=cfg.hidden_layers)
+        self.state_features = EnsembleLinear(state_dim, cfg.state_features, gens)
+        self.time2vec = Time2Vec(cfg.time_embedding_dim, gens)
+        widths = [cfg.state_features, 1, cfg.time_embedding_dim - 1]
+        self.hidden = MLPTrunk(widths, net, gens, nn.Tanh())
+        self.mean = EnsembleLinear(cfg.hidden_units, decision_dim, gens)
+        self.log_std = EnsembleLinear(cfg.hidden_units, decision_dim, gens)
+
+    @property
+    def feature_width(self) -> int:
+        return self.cfg.state_features + self.cfg.time_embedding_dim
+
+    def forward(self, state: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+        """Mean and log σ [E, B, k] of the decision given the state [E, B, d] and t [E, B, 1]."""
+        h = self.hidden([torch.tanh(self.state_features(state)), *self.time2vec(t)])
+        return self.mean(h), self.log_std(h).clamp(*self.cfg.log_std_range)
+
+    def loss(self, state: Tensor, t: Tensor, action: Tensor) -> Tensor:
+        """Per-member −mean log-likelihood − entropy_weight · mean entropy [E]."""
+        mean, log_std = self(state, t)
+        dist = torch.distributions.Normal(mean, log_std.exp())
+        nll = -dist.log_prob(action).sum(-1).mean(-1)
+        entropy = dist.entropy().sum(-1).mean(-1)
+        return nll - self.cfg.entropy_weight * entropy
+
+
+class BCData:
+    """The demonstrations seen so far by E members, as [E, capacity, ·] tensors (state scaled
+    into [0, 1], step index t, scaled perfect decision a_t) with a fill level per member."""
+
+    def __init__(self, members: int, capacity: int, state_dim: int, decision_dim: int):
+        self.state = torch.zeros(members, capacity, state_dim)
+        self.time = torch.zeros(members, capacity, 1)
+        self.action = torch.zeros(members, capacity, decision_dim)
+        self.size = [0] * members
+
+    def add(self, k: int, env: TrajectoryImitationEnv) -> int:
+        """Append the current reference of member k's environment; returns its step count."""
+        ref = env.reference
+        assert ref is not None
+        n, lo = ref.steps, self.size[k]
+        if lo + n > self.state.shape[1]:
+            grow = max(n, self.state.shape[1])
+            for name in ("state", "time", "action"):
+                old = getattr(self, name)
+                setattr(self, name, torch.cat([old, torch.zeros_like(old[:, :grow])], dim=1))
+        self.state[k, lo : lo + n] = torch.as_tensor(env.state_scaler.scale(ref.positions[:-1]))
+        self.time[k, lo : lo + n, 0] = torch.arange(n, dtype=torch.float32)
+        self.action[k, lo : lo + n] = torch.as_tensor(env.perfect_actions)
+        self.size[k] += n
+        return n
+
+    def sample(self, batch: int, generators: Sequence[torch.Generator]) -> list[Tensor]:
+        idx = torch.stack(
+            [
+                torch.randint(n, (batch,), generator=g)
+                for n, g in zip(self.size, generators, strict=True)
+            ]
+        )
+        rows = torch.arange(len(generators))[:, None]
+        return [self.state[rows, idx], self.time[rows, idx], self.action[rows, idx]]
+
+
+class BCTrainer:
+    """Trains E BC members, one per (environment, seed), as one ensemble."""
+
+    def __init__(
+        self,
+        envs: Sequence[TrajectoryImitationEnv],
+        seeds: Sequence[int],
+        config: BCConfig | None = None,
+    ):
+        if len(envs) != len(seeds) or not envs:
+            raise ValueError("give one environment per seed, at least one")
+        self.cfg = config or BCConfig()
+        self.envs = list(envs)
+        self.seeds = [int(s) for s in seeds]
+        state_dim = envs[0].observation_space.shape[0] - 1
+        self.policy = BCPolicy(state_dim, envs[0].action_space.shape[0], self.cfg, self.seeds)
+        self.opt = torch.optim.Adam(self.policy.parameters(), lr=self.cfg.lr, fused=True)
+        self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
+        capacity = self.cfg.episodes * envs[0].source.max_steps
+        self.data = BCData(len(envs), capacity, state_dim, envs[0].action_space.shape[0])
+        self.episode = 0
+        self.losses: list[np.ndarray] = []
+
+    def train_episode(self) -> np.ndarray:
+        """Draw one reference per member, add its pairs, then update; returns the mean loss [E]."""
+        first = self.episode == 0
+        steps = 0
+        for k, (env, seed) in enumerate(zip(self.envs, self.seeds, strict=True)):
+            env.reset(seed=seed if first else None)
+            steps = max(steps, self.data.add(k, env))
+        updates = self.cfg.updates_per_episode or steps
+        total = torch.zeros(len(self.envs))
+        for _ in range(updates):
+            s, t, a = self.data.sample(self.cfg.batch_size, self.generators)
+            loss = self.policy.loss(s, t, a)
+            self.opt.zero_grad(set_to_none=True)
+            loss.sum().backward()
+            self.opt.step()
+            total += loss.detach()
+        self.episode += 1
+        mean = (total / max(updates, 1)).numpy()
+        self.losses.append(mean)
+        return mean
+
+    def train(self, on_episode: Callable[[int], None] | None = None) -> BCPolicy:
+        while self.episode < self.cfg.episodes:
+            self.train_episode()
+            if on_episode is not None:
+                on_episode(self.episode)
+        return self.policy
+
+
+def bc_act(policy: BCPolicy, refs: int, seed: int = 0) -> Act:
+    """The BC ensemble as a batched policy over [E, R] observations; each (member, reference)
+    pair samples from its own generator keyed by (seed, member seed, reference)."""
+    gens = [[seed_generator(seed, s, r) for r in range(refs)] for s in policy.seeds]
+    state_dim = policy.state_features.weight.shape[1]
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        x = torch.as_tensor(obs, dtype=torch.float32)
+        with torch.no_grad():
+            mean, log_std = policy(x[..., :state_dim], x[..., state_dim:])
+        if policy.cfg.deterministic:
+            return mean.numpy()
+        eps = torch.stack(
+            [torch.stack([torch.randn(mean.shape[-1], generator=g) for g in row]) for row in gens]
+        )
+        return (mean + log_std.exp() * eps).numpy()
+
+    return act
+
+
+# ------------------------------------------------------------------------------------- DDPG-TI
+@dataclass(frozen=True)
+class DDPGTIConfig:
+    """Hyperparameters of DDPG-TI; the paper's where it gives them (appendix A.2)."""
+
+    episodes: int = 100
+    state_features: int = 80
+    time_embedding_dim: int = 76
+    hidden_units: int = 32
+    hidden_layers: int = 4
+    gamma: float = 0.9
+    tau: float = 1e-3
+    lr_actor: float = 1e-4
+    lr_critic: float = 2e-4
+    noise_sigma: float = 0.3
+    noise_theta: float = 0.15
+    noise_dt: float = 1e-2
+    batch_size: int = 64
+    buffer_size: int = 50_000
+    learning_starts: int = 64
+    inference_noise: bool = True
+    """Add the OU noise to the actor's decisions at inference, as the paper writes it."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _sb3() -> Any:
+    """Stable-Baselines3 is imported lazily: only DDPG-TI needs it."""
+    import stable_baselines3
+
+    return stable_baselines3
+
+
+def _extractor_class() -> type:
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    class Time2VecExtractor(BaseFeaturesExtractor):
+        """(ŝ_t, t) -> [tanh(W ŝ_t + b) (80), Time2Vec(t) (76)]: DDPG-TI's 156 shared features.
+
+        Time2Vec starts uniformly in [−0.05, 0.05] like DATI's (slow periodic features)."""
+
+        def __init__(
+            self,
+            observation_space: gym.spaces.Box,
+            state_features: int = 80,
+            time_embedding_dim: int = 76,
+        ):
+            super().__init__(observation_space, state_features + time_embedding_dim)
+            state_dim = observation_space.shape[0] - 1
+            self.state = nn.Linear(state_dim, state_features)
+            self.freq = nn.Parameter(torch.empty(time_embedding_dim).uniform_(-0.05, 0.05))
+            self.phase = nn.Parameter(torch.empty(time_embedding_dim).uniform_(-0.05, 0.05))
+
+        def forward(self, obs: Tensor) -> Tensor:
+            z = obs[:, -1:] * self.freq + self.phase
+            return torch.cat(
+                [torch.tanh(self.state(obs[:, :-1])), z[:, :1], torch.sin(z[:, 1:])], dim=1
+            )
+
+    return Time2VecExtractor
+
+
+_CLASSES: dict[str, type] = {}
+
+
+def time2vec_extractor_class() -> type:
+    """The `BaseFeaturesExtractor` subclass of DDPG-TI (built on first use, then cached)."""
+    if "extractor" not in _CLASSES:
+        _CLASSES["extractor"] = _extractor_class()
+    return _CLASSES["extractor"]
+
+
+def ddpg_ti_class() -> type:
+    """`DDPGTI`: SB3's DDPG with separate actor and critic learning rates (nothing else differs)."""
+    if "ddpg" not in _CLASSES:
+        sb3 = _sb3()
+        from stable_baselines3.common.utils import update_learning_rate
+
+        class DDPGTI(sb3.DDPG):
+            critic_learning_rate: float = 2e-4
+
+            def _update_learning_rate(self, optimizers: Any) -> None:
+                super()._update_learning_rate(self.actor.optimizer)
+                update_learning_rate(self.critic.optimizer, self.critic_learning_rate)
+
+        _CLASSES["ddpg"] = DDPGTI
+    return _CLASSES["ddpg"]
+
+
+def make_ddpg_ti(env: TrajectoryImitationEnv, seed: int, cfg: DDPGTIConfig | None = None) -> Any:
+    """An untrained DDPG-TI model on `env` (one seed)."""
+    from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
+
+    cfg = cfg or DDPGTIConfig()
+    k = env.action_space.shape[0]
+    noise = OrnsteinUhlenbeckActionNoise(
+        np.zeros(k), cfg.noise_sigma * np.ones(k), theta=cfg.noise_theta, dt=cfg.noise_dt
+    )
+    policy_kwargs = {
+        "features_extractor_class": time2vec_extractor_class(),
+        "features_extractor_kwargs": {
+            "state_features": cfg.state_features,
+            "time_embedding_dim": cfg.time_embedding_dim,
+        },
+        "share_features_extractor": True,
+        "net_arch": [cfg.hidden_units] * cfg.hidden_layers,
+        "activation_fn": nn.Tanh,
+    }
+    model = ddpg_ti_class()(
+        "MlpPolicy",
+        env,
+        learning_rate=cfg.lr_actor,
+        buffer_size=cfg.buffer_size,
+        learning_starts=cfg.learning_starts,
+        batch_size=cfg.batch_size,
+        tau=cfg.tau,
+        gamma=cfg.gamma,
+        train_freq=1,
+        gradient_steps=1,
+        action_noise=noise,
+        policy_kwargs=policy_kwargs,
+        seed=int(seed),
+        device="cpu",
+        verbose=0,
+    )
+    model.critic_learning_rate = cfg.lr_critic
+    model.critic.optimizer.param_groups[0]["lr"] = cfg.lr_critic
+    return model
+
+
+def train_ddpg_ti(
+    env: TrajectoryImitationEnv,
+    seed: int,
+    cfg: DDPGTIConfig | None = None,
+    on_episode: Callable[[int], None] | None = None,
+) -> Any:
+    """Train one DDPG-TI model for `cfg.episodes` episodes of the env's horizon."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    cfg = cfg or DDPGTIConfig()
+    model = make_ddpg_ti(env, seed, cfg)
+
+    class Episodes(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.count = 0
+
+        def _on_step(self) -> bool:
+            for done in self.locals["dones"]:
+                if done:
+                    self.count += 1
+                    if on_episode is not None:
+                        on_episode(self.count)
+            return True
+
+    model.learn(cfg.episodes * env.source.max_steps, callback=Episodes())
+    return model
+
+
+def ddpg_ti_act(
+    models: Sequence[Any], seeds: Sequence[int], refs: int, cfg: DDPGTIConfig, seed: int = 0
+) -> Act:
+    """E trained DDPG-TI models as a batched policy over [E, R] observations: the actor's decision
+    plus, with `cfg.inference_noise`, an OU process per (member, reference) keyed by the seeds."""
+    k = models[0].action_space.shape[0]
+    gens = [[seed_generator(seed, s, r) for r in range(refs)] for s in seeds]
+    state = np.zeros((len(models), refs, k))
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            out = np.stack(
+                [
+                    m.actor(torch.as_tensor(o, dtype=torch.float32)).numpy()
+                    for m, o in zip(models, obs, strict=True)
+                ]
+            )
+        if not cfg.inference_noise:
+            return out
+        draws = np.stack([[torch.randn(k, generator=g).numpy() for g in row] for row in gens])
+        state[:] += (
+            cfg.noise_theta * -state * cfg.noise_dt
+            + cfg.noise_sigma * np.sqrt(cfg.noise_dt) * draws
+        )
+        return np.clip(out + state, -1.0, 1.0)
+
+    return act
