@@ -1,0 +1,143 @@
+"""`aisdati train` and `aisdati detect` end to end on a tiny real sample (NY Harbor, one hour)."""
+
+from __future__ import annotations
+
+import json
+
+import pyarrow.parquet as pq
+import pytest
+
+from aisdati.detect import SCORES_SCHEMA
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """Ingest once, train a 2-episode model of `down` (6 tracks of 40-50 points), detect once."""
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from aisdati.cli import app
+
+    base = tmp_path_factory.mktemp("ais")
+    data = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+    proc, models, report = base / "processed", base / "models", base / "report"
+
+    def cli(*args):
+        return CliRunner().invoke(app, [str(a) for a in args])
+
+    r = cli("ingest", "--input", data, "--roi", "none", "--min-points", "30", "--out", proc, "-q")
+    assert r.exit_code == 0, r.output
+    r = cli(
+        "train",
+        "--cluster",
+        "down",
+        "--data",
+        proc,
+        "--out",
+        models,
+        "--episodes",
+        2,
+        "--max-tracks",
+        3,
+        "--seed",
+        1,
+        "--json",
+    )
+    assert r.exit_code == 0, r.output
+    train_doc = json.loads(r.stdout)
+    r = cli(
+        "detect",
+        "--data",
+        proc,
+        "--models",
+        models,
+        "--out",
+        report,
+        "-k",
+        2,
+        "--near-km",
+        20,
+        "--top-percent",
+        30,
+    )
+    assert r.exit_code == 0, r.output
+    return {
+        "cli": cli,
+        "proc": proc,
+        "models": models,
+        "report": report,
+        "train": train_doc,
+        "detect_output": r.output,
+    }
+
+
+def test_train_writes_model_card_and_log(run):
+    models = run["models"]
+    assert (models / "down.pt").is_file()
+    card = json.loads((models / "down.json").read_text())
+    assert card["format"] == "aisdati-dati/1"
+    assert card["kind"] == "ais" and card["cluster"] == "down" and card["seed"] == 1
+    assert card["data"]["tracks_used"] == 3 and card["data"]["tracks_in_cluster"] == 6
+    assert card["epsilon_m"] == 500.0 and "warping path" in card["epsilon_interpretation"]
+    assert card["training"]["episodes_run"] == 2
+    assert card["decision_dim"] == 3
+    lines = (models / "down.log.jsonl").read_text().splitlines()
+    assert [json.loads(x)["episode"] for x in lines] == [1, 2]
+    assert run["train"]["card"]["cluster"] == "down"
+
+
+def test_detect_outputs_parse(run):
+    report = run["report"]
+    table = pq.read_table(report / "scores.parquet")
+    assert table.schema.equals(SCORES_SCHEMA, check_metadata=False)
+    scores = table.to_pandas()
+    assert len(scores) >= 3
+    assert scores["rank"].tolist() == list(range(1, len(scores) + 1))
+    assert scores["score"].max() == pytest.approx(1.0)
+    assert scores["flagged"].sum() >= 1
+    assert set(scores["model"]) == {"down"}
+    doc = json.loads((report / "anomalies.geojson").read_text())
+    assert doc["type"] == "FeatureCollection"
+    kinds = [f["properties"]["kind"] for f in doc["features"]]
+    assert kinds.count("track") == scores["flagged"].sum() == kinds.count("rollout")
+    for f in doc["features"]:
+        geom = f["geometry"]
+        if geom["type"] == "LineString":
+            assert len(geom["coordinates"]) >= 2
+            assert all(-180 <= x <= 180 and -90 <= y <= 90 for x, y in geom["coordinates"])
+    assert (report / "map.png").stat().st_size > 10_000
+    assert "flagged" in run["detect_output"]
+
+
+def test_bad_input_is_one_line(run, tmp_path):
+    cli, proc, models = run["cli"], run["proc"], run["models"]
+    cases = [
+        (cli("train", "--cluster", "nope", "--data", proc, "--out", tmp_path), "unknown cluster"),
+        (cli("detect", "--data", proc, "--models", models, "--threshold", 0), "--threshold"),
+        (cli("detect", "--data", proc, "--models", tmp_path / "none"), "no models"),
+    ]
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "m.pt").write_bytes(b"not a model")
+    (bad / "m.json").write_text((models / "down.json").read_text())
+    cases.append(
+        (
+            cli("detect", "--data", proc, "--models", bad, "--out", tmp_path / "r"),
+            "not a model weights file",
+        )
+    )
+    far = tmp_path / "far"
+    far.mkdir()
+    card = json.loads((models / "down.json").read_text())
+    card["region"]["lon"] = [x + 20 for x in card["region"]["lon"]]
+    card["data"]["start_points"] = [[x + 20, y] for x, y in card["data"]["start_points"]]
+    (far / "down.json").write_text(json.dumps(card))
+    (far / "down.pt").write_bytes((models / "down.pt").read_bytes())
+    cases.append(
+        (cli("detect", "--data", proc, "--models", far, "--out", tmp_path / "r"), "another region")
+    )
+    for result, needle in cases:
+        assert result.exit_code == 2, result.output
+        assert needle in result.output
+        assert len(result.output.strip().splitlines()) == 1, result.output

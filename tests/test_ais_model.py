@@ -1,0 +1,91 @@
+"""AIS environment and detection scoring on real NY Harbor tracks (tiny, no training)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aisdati.detect import flag, max_deviation, mean_dtw_m
+from aisdati.geo import haversine_m, spherical_step
+from aisdati.model.ais import build_source, make_env, track_reference
+from aisdati.trackdata import load_tracks, read_track_table
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory):
+    from typer.testing import CliRunner
+
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("processed")
+    src = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+    args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_perfect_policy_reproduces_real_tracks(processed):
+    ids = read_track_table(processed)["track_id"].tolist()[:4]
+    tracks = load_tracks(processed, ids)
+    env = make_env(build_source(tracks))
+    for track in tracks:
+        env.reset(seed=0, options={"reference": track_reference(track)})
+        rewards = []
+        for action in env.perfect_actions:
+            _, reward, terminated, _, info = env.step(action)
+            rewards.append(reward)
+        assert terminated
+        assert info["dtw"] == pytest.approx(0.0, abs=1e-6)
+        np.testing.assert_allclose(env.position, track.positions[-1], atol=1e-9)
+        assert set(rewards) == {1.0}
+
+
+@pytest.mark.parametrize("lat", [0.0, 25.0, 40.7, 60.0])
+def test_spherical_rule_one_step_error_below_0_1_percent(lat):
+    rng = np.random.default_rng(1)
+    sog = rng.uniform(0.5, 30.0, 200)
+    cog = rng.uniform(0.0, 360.0, 200)
+    dist_m = rng.uniform(10.0, 5000.0, 200)
+    dt = dist_m / 1852.0 / sog
+    lon, lat2 = spherical_step(-74.0, lat, sog, cog, dt)
+    true = haversine_m(-74.0, lat, lon, lat2)
+    assert np.max(np.abs(true - dist_m) / dist_m) < 1e-3
+
+
+def _detour(track: np.ndarray, km: float) -> np.ndarray:
+    """The track with a smooth bump of `km` peak in its middle third, perpendicular to the line
+    from its first to its last point."""
+    n = len(track)
+    coslat = np.cos(np.radians(track[0, 1]))
+    d = (track[-1] - track[0]) * [coslat, 1.0]
+    normal = np.array([-d[1], d[0]]) / np.hypot(*d)
+    i = np.arange(n)
+    bump = np.clip(1 - np.abs(i - n / 2) / (n / 6), 0, 1)
+    offset_deg = bump[:, None] * km / 111.2 * normal / [coslat, 1.0]
+    return track + offset_deg
+
+
+def test_planted_detour_scores_above_its_untouched_twin(processed):
+    (track,) = load_tracks(processed, [3])
+    rng = np.random.default_rng(0)
+    # a model that has learnt the route well: rollouts within ~50 m of the track
+    rollouts = [track.positions + rng.normal(0, 0.0005, track.positions.shape) for _ in range(3)]
+    twin = track.positions.copy()
+    detoured = _detour(track.positions, 5.0)
+    score_twin = min(mean_dtw_m(r, twin) for r in rollouts)
+    score_detour = min(mean_dtw_m(r, detoured) for r in rollouts)
+    assert score_detour > 5 * score_twin
+    scores = np.array([score_twin, score_detour]) / max(score_twin, score_detour)
+    assert flag(scores, 0.75, None).tolist() == [False, True]
+    dev, idx = max_deviation(rollouts[0], detoured)
+    assert dev > 4000
+    assert abs(idx - len(detoured) / 2) <= len(detoured) / 10
+
+
+def test_flag_top_percent():
+    scores = np.array([0.1, 1.0, 0.5, 0.9])
+    assert flag(scores, 0.75, 25).tolist() == [False, True, False, False]
+    assert flag(scores, 0.75, None).tolist() == [False, True, False, True]
