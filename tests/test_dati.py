@@ -167,13 +167,6 @@ def test_member_that_stops_first_leaves_the_ensemble_unchanged(early_singles):
         assert_same_member(ensemble, k, early_singles[seed])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=IndexError,
-    reason="library bug: DATITrainer.step passes member ids (log.member) to _drop, which "
-    "expects positions in the compacted ensemble; once member 0 has been dropped, member 1 "
-    "stopping is not dropped and keeps stepping its finished env (IndexError in env.step)",
-)
 def test_member_stopping_after_an_earlier_drop_leaves_the_ensemble(early_singles):
     """As above with the order swapped: seed 11 (member 0) is dropped at episode 2, then
     seed 3 (member 1, now at position 0) stops at episode 4 and must leave too."""
@@ -328,16 +321,7 @@ def test_load_of_mismatched_weights_is_a_user_error(saved):
     "card",
     [
         '{"hello": "world"}',
-        pytest.param(
-            "[1, 2, 3]",
-            marks=pytest.mark.xfail(
-                strict=True,
-                raises=AttributeError,
-                reason="library bug: load_networks calls meta.get() on whatever JSON the card "
-                "holds; a card that is valid JSON but not an object raises AttributeError, "
-                "which is not turned into a UserError",
-            ),
-        ),
+        "[1, 2, 3]",
         "not json at all",
         '{"format": "aisdati-dati/1"}',
     ],

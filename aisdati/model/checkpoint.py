@@ -58,7 +58,7 @@ def load_networks(stem: Path) -> tuple[DATINetworks, DATIConfig, dict[str, Any]]
             raise UserError(f"model file not found: {f}")
     try:
         meta = json.loads(card.read_text())
-        if meta.get("format") != "aisdati-dati/1":
+        if not isinstance(meta, dict) or meta.get("format") != "aisdati-dati/1":
             raise UserError(f"{card} is not an aisdati model card")
         config = DATIConfig.from_dict(meta["config"])
         nets = DATINetworks(meta["state_dim"], meta["decision_dim"], config.network, meta["seeds"])

@@ -342,7 +342,7 @@ class DATITrainer:
             time=t,
         )
         logs = [self._end_episode(k, dtw) for k, dtw in ended]
-        self._drop([log.member for log in logs if log.stopped])
+        self._drop([k for (k, _), log in zip(ended, logs, strict=True) if log.stopped])
         return logs
 
     def _end_episode(self, k: int, final_dtw: float) -> EpisodeLog:
