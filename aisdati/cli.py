@@ -349,11 +349,15 @@ def train(
         170, help="Downsample the cluster to this many tracks (paper: 170); 0 keeps all."
     ),
     patience: int = typer.Option(10, help="Early stopping patience in episodes; 0 disables."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue exactly from <out>/<cluster>.ckpt if it exists."
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the model card as JSON on stdout."),
 ) -> None:
     """Train DATI on one cluster's tracks: writes <out>/<cluster>.pt (weights only), the model
-    card <cluster>.json and the training log <cluster>.log.jsonl, after every episode."""
+    card <cluster>.json, the training log <cluster>.log.jsonl and a resume checkpoint
+    <cluster>.ckpt after every episode (the checkpoint is removed when training finishes)."""
     import json
 
     from aisdati.model.ais import TrainSettings, train_ais
@@ -370,6 +374,7 @@ def train(
         seed=seed,
         max_tracks=max_tracks or None,
         patience=patience,
+        resume=resume,
     )
     with TrainingProgress(
         episodes, f"training {settings.cluster}", disable=quiet or as_json
@@ -390,7 +395,15 @@ def train(
                 env.smoothed,
             )
 
-        result = train_ais(settings, on_step)
+        try:
+            result = train_ais(settings, on_step)
+        except KeyboardInterrupt:
+            err_console.print(
+                f"[yellow]interrupted:[/] the model of the best episode so far is in {out}; "
+                "run the same command with --resume to continue",
+                highlight=False,
+            )
+            raise typer.Exit(130) from None
     card = result.card
     if as_json:
         print(json.dumps({"model": str(result.model), "card": card}, default=str))
@@ -403,6 +416,7 @@ def train(
     table.add_column("item")
     table.add_column("value", justify="right")
     rows = [
+        ("resumed after episode", str(result.resumed_from)) if result.resumed_from else None,
         ("training tracks", f"{used} of {card['data']['tracks_in_cluster']}"),
         ("episodes run", f"{tr['episodes_run']} (best: {tr['best_episode']})"),
         ("mean reward, last episode", f"{tr['mean_reward'][-1]:+.3f}"),
@@ -411,7 +425,8 @@ def train(
         ("wall time", f"{result.wall_seconds:.1f} s"),
     ]
     for row in rows:
-        table.add_row(*row)
+        if row:
+            table.add_row(*row)
     console.print(table)
     console.print(f"wrote [bold]{result.model}[/] and its card and log", highlight=False)
 

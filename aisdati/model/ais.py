@@ -35,6 +35,12 @@ from aisdati.errors import UserError
 from aisdati.model.checkpoint import atomic_write_bytes, save_networks
 from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
 from aisdati.model.env import Reference, ReferenceSource, TrajectoryImitationEnv
+from aisdati.model.resume import (
+    at_episode_boundary,
+    load_trainer_state,
+    read_checkpoint,
+    save_checkpoint,
+)
 from aisdati.model.rules import SphericalRule
 from aisdati.trackdata import Track, load_tracks, read_track_table, select_cluster
 
@@ -127,6 +133,8 @@ class TrainSettings:
     """Downsample the cluster to this many tracks (the paper: 170); None keeps all."""
     patience: int = 10
     epsilon_m: float = EPSILON_M
+    resume: bool = False
+    """Continue from <out>/<cluster>.ckpt (written after every episode) when it exists."""
 
 
 @dataclass
@@ -136,6 +144,8 @@ class TrainResult:
     history: list[EpisodeLog]
     wall_seconds: float
     steps: int
+    resumed_from: int = 0
+    """Episodes already done by the checkpoint this run resumed from (0: a fresh run)."""
 
 
 def code_version() -> str:
@@ -255,25 +265,72 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     trainer = DATITrainer([env], [settings.seed], config)
     stem = model_stem(settings.out_dir, settings.cluster)
     log_path = stem.with_suffix(".log.jsonl")
+    ckpt_path = stem.with_suffix(".ckpt")
     log_lines: list[str] = []
-    t0, steps = time.perf_counter(), 0
+    steps, wall_before, resumed_from = 0, 0.0, 0
+    identity = {"cluster": settings.cluster, "seed": settings.seed, "track_ids": ids}
+    if settings.resume and ckpt_path.is_file():
+        doc = read_checkpoint(ckpt_path)
+        if doc.get("identity") != identity:
+            raise UserError(
+                f"{ckpt_path} belongs to another run (cluster, seed or training tracks differ); "
+                "use the same --seed/--max-tracks/--data, or train without --resume"
+            )
+        source.load_state_dict(doc["source"])
+        by_id = {r.label["track_id"]: r for r in source.references}
+        load_trainer_state(trainer, doc["trainer"], [by_id[int(i)] for i in doc["current"]])
+        log_lines = list(doc["log_lines"])
+        steps, wall_before = int(doc["steps"]), float(doc["wall_seconds"])
+        resumed_from = len(trainer.history)
+    elif settings.resume and stem.with_suffix(".json").is_file():
+        try:
+            old = json.loads(stem.with_suffix(".json").read_text())
+        except (OSError, ValueError):
+            old = {}
+        same = old.get("seed") == settings.seed and old.get("data", {}).get("track_ids") == ids
+        if same and old.get("training", {}).get("finished"):
+            raise UserError(
+                f"{stem.with_suffix('.pt')} has finished training: nothing to resume "
+                "(drop --resume to train again)"
+            )
+    t0 = time.perf_counter()
+
+    def elapsed() -> float:
+        return wall_before + time.perf_counter() - t0
 
     def checkpoint() -> None:
-        wall = time.perf_counter() - t0
-        card = model_card(settings, source, data, trainer.history, wall, steps)
+        card = model_card(settings, source, data, trainer.history, elapsed(), steps)
+        card["training"]["finished"] = trainer.done
         save_networks(stem, trainer.final, config, card)
         atomic_write_bytes(log_path, "".join(log_lines).encode())
+        if trainer.done:
+            ckpt_path.unlink(missing_ok=True)
+        elif at_episode_boundary(trainer):
+            extra = {
+                "identity": identity,
+                "source": source.state_dict(),
+                "current": [int(e.reference.label["track_id"]) for e in trainer.envs],
+                "log_lines": log_lines,
+                "steps": steps,
+                "wall_seconds": elapsed(),
+            }
+            save_checkpoint(ckpt_path, trainer, extra)
 
     while not trainer.done:
         logs = trainer.step()
         steps += 1
         for log in logs:
-            row = {**log.__dict__, "wall_seconds": round(time.perf_counter() - t0, 3)}
+            row = {**log.__dict__, "wall_seconds": round(elapsed(), 3)}
             log_lines.append(json.dumps(row) + "\n")
         if logs:
             checkpoint()
         if on_step is not None:
             on_step(trainer, logs)
-    wall = time.perf_counter() - t0
+    if resumed_from and not steps:
+        checkpoint()
+    wall = elapsed()
     card = model_card(settings, source, data, trainer.history, wall, steps)
-    return TrainResult(stem.with_suffix(".pt"), card, list(trainer.history), wall, steps)
+    card["training"]["finished"] = True
+    return TrainResult(
+        stem.with_suffix(".pt"), card, list(trainer.history), wall, steps, resumed_from
+    )
