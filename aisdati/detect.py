@@ -113,6 +113,8 @@ class DetectSettings:
     top_percent: float | None = None
     near_km: float = 10.0
     seed: int = 0
+    labels: Path | None = None
+    """CSV of hand labels (track_id or mmsi + start, label 0/1) for precision/recall/F1/AUC."""
 
 
 @dataclass
@@ -124,6 +126,7 @@ class Detection:
     models: list[AISModel]
     timings: dict[str, float] = field(default_factory=dict)
     settings: DetectSettings | None = None
+    metrics: dict[str, Any] | None = None
 
 
 # ------------------------------------------------------------------------------------ models
@@ -301,6 +304,8 @@ def check_settings(settings: DetectSettings) -> None:
 def detect(settings: DetectSettings) -> Detection:
     """Score the test tracks; see the module docstring."""
     check_settings(settings)
+    if settings.labels is not None:
+        read_labels(settings.labels)  # fail on a bad file before the rollouts
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     models = load_models(settings.models_dir, settings.models)
@@ -354,7 +359,10 @@ def detect(settings: DetectSettings) -> Detection:
         }
     )
     timings["total_s"] = time.perf_counter() - t0
-    return Detection(scores, tracks, best_rollouts, models, timings, settings)
+    result = Detection(scores, tracks, best_rollouts, models, timings, settings)
+    if settings.labels is not None:
+        result.metrics = evaluate_labels(result, settings.labels)
+    return result
 
 
 # ----------------------------------------------------------------------------------- outputs
@@ -412,7 +420,7 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
 
 
 def write_outputs(result: Detection, out: Path) -> list[Path]:
-    from aisdati.plots import plot_detection_map
+    from aisdati.plots import html_detection_map, plot_detection_map
 
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -441,10 +449,39 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
         title=_map_title(result),
     )
     files.append(path)
+    path = out / "map.html"
+    html_detection_map(
+        [t.positions for t in result.tracks],
+        result.rollouts,
+        [_track_props(r) for r in result.scores.itertuples()],
+        flagged,
+        [m.bounds for m in result.models],
+        path,
+    )
+    files.append(path)
+    if result.metrics is not None:
+        path = out / "metrics.json"
+        atomic_write_bytes(path, json.dumps(result.metrics, indent=2).encode())
+        files.append(path)
     path = out / "report.json"
     atomic_write_bytes(path, json.dumps(report_dict(result), indent=2, default=str).encode())
     files.append(path)
+    for f in files:
+        f.chmod(0o644)  # reports are for sharing (atomic writes start private)
     return files
+
+
+def _track_props(row: Any) -> dict[str, Any]:
+    return {
+        "track_id": int(row.track_id),
+        "mmsi": int(row.mmsi),
+        "rank": int(row.rank),
+        "score": round(float(row.score), 4),
+        "score_m": round(float(row.score_m), 1),
+        "max_dev_m": round(float(row.max_dev_m), 1),
+        "max_dev_lon": float(row.max_dev_lon),
+        "max_dev_lat": float(row.max_dev_lat),
+    }
 
 
 def _map_title(result: Detection) -> str:
@@ -466,6 +503,102 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "flagged": int(sc["flagged"].sum()),
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
+        "metrics": result.metrics,
         "score_definition": "best of K rollouts of great-circle DTW / warping-path length (m), "
         "divided by the maximum over the test set",
     }
+
+
+# ------------------------------------------------------------------------------------ labels
+def read_labels(path: Path) -> pd.DataFrame:
+    """A CSV with `label` (0/1) and either `track_id` or `mmsi` + `start` (UTC time of the
+    track's first report; matched within 60 s)."""
+    if not path.is_file():
+        raise UserError(f"labels file not found: {path}")
+    try:
+        labels = pd.read_csv(path)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read labels {path}: {str(exc).splitlines()[0]}") from None
+    labels.columns = [str(c).strip().lower() for c in labels.columns]
+    if "label" not in labels:
+        raise UserError(f"{path}: no 'label' column (expected track_id,label or mmsi,start,label)")
+    if "track_id" not in labels and not {"mmsi", "start"} <= set(labels):
+        raise UserError(f"{path}: needs a 'track_id' column, or 'mmsi' and 'start' columns")
+    bad = ~labels["label"].isin([0, 1, "0", "1"])
+    if bad.any():
+        raise UserError(f"{path}: labels must be 0 or 1 (row {int(bad.idxmax()) + 2})")
+    labels["label"] = labels["label"].astype(int)
+    return labels
+
+
+def match_labels(scores: pd.DataFrame, tracks: Sequence[Track], labels: pd.DataFrame) -> np.ndarray:
+    """The label of every scored track, -1 where it has none."""
+    out = np.full(len(scores), -1)
+    if "track_id" in labels:
+        lab = dict(zip(labels["track_id"].astype(int), labels["label"], strict=True))
+        out = np.array([lab.get(int(t), -1) for t in scores["track_id"]])
+    else:
+        starts = pd.to_datetime(labels["start"], utc=True, errors="coerce")
+        by_mmsi: dict[int, list[tuple[pd.Timestamp, int]]] = {}
+        for m, s, v in zip(labels["mmsi"].astype(int), starts, labels["label"], strict=True):
+            if pd.notna(s):
+                by_mmsi.setdefault(m, []).append((s, int(v)))
+        start_of = {t.track_id: pd.Timestamp(t.start) for t in tracks}
+        for i, (tid, mmsi) in enumerate(zip(scores["track_id"], scores["mmsi"], strict=True)):
+            st = start_of[int(tid)]
+            st = st.tz_localize("UTC") if st.tzinfo is None else st
+            for s, v in by_mmsi.get(int(mmsi), []):
+                if abs((s - st).total_seconds()) <= 60:
+                    out[i] = v
+    if not (out >= 0).any():
+        raise UserError("the labels match no test track (check track_id, or mmsi and start)")
+    return out
+
+
+def roc_auc(y: np.ndarray, s: np.ndarray) -> float | None:
+    """Area under the ROC curve (Mann-Whitney U with average ranks for ties)."""
+    from scipy.stats import rankdata
+
+    pos, neg = int(y.sum()), int(len(y) - y.sum())
+    if pos == 0 or neg == 0:
+        return None
+    ranks = rankdata(s)
+    return float((ranks[y == 1].sum() - pos * (pos + 1) / 2) / (pos * neg))
+
+
+def label_metrics(y: np.ndarray, flagged: np.ndarray, score: np.ndarray) -> dict[str, Any]:
+    """Precision and recall of the anomaly class, weighted F1 (the paper's metric: per-class F1
+    weighted by class support) and ROC AUC of the normalised score."""
+    y, p = np.asarray(y, int), np.asarray(flagged, int)
+
+    def prf(c: int) -> tuple[float, float, float]:
+        tp = int(((p == c) & (y == c)).sum())
+        prec = tp / max(int((p == c).sum()), 1)
+        rec = tp / max(int((y == c).sum()), 1)
+        f1 = 2 * prec * rec / (prec + rec) if prec + rec > 0 else 0.0
+        return prec, rec, f1
+
+    p1, r1, _ = prf(1)
+    support = np.array([(y == 0).sum(), (y == 1).sum()], dtype=float)
+    f1s = np.array([prf(0)[2], prf(1)[2]])
+    return {
+        "labelled_tracks": len(y),
+        "anomalies_labelled": int(y.sum()),
+        "flagged": int(p.sum()),
+        "precision": p1,
+        "recall": r1,
+        "f1_weighted": float((support * f1s).sum() / support.sum()),
+        "roc_auc": roc_auc(y, score),
+    }
+
+
+def evaluate_labels(result: Detection, path: Path) -> dict[str, Any]:
+    labels = read_labels(path)
+    matched = match_labels(result.scores, result.tracks, labels)
+    keep = matched >= 0
+    metrics = label_metrics(
+        matched[keep], result.scores["flagged"].to_numpy()[keep], result.scores["score"][keep]
+    )
+    metrics["labels_file"] = str(path)
+    metrics["labels_unmatched"] = int(len(labels) - keep.sum())
+    return metrics

@@ -136,3 +136,52 @@ def plot_detection_map(
     ax.legend(handles=handles, fontsize=8, loc="best")
     ax.set_title(title or "DATI anomalies")
     _save(fig, path)
+
+
+def html_detection_map(
+    tracks: Sequence[np.ndarray],
+    rollouts: Sequence[np.ndarray],
+    props: Sequence[dict],
+    flagged: np.ndarray,
+    regions: Sequence[tuple[np.ndarray, np.ndarray]],
+    path: Path,
+) -> None:
+    """The detection map as a zoomable folium (Leaflet) page: OpenStreetMap tiles (fetched by the
+    browser when online), test tracks grey, flagged red with a popup of their scores, nearest
+    rollouts blue, a marker where each flagged track deviates most, the models' regions."""
+    import folium
+
+    allpts = np.concatenate(list(tracks))
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    fmap = folium.Map(tiles="OpenStreetMap", control_scale=True)
+    fmap.fit_bounds([[lo[1], lo[0]], [hi[1], hi[0]]])
+    normal = folium.FeatureGroup("test tracks", show=True)
+    red = folium.FeatureGroup("flagged tracks", show=True)
+    blue = folium.FeatureGroup("nearest rollouts (flagged)", show=True)
+    for xy, roll, p, f in zip(tracks, rollouts, props, flagged, strict=True):
+        latlon = np.round(xy[:, ::-1], 5).tolist()
+        text = "<br>".join(f"{k}: {v}" for k, v in p.items())
+        if not f:
+            folium.PolyLine(latlon, color="#888888", weight=1.5, opacity=0.6, tooltip=text).add_to(
+                normal
+            )
+            continue
+        folium.PolyLine(latlon, color="#d62728", weight=3, tooltip=text, popup=text).add_to(red)
+        folium.PolyLine(np.round(roll[:, ::-1], 5).tolist(), color="#1f77b4", weight=2).add_to(blue)
+        folium.CircleMarker(
+            [p["max_dev_lat"], p["max_dev_lon"]],
+            radius=6,
+            color="black",
+            fill=True,
+            tooltip=f"track {p['track_id']}: largest deviation {p['max_dev_m']:,.0f} m",
+        ).add_to(red)
+    for lo_r, hi_r in regions:
+        folium.Rectangle(
+            [[lo_r[1], lo_r[0]], [hi_r[1], hi_r[0]]], color="black", weight=1, dash_array="5"
+        ).add_to(fmap)
+    for group in (normal, blue, red):
+        group.add_to(fmap)
+    folium.LayerControl().add_to(fmap)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    fmap.save(str(tmp))
+    tmp.replace(path)

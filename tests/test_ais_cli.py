@@ -46,8 +46,14 @@ def run(tmp_path_factory):
     )
     assert r.exit_code == 0, r.output
     train_doc = json.loads(r.stdout)
+    tracks = pq.read_table(proc / "tracks.parquet", columns=["track_id"]).to_pandas()
+    labels = base / "labels.csv"
+    rows = [f"{t},{int(i < 3)}" for i, t in enumerate(tracks["track_id"])]
+    labels.write_text("track_id,label\n" + "\n".join(rows) + "\n")
     r = cli(
         "detect",
+        "--labels",
+        labels,
         "--data",
         proc,
         "--models",
@@ -107,7 +113,16 @@ def test_detect_outputs_parse(run):
             assert len(geom["coordinates"]) >= 2
             assert all(-180 <= x <= 180 and -90 <= y <= 90 for x, y in geom["coordinates"])
     assert (report / "map.png").stat().st_size > 10_000
+    assert "leaflet" in (report / "map.html").read_text().lower()
     assert "flagged" in run["detect_output"]
+
+
+def test_detect_label_metrics(run):
+    metrics = json.loads((run["report"] / "metrics.json").read_text())
+    assert metrics["labelled_tracks"] >= 3
+    for key in ("precision", "recall", "f1_weighted"):
+        assert 0.0 <= metrics[key] <= 1.0
+    assert "weighted F1" in run["detect_output"]
 
 
 def test_bad_input_is_one_line(run, tmp_path):
@@ -137,6 +152,10 @@ def test_bad_input_is_one_line(run, tmp_path):
     cases.append(
         (cli("detect", "--data", proc, "--models", far, "--out", tmp_path / "r"), "another region")
     )
+    nomatch = tmp_path / "labels.csv"
+    nomatch.write_text("track_id,label\n999999,1\n")
+    args = ["detect", "--data", proc, "--models", models, "--out", tmp_path / "r"]
+    cases.append((cli(*args, "--labels", nomatch), "match no test track"))
     for result, needle in cases:
         assert result.exit_code == 2, result.output
         assert needle in result.output

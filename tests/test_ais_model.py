@@ -89,3 +89,16 @@ def test_flag_top_percent():
     scores = np.array([0.1, 1.0, 0.5, 0.9])
     assert flag(scores, 0.75, 25).tolist() == [False, True, False, False]
     assert flag(scores, 0.75, None).tolist() == [False, True, False, True]
+
+
+def test_label_metrics_weighted_f1_and_auc():
+    from aisdati.detect import label_metrics
+
+    y = np.array([1, 1, 0, 0, 0, 0])
+    flagged = np.array([1, 0, 1, 0, 0, 0])
+    score = np.array([0.9, 0.6, 0.8, 0.1, 0.2, 0.3])
+    m = label_metrics(y, flagged, score)
+    assert m["precision"] == pytest.approx(0.5) and m["recall"] == pytest.approx(0.5)
+    # class 1: F1 0.5 (support 2); class 0: precision 3/4, recall 3/4, F1 0.75 (support 4)
+    assert m["f1_weighted"] == pytest.approx((2 * 0.5 + 4 * 0.75) / 6)
+    assert m["roc_auc"] == pytest.approx(7 / 8)
