@@ -33,10 +33,11 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import torch
+from numba import njit, prange
 
 from aisdati.dtw import dtw_path, dtw_path_length
 from aisdati.errors import UserError
-from aisdati.geo import haversine_m
+from aisdati.geo import EARTH_RADIUS_M, haversine_m
 from aisdati.model.checkpoint import atomic_write_bytes, load_networks
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
@@ -264,6 +265,84 @@ def _generate(
     return out
 
 
+def _unit_vectors(lonlat: np.ndarray) -> np.ndarray:
+    lon, lat = np.radians(lonlat[..., 0]), np.radians(lonlat[..., 1])
+    return np.ascontiguousarray(
+        np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+    )
+
+
+@njit(cache=True, parallel=True)
+def _batch_dtw(rolls, lengths, tracks, offsets, owner):  # pragma: no cover - compiled
+    """Exact great-circle DTW cost and path length of rollout b (its first lengths[b] points)
+    against track owner[b] (tracks[offsets[o]:offsets[o + 1]]), for every b in parallel.
+    Points are unit vectors; the great-circle distance 2R asin(chord / 2) equals the haversine
+    formula. Ties prefer diagonal, then up, then left, as `aisdati.dtw`."""
+    nb = rolls.shape[0]
+    cost = np.empty(nb)
+    plen = np.empty(nb, dtype=np.int64)
+    for b in prange(nb):
+        o = owner[b]
+        lo, hi = offsets[o], offsets[o + 1]
+        m = hi - lo
+        n = lengths[b]
+        prev_d = np.full(m, np.inf)
+        prev_l = np.zeros(m, dtype=np.int64)
+        cur_d = np.empty(m)
+        cur_l = np.empty(m, dtype=np.int64)
+        for i in range(n):
+            ax, ay, az = rolls[b, i, 0], rolls[b, i, 1], rolls[b, i, 2]
+            for j in range(m):
+                dx = ax - tracks[lo + j, 0]
+                dy = ay - tracks[lo + j, 1]
+                dz = az - tracks[lo + j, 2]
+                half = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz)
+                d = 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
+                if i == 0 and j == 0:
+                    cur_d[0] = d
+                    cur_l[0] = 1
+                    continue
+                best = np.inf
+                move = 0
+                if j > 0:
+                    best = prev_d[j - 1]
+                if prev_d[j] < best:
+                    best = prev_d[j]
+                    move = 1
+                if j > 0 and cur_d[j - 1] < best:
+                    best = cur_d[j - 1]
+                    move = 2
+                cur_d[j] = d + best
+                if move == 0:
+                    cur_l[j] = prev_l[j - 1] + 1
+                elif move == 1:
+                    cur_l[j] = prev_l[j] + 1
+                else:
+                    cur_l[j] = cur_l[j - 1] + 1
+            prev_d, cur_d = cur_d, prev_d
+            prev_l, cur_l = cur_l, prev_l
+        cost[b] = prev_d[m - 1]
+        plen[b] = prev_l[m - 1]
+    return cost, plen
+
+
+def batch_mean_dtw_m(
+    rollouts: np.ndarray, lengths: np.ndarray, tracks: Sequence[np.ndarray], owner: np.ndarray
+) -> np.ndarray:
+    """`mean_dtw_m(rollouts[b, :lengths[b]], tracks[owner[b]])` for every b, on all cores."""
+    offsets = np.zeros(len(tracks) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(t) for t in tracks])
+    flat = _unit_vectors(np.concatenate(tracks))
+    cost, plen = _batch_dtw(
+        _unit_vectors(rollouts),
+        np.asarray(lengths, np.int64),
+        flat,
+        offsets,
+        np.asarray(owner, np.int64),
+    )
+    return cost / plen
+
+
 def mean_dtw_m(a: np.ndarray, b: np.ndarray) -> float:
     """Great-circle DTW / warping-path length: the mean distance (m) between matched points."""
     cost, length = dtw_path_length(a, b, "haversine")
@@ -327,12 +406,16 @@ def detect(settings: DetectSettings) -> Detection:
         tg = time.perf_counter()
         paths = generate(model, starts, horizons, k, settings.seed + m)
         gen_s += time.perf_counter() - tg
+        dists = batch_mean_dtw_m(
+            paths,
+            np.repeat(horizons + 1, k),
+            [tracks[i].positions for i in idx],
+            np.repeat(np.arange(len(idx)), k),
+        ).reshape(len(idx), k)
         for j, i in enumerate(idx):
-            h = horizons[j]
-            dists = [mean_dtw_m(paths[j * k + r, : h + 1], tracks[i].positions) for r in range(k)]
-            best = int(np.argmin(dists))
-            raw[i] = dists[best]
-            best_rollouts[i] = paths[j * k + best, : h + 1].copy()
+            best = int(np.argmin(dists[j]))
+            raw[i] = dists[j, best]
+            best_rollouts[i] = paths[j * k + best, : horizons[j] + 1].copy()
     timings["rollout_s"] = gen_s
     timings["score_s"] = time.perf_counter() - t1 - gen_s
     top = float(np.max(raw)) if n else 1.0

@@ -102,3 +102,17 @@ def test_label_metrics_weighted_f1_and_auc():
     # class 1: F1 0.5 (support 2); class 0: precision 3/4, recall 3/4, F1 0.75 (support 4)
     assert m["f1_weighted"] == pytest.approx((2 * 0.5 + 4 * 0.75) / 6)
     assert m["roc_auc"] == pytest.approx(7 / 8)
+
+
+def test_batched_parallel_dtw_equals_reference_dtw():
+    from aisdati.detect import batch_mean_dtw_m
+
+    rng = np.random.default_rng(0)
+    origin = np.array([-80.0, 25.0])
+    tracks = [np.cumsum(rng.normal(0, 0.001, (n, 2)), 0) + origin for n in (50, 80, 33)]
+    rolls = np.cumsum(rng.normal(0, 0.001, (6, 90, 2)), 1) + origin
+    lengths = np.array([90, 60, 81, 40, 33, 70])
+    owner = np.array([0, 0, 1, 1, 2, 2])
+    got = batch_mean_dtw_m(rolls, lengths, tracks, owner)
+    want = [mean_dtw_m(rolls[i, : lengths[i]], tracks[owner[i]]) for i in range(6)]
+    np.testing.assert_allclose(got, want, rtol=1e-9)

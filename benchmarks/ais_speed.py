@@ -1,0 +1,111 @@
+"""Speed of DATI on AIS at the paper's scale: training steps per second on 900-step episodes, and
+rollout + scoring time for 143 test tracks of 900-1500 points with K rollouts each.
+
+The tracks are synthetic but AIS-like (Florida Straits, ~12 kn, reports every 2-60 s, a slowly
+turning course), since speed does not depend on where the ships go; the machinery is exactly the
+one `aisdati train` / `aisdati detect` run (AISTrackSource + DATITrainer, `generate` +
+`batch_mean_dtw_m`). Training is timed after a short warm-up; scoring uses an untrained model
+(the cost does not depend on the weights).
+
+Run: python benchmarks/ais_speed.py [--train-steps 300] [--tracks 143] [--rollouts 10]
+(not part of the test suite; writes a markdown table to stdout).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+import torch
+
+from aisdati.detect import AISModel, batch_mean_dtw_m, generate
+from aisdati.model.ais import build_source, make_env
+from aisdati.model.dati import DATIConfig, DATITrainer
+from aisdati.model.networks import DATINetworks
+from aisdati.trackdata import Track
+
+
+def synthetic_track(rng: np.random.Generator, n: int, track_id: int) -> Track:
+    dt = rng.uniform(2, 60, n - 1) / 3600.0
+    cog = np.radians(60 + np.cumsum(rng.normal(0, 1.5, n - 1)))
+    sog = 12 + rng.normal(0, 0.5, n - 1)
+    lat = np.empty(n)
+    lon = np.empty(n)
+    lon[0], lat[0] = -82.9 + rng.uniform(0, 0.1), 23.6 + rng.uniform(0, 0.6)
+    for i in range(n - 1):
+        lat[i + 1] = lat[i] + np.cos(cog[i]) * sog[i] * dt[i] / 60
+        lon[i + 1] = lon[i] + np.sin(cog[i]) * sog[i] * dt[i] / 60 / np.cos(np.radians(lat[i]))
+    return Track(track_id, 366000000 + track_id, None, np.stack([lon, lat], 1), dt, "up")
+
+
+def bench_training(steps: int, seed: int = 0) -> dict[str, float]:
+    rng = np.random.default_rng(seed)
+    tracks = [synthetic_track(rng, 901, i) for i in range(4)]
+    torch.set_num_threads(1)
+    trainer = DATITrainer([make_env(build_source(tracks))], [seed], DATIConfig(episodes=10))
+    for _ in range(20):
+        trainer.step()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        trainer.step()
+    wall = time.perf_counter() - t0
+    return {"steps": steps, "seconds": wall, "steps_per_s": steps / wall}
+
+
+def bench_scoring(n_tracks: int, rollouts: int, seed: int = 0) -> dict[str, float]:
+    rng = np.random.default_rng(seed)
+    tracks = [synthetic_track(rng, int(rng.integers(900, 1501)), i) for i in range(n_tracks)]
+    source = build_source(tracks)
+    lo, hi = source.bounds
+    cfg = DATIConfig()
+    card = {
+        "rule": {"max_sog_kn": source.rule.max_sog, "max_dt_h": source.rule.max_dt_h},
+        "region": {"lon": [lo[0], hi[0]], "lat": [lo[1], hi[1]]},
+        "data": {"start_points": [t.positions[0].tolist() for t in tracks], "track_ids": []},
+    }
+    model = AISModel("bench", DATINetworks(2, 3, cfg.network, [seed]), cfg, card)
+    starts = np.array([t.positions[0] for t in tracks])
+    horizons = np.array([t.steps for t in tracks])
+    batch_mean_dtw_m(np.zeros((1, 2, 2)), np.array([2]), [np.zeros((2, 2))], np.array([0]))
+    t0 = time.perf_counter()
+    paths = generate(model, starts, horizons, rollouts, seed)
+    t1 = time.perf_counter()
+    batch_mean_dtw_m(
+        paths,
+        np.repeat(horizons + 1, rollouts),
+        [t.positions for t in tracks],
+        np.repeat(np.arange(n_tracks), rollouts),
+    )
+    t2 = time.perf_counter()
+    cells = float(sum(len(t.positions) ** 2 for t in tracks)) * rollouts  # ~ n x m per pair
+    return {"rollout_s": t1 - t0, "dtw_s": t2 - t1, "total_s": t2 - t0, "cells": cells}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--train-steps", type=int, default=300)
+    ap.add_argument("--tracks", type=int, default=143)
+    ap.add_argument("--rollouts", type=int, default=10)
+    args = ap.parse_args()
+    tr = bench_training(args.train_steps)
+    sc = bench_scoring(args.tracks, args.rollouts)
+    per_episode = 900 / tr["steps_per_s"]
+    print(f"AIS speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
+    print("| measure | value |")
+    print("|---|---|")
+    print(f"| training steps/s (E = 1, 900-step episodes) | {tr['steps_per_s']:.1f} |")
+    print(f"| one 900-step episode | {per_episode:.0f} s |")
+    print(f"| paper's budget, 170 episodes | {170 * per_episode / 3600:.1f} h |")
+    print(
+        f"| rollouts: {args.tracks} tracks x K = {args.rollouts}, 900-1500 points "
+        f"| {sc['rollout_s']:.1f} s |"
+    )
+    gcells = sc["cells"] / 1e9
+    print(f"| great-circle DTW of all pairs ({gcells:.2f} G cells) | {sc['dtw_s']:.1f} s |")
+    print(f"| rollout + scoring total (target < 30 s) | {sc['total_s']:.1f} s |")
+
+
+if __name__ == "__main__":
+    main()
