@@ -441,8 +441,10 @@ def detection_table(scores: Any, limit: int = 15) -> Table:
         if len(flagged)
         else f"no track flagged among {len(scores)}; the highest scores"
     )
-    table = Table(title=title)
-    cols = ["rank", "track", "mmsi", "points", "score", "mean dist", "max dev", "at (lat, lon)"]
+    from rich import box
+
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False)
+    cols = ["rank", "track", "mmsi", "score", "mean dist", "max dev", "at (lat, lon)"]
     several = scores["model"].nunique() > 1
     if several:
         cols.insert(3, "model")
@@ -455,10 +457,9 @@ def detection_table(scores: Any, limit: int = 15) -> Table:
             str(r.rank),
             str(r.track_id),
             str(r.mmsi),
-            str(r.n_points),
             f"[{'red' if r.flagged else 'white'}]{r.score:.3f}[/]",
-            f"{r.score_m:,.0f} m",
-            f"{r.max_dev_m:,.0f} m",
+            f"{r.score_m / 1000:,.2f} km",
+            f"{r.max_dev_m / 1000:,.2f} km",
             f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         ]
         if several:

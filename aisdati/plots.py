@@ -68,6 +68,11 @@ def plot_best_rollouts(
     _save(fig, path)
 
 
+LAND_MIN_SPAN_DEG = 2.0
+"""The 1:110m land outline is drawn only on maps spanning at least this many degrees; on smaller
+ones (a harbour) it would put land across shipping lanes."""
+
+
 def land_geometry():
     """Offline land basemap: Natural Earth 1:110m, the Americas (see aisdati/data/README.md)."""
     import json
@@ -103,7 +108,6 @@ def plot_detection_map(
     deviate most, the models' regions dashed, over an offline land basemap (lon/lat, the
     longitude axis stretched by 1/cos(latitude) so that shapes are true)."""
     fig, ax = plt.subplots(figsize=(9, 7.5))
-    _draw_land(ax)
     for xy, f in zip(tracks, flagged, strict=True):
         if not f:
             ax.plot(xy[:, 0], xy[:, 1], color="0.55", lw=0.6, alpha=0.7, zorder=1)
@@ -115,14 +119,30 @@ def plot_detection_map(
     if flagged.any():
         ax.plot(max_dev[flagged, 0], max_dev[flagged, 1], "kx", ms=7, mew=1.6, zorder=4)
     for lo, hi in regions:
-        ax.plot([lo[0], hi[0], hi[0], lo[0], lo[0]], [lo[1], lo[1], hi[1], hi[1], lo[1]],
-                "k--", lw=0.8, zorder=1)  # fmt: skip
+        ax.plot(
+            [lo[0], hi[0], hi[0], lo[0], lo[0]],
+            [lo[1], lo[1], hi[1], hi[1], lo[1]],
+            "k--",
+            lw=0.8,
+            zorder=1,
+        )
     allpts = np.concatenate([*tracks, *[np.stack([lo, hi]) for lo, hi in regions]])
     lo, hi = allpts.min(axis=0), allpts.max(axis=0)
     pad = np.maximum((hi - lo) * 0.04, 0.01)
     ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
     ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
     ax.set_aspect(1.0 / np.cos(np.radians((lo[1] + hi[1]) / 2)))
+    if max(hi - lo) >= LAND_MIN_SPAN_DEG:
+        _draw_land(ax)
+    else:
+        ax.text(
+            0.01,
+            0.01,
+            "harbour scale: the offline 1:110m land outline is too coarse to draw",
+            transform=ax.transAxes,
+            fontsize=7,
+            color="0.4",
+        )
     ax.set_facecolor("#eef4f8")
     ax.set_xlabel("longitude (deg)")
     ax.set_ylabel("latitude (deg)")
