@@ -549,8 +549,6 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
     path = out / "report.json"
     atomic_write_bytes(path, json.dumps(report_dict(result), indent=2, default=str).encode())
     files.append(path)
-    for f in files:
-        f.chmod(0o644)  # reports are for sharing (atomic writes start private)
     return files
 
 
