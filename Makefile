@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup test demo selftest
+.PHONY: setup test demo quick selftest
 
 setup: $(VENV)/.installed
 
@@ -17,6 +17,9 @@ test: setup
 	$(BIN)/pytest
 
 demo: setup
+	bash scripts/demo.sh
+
+quick: setup
 	$(BIN)/aisdati selftest --quick --out runs/quick
 
 selftest: setup
