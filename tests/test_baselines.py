@@ -16,10 +16,10 @@ from aisdati.model.baselines import (
     DDPGTIConfig,
     bc_act,
     ddpg_ti_act,
-    rollout_policy,
     train_ddpg_ti,
 )
 from aisdati.model.env import make_family_env
+from aisdati.model.evaluate import rollout_policy
 from aisdati.model.families import Family
 from aisdati.model.networks import DATINetworks
 from aisdati.model.selftest import (

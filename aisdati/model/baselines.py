@@ -42,46 +42,9 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from aisdati.model.env import Reference, TrajectoryImitationEnv
+from aisdati.model.env import TrajectoryImitationEnv
+from aisdati.model.evaluate import Act, seed_generator
 from aisdati.model.networks import EnsembleLinear, MLPTrunk, NetworkConfig, Time2Vec
-
-Act = Callable[[np.ndarray], np.ndarray]
-"""A batched policy: observations [E, R, obs] -> scaled decisions [E, R, k]."""
-
-
-def seed_generator(*key: int) -> torch.Generator:
-    """A torch generator keyed by a tuple of integers (evaluation seed, member seed, ...)."""
-    state = np.random.SeedSequence([int(k) for k in key]).generate_state(1)[0]
-    return torch.Generator().manual_seed(int(state))
-
-
-def rollout_policy(
-    act: Act,
-    env_grid: Sequence[Sequence[TrajectoryImitationEnv]],
-    references: Sequence[Sequence[Reference]],
-) -> tuple[list[list[np.ndarray]], np.ndarray]:
-    """Roll `act` out for member e on references[e][r] in env_grid[e][r] from the reference's
-    first point, on its own predictions; returns the paths [E][R] and final smoothed DTW [E, R]."""
-    members, refs = len(env_grid), len(env_grid[0])
-    obs = np.stack(
-        [
-            [env_grid[e][r].reset(options={"reference": references[e][r]})[0] for r in range(refs)]
-            for e in range(members)
-        ]
-    ).astype(np.float32)
-    paths = [[[env_grid[e][r].position.copy()] for r in range(refs)] for e in range(members)]
-    scores = np.full((members, refs), np.nan)
-    alive = np.ones((members, refs), dtype=bool)
-    while alive.any():
-        actions = act(obs)
-        for e, r in zip(*np.nonzero(alive), strict=True):
-            env = env_grid[e][r]
-            obs[e, r], _, terminated, truncated, info = env.step(actions[e, r])
-            paths[e][r].append(env.position.copy())
-            if terminated or truncated:
-                alive[e, r] = False
-                scores[e, r] = info["dtw_smoothed"]
-    return [[np.asarray(p) for p in row] for row in paths], scores
 
 
 # ------------------------------------------------------------------------------------------ BC

@@ -9,7 +9,7 @@ mean (IQM, Agarwal et al. 2021) with a 95% bootstrap interval are reported besid
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,34 +29,37 @@ class Rollouts:
     scores: np.ndarray
 
 
-def rollout(
-    nets: DATINetworks,
+Act = Callable[[np.ndarray], np.ndarray]
+"""A batched policy: observations [E, R, obs] -> scaled decisions [E, R, k]."""
+
+
+def seed_generator(*key: int) -> torch.Generator:
+    """A generator keyed by integers (evaluation seed, member seed, reference index), so that a
+    member's rollouts do not depend on which ensemble or worker it was trained in."""
+    state = np.random.SeedSequence([int(k) for k in key]).generate_state(1)[0]
+    return torch.Generator().manual_seed(int(state))
+
+
+def rollout_policy(
+    act: Act,
     env_grid: Sequence[Sequence[TrajectoryImitationEnv]],
     references: Sequence[Sequence[Reference]],
-    config: DATIConfig,
-    seed: int = 0,
-) -> Rollouts:
-    """Roll out member e on references[e][r] in env_grid[e][r], all members and references in
-    one batched forward pass per step; each (member, reference) pair has its own noise stream."""
+) -> tuple[list[list[np.ndarray]], np.ndarray]:
+    """Roll `act` out for member e on references[e][r] in env_grid[e][r] from the reference's
+    first point, on its own predictions (no cheese signal); one batched call of `act` per step.
+    Returns the paths [E][R] and the final smoothed normalised DTW [E, R]."""
     members, refs = len(env_grid), len(env_grid[0])
-    state_dim = env_grid[0][0].observation_space.shape[0] - 1
-    obs = np.zeros((members, refs, state_dim + 1), dtype=np.float32)
-    for e in range(members):
-        for r in range(refs):
-            obs[e, r] = env_grid[e][r].reset(options={"reference": references[e][r]})[0]
+    obs = np.stack(
+        [
+            [env_grid[e][r].reset(options={"reference": references[e][r]})[0] for r in range(refs)]
+            for e in range(members)
+        ]
+    ).astype(np.float32)
     paths = [[[env_grid[e][r].position.copy()] for r in range(refs)] for e in range(members)]
     scores = np.full((members, refs), np.nan)
     alive = np.ones((members, refs), dtype=bool)
-    noises = [
-        LatentNoise(config, [_generator(seed, member_seed, r) for r in range(refs)])
-        for member_seed in nets.seeds
-    ]
     while alive.any():
-        x = torch.as_tensor(obs)
-        eta = torch.stack([n.sample()[:, 0] for n in noises])
-        with torch.no_grad():
-            time = nets.time_features(x[..., state_dim:])
-            actions = nets.forward_actor(x[..., :state_dim], eta, time).numpy()
+        actions = act(obs)
         for e, r in zip(*np.nonzero(alive), strict=True):
             env = env_grid[e][r]
             obs[e, r], _, terminated, truncated, info = env.step(actions[e, r])
@@ -64,14 +67,38 @@ def rollout(
             if terminated or truncated:
                 alive[e, r] = False
                 scores[e, r] = info["dtw_smoothed"]
-    return Rollouts([[np.asarray(p) for p in row] for row in paths], scores)
+    return [[np.asarray(p) for p in row] for row in paths], scores
 
 
-def _generator(*key: int) -> torch.Generator:
-    """A generator keyed by (evaluation seed, member seed, reference index), so a member's
-    rollouts do not depend on which ensemble or worker it was trained in."""
-    state = np.random.SeedSequence([int(k) for k in key]).generate_state(1)[0]
-    return torch.Generator().manual_seed(int(state))
+def dati_policy(nets: DATINetworks, config: DATIConfig, refs: int, seed: int = 0) -> Act:
+    """DATI's forward actors as a batched policy; each (member, reference) pair draws its latent
+    noise from its own stream."""
+    noises = [
+        LatentNoise(config, [seed_generator(seed, member_seed, r) for r in range(refs)])
+        for member_seed in nets.seeds
+    ]
+    state_dim = nets.forward_actor.input_features.weight.shape[1]
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        x = torch.as_tensor(obs)
+        eta = torch.stack([n.sample()[:, 0] for n in noises])
+        with torch.no_grad():
+            time = nets.time_features(x[..., state_dim:])
+            return nets.forward_actor(x[..., :state_dim], eta, time).numpy()
+
+    return act
+
+
+def rollout(
+    nets: DATINetworks,
+    env_grid: Sequence[Sequence[TrajectoryImitationEnv]],
+    references: Sequence[Sequence[Reference]],
+    config: DATIConfig,
+    seed: int = 0,
+) -> Rollouts:
+    """Roll out DATI member e on references[e][r] in env_grid[e][r]."""
+    act = dati_policy(nets, config, len(env_grid[0]), seed)
+    return Rollouts(*rollout_policy(act, env_grid, references))
 
 
 @dataclass(frozen=True)

@@ -34,13 +34,12 @@ from aisdati.model.baselines import (
     DDPGTIConfig,
     bc_act,
     ddpg_ti_act,
-    rollout_policy,
     train_ddpg_ti,
 )
 from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import FamilySource, Reference, TrajectoryImitationEnv
-from aisdati.model.evaluate import Summary, rollout, summarize
+from aisdati.model.evaluate import Summary, rollout, rollout_policy, summarize
 from aisdati.model.families import PAPER_DATI, Family, get_family
 from aisdati.plots import plot_best_rollouts, plot_families
 
