@@ -1,4 +1,4 @@
-"""Progress display for training: one rich bar over all members' episodes."""
+"""Progress display for training: rich bars over members' episodes and an episode's steps."""
 
 from __future__ import annotations
 
@@ -14,7 +14,25 @@ from rich.progress import (
 )
 
 
-class EpisodeProgress:
+class _Bars:
+    """A rich `Progress` that is started and stopped as a context manager."""
+
+    progress: Progress
+
+    def __enter__(self) -> _Bars:
+        self.progress.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.progress.stop()
+
+
+class EpisodeProgress(_Bars):
     """Counts training episodes of many members; a member that stops early counts as done."""
 
     def __init__(self, members: int, episodes: int, label: str, disable: bool = False):
@@ -35,20 +53,8 @@ class EpisodeProgress:
         self.done[member] = self.episodes if stopped else episode
         self.progress.update(self.task, completed=sum(self.done.values()))
 
-    def __enter__(self) -> EpisodeProgress:
-        self.progress.start()
-        return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.progress.stop()
-
-
-class TrainingProgress:
+class TrainingProgress(_Bars):
     """Two bars for one training run: episodes, and the steps of the current episode with its
     running mean reward and smoothed DTW (metres)."""
 
@@ -85,15 +91,3 @@ class TrainingProgress:
             total=horizon,
             info=f"steps  reward {reward:+.2f}  DTW {dtw:,.0f} m",
         )
-
-    def __enter__(self) -> TrainingProgress:
-        self.progress.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.progress.stop()
