@@ -75,7 +75,11 @@ class AISModel:
     @property
     def rule(self) -> SphericalRule:
         r = self.card["rule"]
-        return SphericalRule(max_sog=float(r["max_sog_kn"]), max_dt_h=float(r["max_dt_h"]))
+        return SphericalRule(
+            max_sog=float(r["max_sog_kn"]),
+            max_dt_h=float(r["max_dt_h"]),
+            cog_center=float(r.get("cog_center_deg", 180.0)),
+        )
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -116,3 +116,22 @@ def test_batched_parallel_dtw_equals_reference_dtw():
     got = batch_mean_dtw_m(rolls, lengths, tracks, owner)
     want = [mean_dtw_m(rolls[i, : lengths[i]], tracks[owner[i]]) for i in range(6)]
     np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_cog_window_is_centred_on_the_traffic_and_keeps_the_rule_exact():
+    from aisdati.model.rules import SphericalRule, mean_course
+
+    assert mean_course(np.array([350.0, 10.0])) == pytest.approx(0.0, abs=1e-9)
+    assert mean_course(np.array([100.0, 140.0])) == pytest.approx(120.0)
+    # a north-going track whose courses straddle 0/360
+    lat = 40.0 + np.arange(6) * 0.01
+    lon = -74.0 + np.array([0.0, 0.001, 0.0, 0.001, 0.0, 0.001])
+    positions = np.stack([lon, lat], axis=1)
+    dts = np.full(5, 0.05)
+    rule = SphericalRule(max_sog=30.0, max_dt_h=0.1, cog_center=0.0)
+    decisions = rule.perfect_decisions(positions, dts)
+    assert np.all(np.abs(decisions[:, 1]) < 10.0)  # near 0, not split between ~0 and ~360
+    scaled = rule.decision_scaler.scale(decisions)
+    assert np.all(np.abs(scaled[:, 1]) < 0.1)
+    stepped = rule.step(positions[:-1], decisions)
+    np.testing.assert_allclose(stepped, positions[1:], atol=1e-9)

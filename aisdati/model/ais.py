@@ -41,7 +41,7 @@ from aisdati.model.resume import (
     read_checkpoint,
     save_checkpoint,
 )
-from aisdati.model.rules import SphericalRule
+from aisdati.model.rules import SphericalRule, mean_course
 from aisdati.trackdata import Track, load_tracks, read_track_table, select_cluster
 
 EPSILON_M = 500.0
@@ -72,12 +72,14 @@ def region_box(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]
 
 
 def fit_rule(tracks: Sequence[Track]) -> SphericalRule:
-    """The spherical rule with decision ranges covering every training track's perfect decisions."""
+    """The spherical rule with decision ranges covering every training track's perfect decisions,
+    its COG window centred on the tracks' distance-weighted mean course."""
     base = SphericalRule(max_sog=1.0, max_dt_h=1.0)
     decisions = np.concatenate([base.perfect_decisions(t.positions, t.dts) for t in tracks])
     max_sog = float(decisions[:, 0].max()) * DECISION_HEADROOM
     max_dt = float(decisions[:, 2].max()) * DECISION_HEADROOM
-    return SphericalRule(max_sog=max(max_sog, 1.0), max_dt_h=max(max_dt, 1e-3))
+    center = mean_course(decisions[:, 1], weights=decisions[:, 0] * decisions[:, 2])
+    return SphericalRule(max_sog=max(max_sog, 1.0), max_dt_h=max(max_dt, 1e-3), cog_center=center)
 
 
 class AISTrackSource(ReferenceSource):
@@ -221,6 +223,7 @@ def model_card(
             "decisions": ["sog_kn", "cog_deg", "dt_h"],
             "max_sog_kn": source.rule.max_sog,
             "max_dt_h": source.rule.max_dt_h,
+            "cog_center_deg": source.rule.cog_center,
         },
         "epsilon_m": settings.epsilon_m,
         "epsilon_interpretation": EPSILON_READING,

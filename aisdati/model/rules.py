@@ -80,16 +80,25 @@ class PlanarRule(UpdateRule):
 
 @dataclass(frozen=True)
 class SphericalRule(UpdateRule):
-    """Eq. (5): states (lon, lat) in degrees, decisions (SOG knots, COG degrees, dt hours)."""
+    """Eq. (5): states (lon, lat) in degrees, decisions (SOG knots, COG degrees, dt hours).
+
+    COG is a circular quantity; its decoded range is the 360° window centred on `cog_center`.
+    With the default 180 the window is [0, 360], the plain reading; centring it on the training
+    traffic's mean course keeps the cluster's headings away from the wrap-around, where an L1
+    loss between 359° and 1° (or a tanh output) would otherwise average north into south."""
 
     max_sog: float
     max_dt_h: float
+    cog_center: float = 180.0
     metric: str = "haversine"
     decision_names: tuple[str, ...] = ("sog", "cog", "dt")
 
     @property
     def decision_scaler(self) -> BoxScaler:
-        return BoxScaler(np.array([0.0, 0.0, 0.0]), np.array([self.max_sog, 360.0, self.max_dt_h]))
+        c = self.cog_center
+        return BoxScaler(
+            np.array([0.0, c - 180.0, 0.0]), np.array([self.max_sog, c + 180.0, self.max_dt_h])
+        )
 
     def step(self, state: np.ndarray, decision: np.ndarray) -> np.ndarray:
         lon, lat = spherical_step(
@@ -98,7 +107,19 @@ class SphericalRule(UpdateRule):
         return np.stack([lon, lat], axis=-1)
 
     def perfect_decisions(self, positions: np.ndarray, dts: np.ndarray) -> np.ndarray:
-        """The SOG and COG that reach each next report in its real time step (hours)."""
+        """The SOG and COG (in the rule's window) that reach each next report in its real time
+        step (hours)."""
         lon, lat = positions[:-1, 0], positions[:-1, 1]
         sog, cog = spherical_decision(lon, lat, positions[1:, 0], positions[1:, 1], dts)
+        cog = (cog - self.cog_center + 180.0) % 360.0 + self.cog_center - 180.0
         return np.stack([sog, cog, np.asarray(dts, dtype=np.float64)], axis=-1)
+
+
+def mean_course(cog_deg: np.ndarray, weights: np.ndarray | None = None) -> float:
+    """Circular mean of courses in degrees [0, 360) (180 when they cancel out)."""
+    rad = np.radians(cog_deg)
+    w = np.ones_like(rad) if weights is None else weights
+    x, y = float(np.sum(w * np.sin(rad))), float(np.sum(w * np.cos(rad)))
+    if np.hypot(x, y) < 1e-12:
+        return 180.0
+    return round(float(np.degrees(np.arctan2(x, y))), 9) % 360.0
