@@ -149,7 +149,17 @@ def resolve_columns(names: list[str], label: str) -> dict[str, str]:
     return found
 
 
-class _CountingReader:
+class _ForwardOnly:
+    """What pyarrow asks of a file-like object that can only be read forwards."""
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return False
+
+
+class _CountingReader(_ForwardOnly):
     """A read-only file wrapper that counts the bytes read, for the progress bars."""
 
     def __init__(self, raw: BinaryIO) -> None:
@@ -161,12 +171,6 @@ class _CountingReader:
         data = self.raw.read(n)
         self.bytes_read += len(data)
         return data
-
-    def readable(self) -> bool:
-        return True
-
-    def seekable(self) -> bool:
-        return False
 
     def close(self) -> None:
         self.closed = True
@@ -274,7 +278,7 @@ class SourceReader:
         return "skip"
 
 
-class _Decompressed:
+class _Decompressed(_ForwardOnly):
     """A decompressing stream that still reports the compressed bytes read to its counter."""
 
     def __init__(self, stream: pa.NativeFile, counter: _CountingReader) -> None:
@@ -284,12 +288,6 @@ class _Decompressed:
 
     def read(self, n: int = -1) -> bytes:
         return self.stream.read(None if n is None or n < 0 else n)
-
-    def readable(self) -> bool:
-        return True
-
-    def seekable(self) -> bool:
-        return False
 
     def close(self) -> None:
         self.closed = True
