@@ -3,6 +3,7 @@ print with rich. Every user mistake surfaces as a `UserError` and is shown as on
 
 from __future__ import annotations
 
+import errno
 import functools
 from collections.abc import Callable
 from pathlib import Path
@@ -10,9 +11,17 @@ from typing import Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from aisdati.errors import UserError
+from aisdati.options import (
+    Terminated,
+    check_option,
+    check_options,
+    handle_termination,
+    prepare_output_dir,
+)
 
 app = typer.Typer(
     help="aisdati: find abnormal vessel tracks in AIS data with DATI (domain-adaptive trajectory "
@@ -25,32 +34,45 @@ console = Console()
 err_console = Console(stderr=True)
 
 
+PATH_ERRNOS = (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR, errno.ENOENT)
+
+
 def user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn `UserError` (and Ctrl-C) into a one-line message and a non-zero exit code."""
+    """Turn `UserError` (and Ctrl-C, SIGTERM, a file system refusing a path) into a one-line
+    message and a non-zero exit code: 2 for user mistakes, 130 / 143 for SIGINT / SIGTERM."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            return func(*args, **kwargs)
+            with handle_termination():
+                return func(*args, **kwargs)
         except UserError as exc:
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            message = escape(str(exc))  # a message may hold [brackets]: not markup
+            err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
+        except Terminated:
+            err_console.print("[yellow]terminated[/]")
+            raise typer.Exit(143) from None
         except KeyboardInterrupt:
             err_console.print("[yellow]interrupted[/]")
             raise typer.Exit(130) from None
+        except OSError as exc:  # disk full, permissions changed mid-run: one line, no traceback
+            if exc.filename is None:
+                raise
+            message = escape(f"{exc.filename}: {exc.strerror or type(exc).__name__}")
+            err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+            raise typer.Exit(2 if exc.errno in PATH_ERRNOS else 1) from None
 
     return wrapper
 
 
-def ensure_writable_dir(path: Path) -> None:
-    """Fail early, in one line, when an output folder cannot be created or written."""
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".aisdati-write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise UserError(f"cannot write to output folder {path}: {exc.strerror or exc}") from None
+ensure_writable_dir = prepare_output_dir
+"""Kept for callers of the old name: every command prepares its output folder this way."""
+
+
+def warn(message: str) -> None:
+    """One yellow line on stderr: something the operator should know, not an error."""
+    err_console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
 def _ours(value: float, paper: float | None) -> str:
@@ -180,12 +202,14 @@ def ingest(
     )
 
     from aisdati.preprocess.download import download, marinecadastre_files
+    from aisdati.preprocess.output import OUTPUT_NAMES
     from aisdati.preprocess.pipeline import ingest as run_ingest
     from aisdati.preprocess.read import expand_inputs
     from aisdati.preprocess.report import summary_table
     from aisdati.preprocess.roi import load_roi
     from aisdati.preprocess.settings import IngestSettings, parse_duration
 
+    check_options({"--min-sog": min_sog, "--max-speed": max_speed})
     if not inputs and year is None:
         raise UserError("nothing to ingest: give --input FILES or --year (with --months/--zone)")
     settings = IngestSettings(
@@ -195,9 +219,13 @@ def ingest(
         min_points=min_points,
         keep_rejects=keep_rejects,
     )
+    check_option("--stop-gap", settings.stop_gap_s)
     area = load_roi(roi)
     remote = marinecadastre_files(year, months, days, zone) if year is not None else []
     local = expand_inputs(inputs) if inputs else []
+    prepare_output_dir(out, "--out", OUTPUT_NAMES)
+    if remote:
+        prepare_output_dir(data_dir, "--data-dir")
     bar_console = err_console if as_json else console
     progress = Progress(
         TextColumn("{task.description}"),
@@ -304,7 +332,7 @@ def selftest(
     if noise not in ("gaussian", "ou"):
         raise UserError(f"--noise must be gaussian or ou, got {noise!r}")
     out = out or Path("runs") / f"selftest-{datetime.now():%Y%m%d-%H%M%S}"
-    ensure_writable_dir(out)
+    prepare_output_dir(out, "--out")
 
     config = DATIConfig(episodes=episodes, noise=noise).with_network(
         time_embedding=time_embedding, reward_input=reward_input
@@ -364,8 +392,10 @@ def train(
     from aisdati.progress import TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
+    check_options({"--seed": seed})
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
-    ensure_writable_dir(out)
+    name = cluster.strip().lower()
+    prepare_output_dir(out, "--out", [name + x for x in (".pt", ".json", ".log.jsonl", ".ckpt")])
     settings = TrainSettings(
         data_dir=data,
         cluster=cluster.strip().lower(),
@@ -376,11 +406,14 @@ def train(
         patience=patience,
         resume=resume,
     )
+    resuming = resume and (out / f"{settings.cluster}.ckpt").is_file()
+    episodes_done = [0]  # episodes this run finished (each one saves the model)
     with TrainingProgress(
         episodes, f"training {settings.cluster}", disable=quiet or as_json
     ) as bar:
 
         def on_step(trainer: Any, logs: list[Any]) -> None:
+            episodes_done[0] += len(logs)
             for log in logs:
                 bar.episode_done(log.episode, log.mean_reward, log.final_dtw)
             if trainer.done:
@@ -397,13 +430,20 @@ def train(
 
         try:
             result = train_ais(settings, on_step)
-        except KeyboardInterrupt:
-            err_console.print(
-                f"[yellow]interrupted:[/] the model of the best episode so far is in {out}; "
-                "run the same command with --resume to continue",
-                highlight=False,
-            )
-            raise typer.Exit(130) from None
+        except KeyboardInterrupt as exc:
+            if episodes_done[0] or resuming:
+                message = (
+                    f"the model of the best episode so far is in {out}; "
+                    "run the same command with --resume to continue"
+                )
+            else:
+                message = (
+                    "stopped during the first episode, before any model was saved; "
+                    "run the same command again to start over"
+                )
+            kind = "terminated" if isinstance(exc, Terminated) else "interrupted"
+            err_console.print(f"[yellow]{kind}:[/] {message}", highlight=False)
+            raise typer.Exit(143 if isinstance(exc, Terminated) else 130) from None
     card = result.card
     if as_json:
         print(json.dumps({"model": str(result.model), "card": card}, default=str))
@@ -508,6 +548,7 @@ def detect(
     from aisdati.detect import DetectSettings, check_settings, report_dict, write_outputs
     from aisdati.detect import detect as run_detect
 
+    check_options({"--threshold": threshold, "--top-percent": top_percent, "--near-km": near_km})
     settings = DetectSettings(
         data_dir=data,
         models_dir=models_dir,
@@ -523,7 +564,7 @@ def detect(
         labels=labels,
     )
     check_settings(settings)
-    ensure_writable_dir(settings.out_dir)
+    prepare_output_dir(settings.out_dir, "--out", DETECT_OUTPUTS)
     status = err_console if as_json else console
     with status.status("rolling out and scoring", spinner="dots") if not quiet else _null():
         result = run_detect(settings)
@@ -551,6 +592,16 @@ def detect(
         f"wrote {', '.join(f.name for f in files)} to [bold]{settings.out_dir}[/]",
         highlight=False,
     )
+
+
+DETECT_OUTPUTS = (
+    "scores.parquet",
+    "anomalies.geojson",
+    "map.png",
+    "map.html",
+    "metrics.json",
+    "report.json",
+)
 
 
 def _null() -> Any:

@@ -79,17 +79,19 @@ def test_default_roi_keeps_only_the_florida_straits(cli, data, tmp_path):
 
 
 def test_2023_sample_with_floats_in_integer_fields(cli, data, tmp_path):
-    result, report = ingest(
+    result, _ = ingest(
         cli,
         tmp_path,
         data / "noaa_2023-01-11_1000rows.csv",
         extra=("--roi", "none", "--min-points", "2"),
     )
-    assert result.exit_code == 0, result.output
-    assert report["rows_read"] == 1000
-    assert report["rejected"]["bad_number"] == report["rejected"]["bad_mmsi"] == 0
-    assert report["tracks"]["total"] == 0  # one report per vessel: no track of two points
-    assert pq.read_table(tmp_path / "points.parquet").num_rows == 0
+    # one report per vessel: no track of two points, which is an error (exit 2, nothing written)
+    # whose one line accounts for every row, none of them a bad number or MMSI
+    assert result.exit_code == 2, result.output
+    message = " ".join(result.stderr.split())
+    assert "no track kept: 1,000 rows read" in message and "short_segment" in message
+    assert "bad_number" not in message and "bad_mmsi" not in message
+    assert not (tmp_path / "points.parquet").exists()
 
 
 def test_ny_harbor_hour_reordered_misspelt_negative_cog(cli, data, tmp_path):

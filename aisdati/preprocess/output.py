@@ -14,6 +14,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import shapely
 
+from aisdati.errors import UserError
 from aisdati.geo import haversine_m
 from aisdati.preprocess.cluster import cluster_tracks
 
@@ -118,6 +119,24 @@ def _cog32(cog: np.ndarray) -> np.ndarray:
     out = cog.astype(np.float32)
     out[out >= 360.0] = 0.0
     return out
+
+
+OUTPUT_NAMES = ("points.parquet", "tracks.parquet", "ingest_report.json", "rejects.parquet")
+"""Every file ingest may write into its output folder."""
+
+
+def commit_all(staged: list[StagedFile]) -> None:
+    """Rename every staged file to its final name; if one rename fails (the final name became a
+    folder, the disk went read-only), the temporaries left are removed and the failure is one
+    `UserError`. Renames are atomic one by one, not as a set: the output folder is checked
+    beforehand (`prepare_output_dir`) so that this does not happen in practice."""
+    for i, f in enumerate(staged):
+        try:
+            f.commit()
+        except OSError as exc:
+            for rest in staged[i:]:
+                rest.discard()
+            raise UserError(f"cannot write {f.final}: {exc.strerror or exc}") from None
 
 
 class StagedFile:

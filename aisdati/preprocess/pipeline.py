@@ -11,6 +11,7 @@ partitions.
 from __future__ import annotations
 
 import math
+import os
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -22,13 +23,16 @@ import pyarrow as pa
 from rich.progress import Progress
 
 from aisdati.errors import UserError
+from aisdati.options import hold_lock, prepare_output_dir
 from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
 from aisdati.preprocess.output import (
+    OUTPUT_NAMES,
     POINTS_SCHEMA,
     REJECTS_SCHEMA,
     StagedFile,
     StagedParquet,
     build_tracks,
+    commit_all,
     write_json,
     write_tracks,
 )
@@ -42,7 +46,7 @@ from aisdati.preprocess.read import (
     sources_of,
     to_canonical,
 )
-from aisdati.preprocess.report import REASONS, IngestCounts
+from aisdati.preprocess.report import REASONS, IngestCounts, no_tracks_message
 from aisdati.preprocess.segment import segment
 from aisdati.preprocess.settings import IngestSettings
 
@@ -89,10 +93,13 @@ def ingest(
     readers = [SourceReader(s) for s in sources]  # every header checked before any work
     counts = IngestCounts()
     n_parts = _partition_count(sources, settings)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    prepare_output_dir(out_dir, "--out", OUTPUT_NAMES)
     staged: list[StagedFile] = []
     try:
-        with tempfile.TemporaryDirectory(dir=out_dir, prefix=".ingest-") as tmp:
+        with (
+            tempfile.TemporaryDirectory(dir=out_dir, prefix=f".ingest-{os.getpid()}-") as tmp,
+            hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
+        ):
             rejects = (
                 StagedParquet(out_dir / "rejects.parquet", REJECTS_SCHEMA)
                 if settings.keep_rejects
@@ -114,6 +121,8 @@ def ingest(
             staged.append(points)
             labels = [s.label for s in sources]
             tracks = _vessel_stages(parts, counts, settings, points, rejects, labels, progress)
+            if not tracks:
+                raise UserError(no_tracks_message(counts))
             points.close()
             stage_seconds["vessel_segment_cluster"] = (
                 time.perf_counter() - started - stage_seconds["read_clean_filter"]
@@ -132,8 +141,9 @@ def ingest(
         for f in staged:
             f.discard()
         raise
-    for f in staged:
-        f.commit()
+    commit_all(staged)
+    if not settings.keep_rejects:  # an earlier --keep-rejects run's file would now mislead
+        (out_dir / "rejects.parquet").unlink(missing_ok=True)
     return result
 
 

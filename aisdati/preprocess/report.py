@@ -81,6 +81,18 @@ class IngestCounts:
         }
 
 
+def no_tracks_message(counts: IngestCounts) -> str:
+    """The one-line error of a run that kept no track: where the rows went, and what to loosen."""
+    reasons = sorted(
+        ((n, reason) for reason, n in counts.rejected_by_reason().items() if n), reverse=True
+    )
+    where = ", ".join(f"{reason} {n:,}" for n, reason in reasons) or "none"
+    return (
+        f"no track kept: {counts.rows_read:,} rows read, rejected: {where}; nothing written "
+        "(loosen --min-points, --min-sog, --stop-gap or --roi, or check the input)"
+    )
+
+
 def summary_table(counts: IngestCounts) -> Table:
     """The per-stage summary: rows read, rejected per stage and reason, kept, tracks per cluster."""
     table = Table(title="aisdati ingest", show_lines=False)
