@@ -11,14 +11,16 @@ from __future__ import annotations
 
 import csv
 import glob
+import math
 import re
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
+import numba
 import numpy as np
 import pandas as pd
 import pyarrow as pa
@@ -138,14 +140,16 @@ def resolve_columns(names: list[str], label: str) -> dict[str, str]:
             if key in spellings:
                 if canonical in found:
                     raise UserError(
-                        f"{label}: columns '{found[canonical]}' and '{name}' both look like "
-                        f"{canonical.upper()}"
+                        f"{label}: columns {found[canonical][:40]!r} and {name[:40]!r} both look "
+                        f"like {canonical.upper()}"
                     )
                 found[canonical] = name
     missing = [c for c in REQUIRED if c not in found]
     if missing:
         wanted = ", ".join(f"{c.upper()} (e.g. {ALIASES[c][0]})" for c in missing)
-        raise UserError(f"{label}: missing required column {wanted}; header is {names}")
+        shown = repr([n if len(n) <= 40 else n[:37] + "..." for n in names[:30]])
+        more = f" and {len(names) - 30} more" if len(names) > 30 else ""
+        raise UserError(f"{label}: missing required column {wanted}; header is {shown}{more}")
     return found
 
 
@@ -216,26 +220,46 @@ class SourceReader:
         return counter
 
     def _header(self) -> list[str]:
+        """The column names on the first line (ended by LF, CRLF or a lone CR)."""
         try:
             stream = self._open_binary()
             try:
-                chunk = stream.read(1 << 20)
+                chunk = stream.read(MAX_HEADER_BYTES)
             finally:
                 stream.close()
         except READ_ERRORS as exc:
             raise describe_read_error(self.source, exc) from None
-        first = chunk.split(b"\n", 1)[0].rstrip(b"\r")
+        ends = [i for i in (chunk.find(b"\n"), chunk.find(b"\r")) if i >= 0]
+        if not ends and len(chunk) >= MAX_HEADER_BYTES:
+            raise UserError(
+                f"{self.source.label}: no line break in the first {MAX_HEADER_BYTES >> 20} MiB: "
+                "not a CSV file with a header line"
+            )
+        first = chunk[: min(ends)] if ends else chunk
         if not first.strip():
             raise UserError(f"{self.source.label}: the file is empty (no header line)")
         text = first.decode("utf-8-sig", errors="replace")
-        names = next(csv.reader([text]))
+        limit = csv.field_size_limit(MAX_HEADER_BYTES)  # a name may be as long as the line
+        try:
+            names = next(csv.reader([text]))
+        except csv.Error as exc:
+            raise UserError(f"{self.source.label}: unreadable header line ({exc})") from None
+        finally:
+            csv.field_size_limit(limit)
         return [n.strip() for n in names]
 
     def _parquet_names(self) -> list[str]:
         try:
-            return pq.ParquetFile(self.source.path).schema_arrow.names
+            schema = pq.ParquetFile(self.source.path).schema_arrow
         except (pa.ArrowException, OSError) as exc:
             raise UserError(f"{self.source.label}: not a readable parquet file ({exc})") from None
+        for name, kind in zip(schema.names, schema.types, strict=True):
+            if _normalise(name) in ALIASES["time"] and not _time_like(kind):
+                raise UserError(
+                    f"{self.source.label}: column {name!r} holds {kind} values; expected times "
+                    "(a timestamp, text, or numbers of seconds since 1970)"
+                )
+        return schema.names
 
     def batches(self) -> Iterator[pa.RecordBatch]:
         """Record batches holding the resolved columns, under the source's own names."""
@@ -247,13 +271,14 @@ class SourceReader:
                 self._rows += batch.num_rows
                 yield batch
             return
-        stream = self._open_binary()
-        self._counter = stream if isinstance(stream, _CountingReader) else stream.counter
+        raw = self._open_binary()
+        self._counter = raw if isinstance(raw, _CountingReader) else raw.counter
+        stream = LineGuard(raw, self.malformed.append)
         try:
             reader = pcsv.open_csv(
                 pa.PythonFile(stream, mode="r"),
                 read_options=pcsv.ReadOptions(
-                    block_size=BLOCK_SIZE, skip_rows=1, column_names=self.names
+                    block_size=BLOCK_SIZE, skip_rows=0, column_names=self.names
                 ),
                 parse_options=pcsv.ParseOptions(invalid_row_handler=self._on_malformed),
                 convert_options=pcsv.ConvertOptions(
@@ -274,7 +299,7 @@ class SourceReader:
             stream.close()
 
     def _on_malformed(self, row: pcsv.InvalidRow) -> str:
-        self.malformed.append(row.text)
+        self.malformed.append(shorten(row.text))
         return "skip"
 
 
@@ -293,6 +318,213 @@ class _Decompressed(_ForwardOnly):
         self.closed = True
         self.stream.close()
         self.counter.close()
+
+
+MAX_HEADER_BYTES = 1 << 20
+"""The header line must end within this many bytes."""
+MAX_LINE_BYTES = 1 << 20
+"""A line longer than this is no AIS report (they take 100-300 bytes): it is cut out of the stream
+and counted as one malformed row, so one giant line neither fails the file on pyarrow's block size
+nor holds more than this much memory."""
+RAW_TEXT_CHARS = 1000
+"""How much of a malformed row's text is kept (for rejects.parquet)."""
+
+
+def shorten(text: str) -> str:
+    """A malformed row's text as kept: at most `RAW_TEXT_CHARS` characters."""
+    if len(text) <= RAW_TEXT_CHARS:
+        return text
+    return f"{text[:RAW_TEXT_CHARS]}... ({len(text):,} characters)"
+
+
+class LineGuard(_ForwardOnly):
+    """The CSV bytes as pyarrow can parse them line by line, between the (decompressed) source and
+    pyarrow's reader. It drops the header line (read already by `SourceReader`), ends lines at LF
+    whatever the file used (CRLF or old-Mac CR), replaces bytes that are not UTF-8 (so a row with
+    random bytes fails its own checks, or is kept when they sit in a column we do not read,
+    instead of failing the file), and cuts out, as one malformed row each, lines longer than
+    `MAX_LINE_BYTES` and lines that end inside a quoted field (pyarrow would carry the quote on
+    over the following lines and swallow up to a block of good rows into one bad one)."""
+
+    def __init__(self, raw: Any, on_malformed: Callable[[str], None]) -> None:
+        self.raw = raw
+        self.on_malformed = on_malformed
+        self.closed = False
+        self._pending = b""  # cleaned bytes beyond what the last read asked for (rare)
+        self._carry = b""  # the start of a line whose end has not arrived yet
+        self._dropping: str | None = "header"  # or "long": skipping to the end of a line
+        self._dropped = 0
+        self._dropped_head = b""
+        self._eof = False
+
+    def read(self, n: int = -1) -> bytes:
+        """Whole lines, at most `n` bytes (pyarrow reads blocks of `BLOCK_SIZE`; a shorter block
+        is fine as long as it ends at a line end); b"" only at the end."""
+        want = BLOCK_SIZE if n is None or n < 0 else max(n, 1)
+        out = self._pending
+        while not out and not self._eof:
+            chunk = self.raw.read(max(want - len(self._carry), 1 << 16))
+            if chunk:
+                out = self._feed(chunk)
+            else:
+                self._eof = True
+                out = self._finish()
+        out, self._pending = out[:want], out[want:]
+        return out
+
+    def close(self) -> None:
+        self.closed = True
+        self.raw.close()
+
+    def _feed(self, chunk: bytes) -> bytes:
+        if b"\r" in chunk:
+            chunk = chunk.replace(b"\r", b"\n")  # CRLF leaves an empty line: pyarrow skips it
+        data = self._carry + chunk if self._carry else chunk
+        self._carry = b""
+        if self._dropping is not None:
+            end = data.find(b"\n")
+            if end < 0:
+                self._drop_more(data)
+                return b""
+            self._drop_more(data[:end])
+            self._end_drop()
+            data = data[end + 1 :]
+        cut = data.rfind(b"\n") + 1
+        body, rest = data[:cut], data[cut:]
+        if len(rest) > MAX_LINE_BYTES:
+            self._dropping = "long"
+            self._drop_more(rest)
+        else:
+            self._carry = rest
+        return self._clean(body)
+
+    def _finish(self) -> bytes:
+        if self._dropping is not None:
+            self._end_drop()
+        tail, self._carry = self._carry, b""
+        return self._clean(tail)
+
+    def _drop_more(self, data: bytes) -> None:
+        if len(self._dropped_head) < RAW_TEXT_CHARS:
+            self._dropped_head += data[: RAW_TEXT_CHARS - len(self._dropped_head)]
+        self._dropped += len(data)
+
+    def _end_drop(self) -> None:
+        if self._dropping == "long":
+            self._report(self._dropped_head, self._dropped)
+        self._dropping, self._dropped, self._dropped_head = None, 0, b""
+
+    def _report(self, line: bytes, size: int | None = None) -> None:
+        text = line[:RAW_TEXT_CHARS].decode("utf-8", errors="replace")
+        size = len(line) if size is None else size
+        if size > RAW_TEXT_CHARS:
+            text += f"... ({size:,} bytes)"
+        self.on_malformed(text)
+
+    def _clean(self, body: bytes) -> bytes:
+        """Whole lines (or the file's last, unended one) made safe for pyarrow."""
+        if not body:
+            return body
+        if _may_hold_long_line(body):
+            starts = _line_starts(body)
+            ends = np.r_[starts[1:], len(body)]
+            long = np.flatnonzero(ends - starts > MAX_LINE_BYTES + 1)
+            body = self._cut(body, [(int(starts[i]), int(ends[i])) for i in long])
+        if not body.isascii():
+            try:
+                body.decode("utf-8")
+            except UnicodeDecodeError:
+                body = body.decode("utf-8", errors="replace").encode("utf-8")
+        if b'"' in body:
+            body = self._cut_unterminated(body)
+        return body
+
+    def _cut(self, body: bytes, spans: list[tuple[int, int]]) -> bytes:
+        """`body` without the lines [start, end) of `spans` (each reported as a malformed row)."""
+        if not spans:
+            return body
+        pieces, pos = [], 0
+        for a, b in sorted(spans):
+            pieces.append(body[pos:a])
+            self._report(body[a:b].rstrip(b"\n"))
+            pos = b
+        pieces.append(body[pos:])
+        return b"".join(pieces)
+
+    def _cut_unterminated(self, body: bytes) -> bytes:
+        """Cut out the lines that end inside a quoted field."""
+        buf = np.frombuffer(body, np.uint8)
+        starts = np.empty(64, np.int64)
+        found = _unterminated_lines(buf, starts)
+        if found > len(starts):
+            starts = np.empty(found, np.int64)
+            _unterminated_lines(buf, starts)
+        spans = []
+        for a in starts[:found]:
+            end = body.find(b"\n", int(a))
+            spans.append((int(a), len(body) if end < 0 else end + 1))
+        return self._cut(body, spans)
+
+
+@numba.njit(cache=True)
+def _unterminated_lines(buf: np.ndarray, out: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Start offsets (into `out`, as many as fit) of the lines of `buf` that end inside a quoted
+    field, and how many there are. pyarrow's dialect: a quote opens a field only at its start,
+    `""` inside it is an escaped quote, the first other quote closes it, and after that (as in an
+    unquoted field) a quote is a literal character. Only lines holding a quote are parsed; the
+    rest are skipped at memory speed."""
+    found = 0
+    n = buf.shape[0]
+    done = 0  # everything before this offset is settled
+    i = 0
+    while True:
+        while i < n and buf[i] != 34:  # the next quote
+            i += 1
+        if i >= n:
+            return found
+        line = i
+        while line > done and buf[line - 1] != 10:  # back to the start of its line
+            line -= 1
+        state = 0  # 0: field start, 1: unquoted field or after a closing quote, 2: quoted
+        i = line
+        while i < n:
+            c = buf[i]
+            if state == 2:
+                if c == 34:
+                    if i + 1 < n and buf[i + 1] == 34:
+                        i += 1
+                    else:
+                        state = 1
+                elif c == 10:
+                    break
+            elif c == 10:
+                break
+            elif c == 44:  # ,
+                state = 0
+            elif state == 0:
+                state = 2 if c == 34 else 1
+            i += 1
+        if state == 2:  # the line ended (or the buffer did) inside the quotes
+            if found < out.shape[0]:
+                out[found] = line
+            found += 1
+        i += 1
+        done = i
+
+
+def _may_hold_long_line(body: bytes) -> bool:
+    """Cheap test: some window of half `MAX_LINE_BYTES` without a line end (else no line is too
+    long); only then are the lines measured."""
+    half = MAX_LINE_BYTES // 2
+    return len(body) > MAX_LINE_BYTES and any(
+        body.find(b"\n", k, k + half) < 0 for k in range(0, len(body) - half + 1, half)
+    )
+
+
+def _line_starts(body: bytes) -> np.ndarray:
+    ends = np.flatnonzero(np.frombuffer(body, np.uint8) == ord("\n"))
+    starts = np.r_[0, ends + 1]
+    return starts[starts < len(body)] if len(body) else starts[:0]
 
 
 READ_ERRORS = (
@@ -339,25 +571,106 @@ def _to_float(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
     return values.to_numpy(zero_copy_only=False), np.zeros(len(arr), dtype=bool)
 
 
+TIME_RANGE_US = (
+    int(pd.Timestamp("1990-01-01", tz="UTC").value // 1000),
+    int(pd.Timestamp("2100-01-01", tz="UTC").value // 1000),
+)
+"""Times outside [1990, 2100) are no AIS reports (AIS began in the 2000s): a time column read in
+the wrong unit lands in 1970 or far in the future, and is rejected row by row as bad_time."""
+EPOCH_UNITS = ((1e11, 1_000_000, 1), (1e14, 1_000, 1), (1e17, 1, 1), (math.inf, 1, 1_000))
+"""Numeric times are seconds, milliseconds, microseconds or nanoseconds since 1970, told apart by
+their size (|t| below 1e11, 1e14, 1e17 or more: any time from 1973 to 5138 in each unit):
+(bound, multiplier, divisor) to microseconds."""
+
+
 def _to_time(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
     """Microseconds since the epoch (UTC; times without a zone are UTC, as MarineCadastre's are)
-    and a mask of the values that are not times."""
+    and a mask of the values that are not times: unparsable, or outside `TIME_RANGE_US`.
+    Timestamps keep their unit; numbers (a parquet column of epoch seconds, or such strings in a
+    CSV) are read in the unit their size gives (`EPOCH_UNITS`)."""
+    if pa.types.is_dictionary(arr.type):
+        arr = arr.dictionary_decode()
+    nulls = _null_mask(arr)
     if pa.types.is_timestamp(arr.type):
         values = arr.cast(pa.timestamp("us", tz=arr.type.tz))
+        out = pc.fill_null(values.view(pa.int64()), 0).to_numpy(zero_copy_only=False)
+        bad = np.zeros(len(arr), dtype=bool)
+    elif pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type):
+        out, bad = _epoch_us(arr.to_numpy(zero_copy_only=False))
+    elif pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type):
+        out, bad = _text_time_us(arr)
     else:
         try:
             values = pc.cast(arr, pa.timestamp("us"))
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+            raise UserError(
+                f"the time column holds {arr.type} values: expected times, text or numbers"
+            ) from None
+        out = pc.fill_null(values.view(pa.int64()), 0).to_numpy(zero_copy_only=False)
+        bad = np.zeros(len(arr), dtype=bool)
+    out = np.asarray(out, dtype=np.int64)
+    bad = (bad | (out < TIME_RANGE_US[0]) | (out >= TIME_RANGE_US[1])) & ~nulls
+    return out, bad
+
+
+def _epoch_us(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Epoch numbers (any unit, see `EPOCH_UNITS`) as microseconds, and a mask of non-numbers."""
+    out = np.zeros(len(values), dtype=np.int64)
+    if values.dtype.kind in "iu":
+        ints = values.astype(np.int64)
+        size = np.abs(ints.astype(np.float64))
+        low = 0.0
+        for bound, mul, div in EPOCH_UNITS:
+            sel = (size >= low) & (size < bound)
+            with np.errstate(over="ignore"):
+                out[sel] = ints[sel] * mul // div
+            low = bound
+        return out, np.zeros(len(values), dtype=bool)
+    floats = values.astype(np.float64)
+    bad = ~np.isfinite(floats)
+    size = np.abs(np.where(bad, 0.0, floats))
+    scale = np.ones(len(floats))
+    low = 0.0
+    for bound, mul, div in EPOCH_UNITS:
+        scale[(size >= low) & (size < bound)] = mul / div
+        low = bound
+    ok = ~bad
+    out[ok] = np.round(floats[ok] * scale[ok]).astype(np.int64)
+    return out, bad
+
+
+def _text_time_us(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
+    """Times written as text: ISO 8601 (fast path in Arrow, else pandas), or epoch numbers."""
+    for kind in (pa.timestamp("us"), pa.timestamp("us", tz="UTC")):
+        try:
+            values = pc.cast(arr, kind)
         except pa.ArrowInvalid:
-            try:
-                values = pc.cast(arr, pa.timestamp("us", tz="UTC"))
-            except pa.ArrowInvalid:
-                parsed = pd.to_datetime(
-                    arr.to_pandas(), errors="coerce", utc=True, format="ISO8601"
-                ).dt.as_unit("us")
-                out = parsed.to_numpy(dtype="datetime64[us]").view(np.int64)
-                return out, parsed.isna().to_numpy() & ~_null_mask(arr)
-    ints = pc.fill_null(values.view(pa.int64()), 0)
-    return ints.to_numpy(zero_copy_only=False), np.zeros(len(arr), dtype=bool)
+            continue
+        ints = pc.fill_null(values.view(pa.int64()), 0).to_numpy(zero_copy_only=False)
+        return ints, np.zeros(len(arr), dtype=bool)
+    text = arr.to_pandas()
+    parsed = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601").dt.as_unit("us")
+    out = parsed.to_numpy(dtype="datetime64[us]").view(np.int64).copy()
+    bad = parsed.isna().to_numpy() & ~_null_mask(arr)
+    if bad.any():  # numbers: epoch seconds (or ms, us, ns) written as text
+        numbers = pd.to_numeric(text[bad], errors="coerce").to_numpy(dtype=np.float64)
+        epoch, not_number = _epoch_us(numbers)
+        idx = np.flatnonzero(bad)
+        out[idx[~not_number]] = epoch[~not_number]
+        bad[idx[~not_number]] = False
+    return out, bad
+
+
+def _time_like(kind: pa.DataType) -> bool:
+    return (
+        pa.types.is_timestamp(kind)
+        or pa.types.is_date(kind)
+        or pa.types.is_integer(kind)
+        or pa.types.is_floating(kind)
+        or pa.types.is_string(kind)
+        or pa.types.is_large_string(kind)
+        or pa.types.is_dictionary(kind)
+    )
 
 
 def _null_mask(arr: pa.Array) -> np.ndarray:

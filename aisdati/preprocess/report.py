@@ -21,7 +21,7 @@ REASONS: dict[int, tuple[str, str, str]] = {
     2: ("read", "missing_value", "blank MMSI, time, position, SOG or COG"),
     3: ("read", "bad_number", "non-numeric LAT, LON, SOG or COG"),
     4: ("read", "bad_mmsi", "MMSI not a positive integer"),
-    5: ("read", "bad_time", "unparsable time"),
+    5: ("read", "bad_time", "unparsable time, or not in 1990-2099"),
     6: ("clean", "sentinel_lat", "LAT 91 (not available)"),
     7: ("clean", "sentinel_lon", "LON 181 (not available)"),
     8: ("clean", "sentinel_sog", "SOG 102.3 (not available)"),
