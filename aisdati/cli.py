@@ -220,7 +220,7 @@ def ingest(
         keep_rejects=keep_rejects,
     )
     check_option("--stop-gap", settings.stop_gap_s)
-    area = load_roi(roi)
+    area = load_roi(roi, warn=warn)
     remote = marinecadastre_files(year, months, days, zone) if year is not None else []
     local = expand_inputs(inputs) if inputs else []
     prepare_output_dir(out, "--out", OUTPUT_NAMES)
