@@ -547,6 +547,7 @@ def detect(
 
     from aisdati.detect import DetectSettings, check_settings, report_dict, write_outputs
     from aisdati.detect import detect as run_detect
+    from aisdati.model.card import unfinished_models
 
     check_options({"--threshold": threshold, "--top-percent": top_percent, "--near-km": near_km})
     settings = DetectSettings(
@@ -565,6 +566,8 @@ def detect(
     )
     check_settings(settings)
     prepare_output_dir(settings.out_dir, "--out", DETECT_OUTPUTS)
+    for message in unfinished_models(models_dir, settings.models):
+        warn(message)
     status = err_console if as_json else console
     with status.status("rolling out and scoring", spinner="dots") if not quiet else _null():
         result = run_detect(settings)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -38,6 +39,7 @@ from numba import njit, prange
 from aisdati.dtw import dtw_path, dtw_path_length
 from aisdati.errors import UserError
 from aisdati.geo import EARTH_RADIUS_M, haversine_m
+from aisdati.model.card import card_warnings, training_mask, validate_ais_card
 from aisdati.model.checkpoint import atomic_write_bytes, load_networks
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
@@ -71,6 +73,8 @@ class AISModel:
     nets: DATINetworks
     config: DATIConfig
     card: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+    """What the operator should know before trusting this model (e.g. unfinished training)."""
 
     @property
     def rule(self) -> SphericalRule:
@@ -96,6 +100,11 @@ class AISModel:
     @property
     def training_ids(self) -> set[int]:
         return {int(i) for i in self.card["data"]["track_ids"]}
+
+    def training_mask(self, tracks: pd.DataFrame) -> np.ndarray:
+        """Which rows of a tracks table are this model's training tracks (by vessel and time
+        span where the card has them: track ids change when the data is ingested again)."""
+        return training_mask(self.card, tracks)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         lo, hi = self.bounds
@@ -147,7 +156,8 @@ def load_ais_model(stem: Path) -> AISModel:
         raise UserError(f"{stem}.json is not an AIS model card (train one with `aisdati train`)")
     if nets.members != 1 or card.get("decision_dim", 3) != 3:
         raise UserError(f"{stem}: expected a single-member model with 3 decisions")
-    return AISModel(stem.name, nets, config, card)
+    validate_ais_card(card, stem.with_suffix(".json"))
+    return AISModel(stem.name, nets, config, card, card_warnings(card, stem.name))
 
 
 def load_models(models_dir: Path, names: Sequence[str]) -> list[AISModel]:
@@ -193,7 +203,7 @@ def select_test_tracks(
             d = haversine_m(starts[:, None, 0], starts[:, None, 1], chunk[:, 0], chunk[:, 1])
             near[:, m] = np.minimum(near[:, m], d.min(axis=1) / 1000.0)
         if not settings.track_ids:
-            trained = np.isin(ids, list(model.training_ids))
+            trained = model.training_mask(table)
             near[trained, m] = np.inf  # a model does not judge its own training tracks
     inside = np.zeros(len(ids), dtype=bool)
     for model in models:
@@ -584,6 +594,7 @@ def report_dict(result: Detection) -> dict[str, Any]:
         if s
         else {},
         "models": [m.name for m in result.models],
+        "warnings": [w for m in result.models for w in m.warnings],
         "test_tracks": len(sc),
         "flagged": int(sc["flagged"].sum()),
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
@@ -597,23 +608,70 @@ def report_dict(result: Detection) -> dict[str, Any]:
 # ------------------------------------------------------------------------------------ labels
 def read_labels(path: Path) -> pd.DataFrame:
     """A CSV with `label` (0/1) and either `track_id` or `mmsi` + `start` (UTC time of the
-    track's first report; matched within 60 s)."""
+    track's first report; matched within 60 s). Every value is checked here, before any work, and
+    the first bad one is named with its row: ids must be integers (track ids >= 0 and within
+    int64, MMSIs positive), starts times, labels 0 or 1, and one key may not get two labels."""
     if not path.is_file():
         raise UserError(f"labels file not found: {path}")
     try:
-        labels = pd.read_csv(path)
+        raw = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8")
     except (ValueError, UnicodeDecodeError) as exc:
         raise UserError(f"cannot read labels {path}: {str(exc).splitlines()[0]}") from None
-    labels.columns = [str(c).strip().lower() for c in labels.columns]
-    if "label" not in labels:
+    raw.columns = [str(c).strip().lower() for c in raw.columns]
+    if "label" not in raw:
         raise UserError(f"{path}: no 'label' column (expected track_id,label or mmsi,start,label)")
-    if "track_id" not in labels and not {"mmsi", "start"} <= set(labels):
+    if "track_id" not in raw and not {"mmsi", "start"} <= set(raw):
         raise UserError(f"{path}: needs a 'track_id' column, or 'mmsi' and 'start' columns")
-    bad = ~labels["label"].isin([0, 1, "0", "1"])
+    if raw.empty:
+        raise UserError(f"{path}: the file holds no labels")
+    labels = pd.DataFrame(index=raw.index)
+    keys = ["track_id"] if "track_id" in raw else ["mmsi", "start"]
+    if "track_id" in raw:
+        labels["track_id"] = _label_ints(raw["track_id"], "track_id", 0, 2**63 - 1, path)
+    else:
+        labels["mmsi"] = _label_ints(raw["mmsi"], "mmsi", 1, 2**53, path)
+        start = pd.to_datetime(raw["start"].str.strip(), utc=True, errors="coerce", format="mixed")
+        if start.isna().any():
+            row = int(np.flatnonzero(start.isna().to_numpy())[0])
+            raise UserError(
+                f"{path}: row {row + 1}: start must be a time (ISO 8601, UTC), "
+                f"got {_shown(raw['start'].iloc[row])}"
+            )
+        labels["start"] = start
+    text = raw["label"].str.strip()
+    bad = ~text.isin(["0", "1", "0.0", "1.0"])
     if bad.any():
-        raise UserError(f"{path}: labels must be 0 or 1 (row {int(bad.idxmax()) + 2})")
-    labels["label"] = labels["label"].astype(int)
+        row = int(np.flatnonzero(bad.to_numpy())[0])
+        raise UserError(
+            f"{path}: row {row + 1}: label must be 0 or 1, got {_shown(raw['label'].iloc[row])}"
+        )
+    labels["label"] = text.str[0].astype(int)
+    conflict = labels.groupby(keys)["label"].nunique() > 1
+    if conflict.any():
+        key = conflict.index[np.flatnonzero(conflict.to_numpy())[0]]
+        raise UserError(f"{path}: {'/'.join(keys)} {key} has both labels 0 and 1")
     return labels
+
+
+def _shown(value: Any) -> str:
+    text = repr(str(value))
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _label_ints(values: pd.Series, column: str, low: int, high: int, path: Path) -> pd.Series:
+    """A column of integer ids (written as 12 or 12.0) within [low, high], or a `UserError`
+    naming the first row that is not one."""
+    out = np.zeros(len(values), dtype=np.int64)
+    for row, value in enumerate(values.to_numpy()):
+        match = re.fullmatch(r"\s*\+?(\d{1,30})(?:\.0*)?\s*", value)
+        number = int(match[1]) if match else None
+        if number is None or not low <= number <= high:
+            raise UserError(
+                f"{path}: row {row + 1}: {column} must be an integer in [{low}, {high}], "
+                f"got {_shown(value)}"
+            )
+        out[row] = number
+    return pd.Series(out, index=values.index)
 
 
 def match_labels(scores: pd.DataFrame, tracks: Sequence[Track], labels: pd.DataFrame) -> np.ndarray:

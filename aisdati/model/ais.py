@@ -32,6 +32,7 @@ import torch
 
 from aisdati import __version__
 from aisdati.errors import UserError
+from aisdati.model.card import track_keys
 from aisdati.model.checkpoint import atomic_write_bytes, save_networks
 from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
 from aisdati.model.env import Reference, ReferenceSource, TrajectoryImitationEnv
@@ -193,6 +194,7 @@ def data_card(settings: TrainSettings, tracks: Sequence[Track], total: int) -> d
         "tracks_in_cluster": total,
         "tracks_used": len(tracks),
         "track_ids": [t.track_id for t in tracks],
+        "track_keys": track_keys(used),
         "points": int(sum(len(t.positions) for t in tracks)),
         "time_span": [str(used["start"].min()), str(used["end"].max())],
         "start_points": [[float(t.positions[0, 0]), float(t.positions[0, 1])] for t in tracks],
