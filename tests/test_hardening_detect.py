@@ -225,3 +225,15 @@ def test_train_and_detect_outputs_under_a_file_or_on_a_folder(trained, tmp_path)
     (models / "down.json").mkdir(parents=True)
     result = run("train", "--cluster", "down", "--data", trained["proc"], "--out", models)
     one_line_error(result, "down.json is a folder")
+
+
+def test_resume_beside_a_damaged_card_trains_without_a_traceback(trained, tmp_path):
+    models = tmp_path / "models"
+    shutil.copytree(trained["models"], models)
+    (models / "down.json").write_text("[1, 2]")  # valid JSON, no card
+    result = run(
+        "train", "--cluster", "down", "--data", trained["proc"], "--out", models,
+        "--episodes", 1, "--max-tracks", 3, "--seed", 1, "--resume", "-q",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert card_of(models)["training"]["finished"] is True

@@ -294,3 +294,10 @@ def test_rejects_of_an_earlier_run_do_not_stay(cli, data, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [
         "ingest_report.json", "points.parquet", "tracks.parquet",
     ]  # fmt: skip
+
+
+def test_a_binary_file_named_csv_is_one_line(cli, data, tmp_path):
+    src = tmp_path / "photo.csv"
+    src.write_bytes(bytes(np.random.default_rng(1).integers(0, 256, 5000, dtype=np.uint8)))
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(result, "photo.csv: the first line is not CSV text")

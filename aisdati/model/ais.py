@@ -292,6 +292,10 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
             old = json.loads(stem.with_suffix(".json").read_text())
         except (OSError, ValueError):
             old = {}
+        if not isinstance(old, dict) or not all(
+            isinstance(old.get(k, {}), dict) for k in ("data", "training")
+        ):
+            old = {}  # a damaged card: nothing to compare with (detect refuses it, naming why)
         same = old.get("seed") == settings.seed and old.get("data", {}).get("track_ids") == ids
         if same and old.get("training", {}).get("finished"):
             raise UserError(

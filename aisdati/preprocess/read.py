@@ -239,6 +239,9 @@ class SourceReader:
         if not first.strip():
             raise UserError(f"{self.source.label}: the file is empty (no header line)")
         text = first.decode("utf-8-sig", errors="replace")
+        odd = sum(1 for c in text if c == "\ufffd" or (not c.isprintable() and c != "\t"))
+        if odd > len(text) // 10:
+            raise UserError(f"{self.source.label}: the first line is not CSV text (a binary file?)")
         limit = csv.field_size_limit(MAX_HEADER_BYTES)  # a name may be as long as the line
         try:
             names = next(csv.reader([text]))
