@@ -9,12 +9,14 @@ needs are converted, as strings first, so one bad value costs one counted row, n
 
 from __future__ import annotations
 
+import codecs
 import csv
 import glob
 import math
 import re
 import zipfile
 import zlib
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -347,65 +349,86 @@ class LineGuard(_ForwardOnly):
     random bytes fails its own checks, or is kept when they sit in a column we do not read,
     instead of failing the file), and cuts out, as one malformed row each, lines longer than
     `MAX_LINE_BYTES` and lines that end inside a quoted field (pyarrow would carry the quote on
-    over the following lines and swallow up to a block of good rows into one bad one)."""
+    over the following lines and swallow up to a block of good rows into one bad one).
+
+    Clean blocks (the usual case) pass as views of what was read, without a copy: the checks
+    are searches over the block, and only a block that needs a change is copied and cut."""
 
     def __init__(self, raw: Any, on_malformed: Callable[[str], None]) -> None:
         self.raw = raw
         self.on_malformed = on_malformed
         self.closed = False
-        self._pending = b""  # cleaned bytes beyond what the last read asked for (rare)
+        self._ready: deque[bytes | memoryview] = deque()  # whole lines, in order
         self._carry = b""  # the start of a line whose end has not arrived yet
         self._dropping: str | None = "header"  # or "long": skipping to the end of a line
         self._dropped = 0
         self._dropped_head = b""
         self._eof = False
 
-    def read(self, n: int = -1) -> bytes:
+    def read(self, n: int = -1) -> bytes | memoryview:
         """Whole lines, at most `n` bytes (pyarrow reads blocks of `BLOCK_SIZE`; a shorter block
-        is fine as long as it ends at a line end); b"" only at the end."""
+        is fine as long as it ends at a line end); empty only at the end."""
         want = BLOCK_SIZE if n is None or n < 0 else max(n, 1)
-        out = self._pending
-        while not out and not self._eof:
-            chunk = self.raw.read(max(want - len(self._carry), 1 << 16))
+        while not self._ready and not self._eof:
+            chunk = self.raw.read(want)
             if chunk:
-                out = self._feed(chunk)
+                self._feed(chunk)
             else:
                 self._eof = True
-                out = self._finish()
-        out, self._pending = out[:want], out[want:]
-        return out
+                self._finish()
+        if not self._ready:
+            return b""
+        piece = self._ready.popleft()
+        if len(piece) > want:  # grown by UTF-8 replacement characters: the rest comes next
+            self._ready.appendleft(piece[want:])
+            piece = piece[:want]
+        return piece
 
     def close(self) -> None:
         self.closed = True
         self.raw.close()
 
-    def _feed(self, chunk: bytes) -> bytes:
+    def _feed(self, chunk: bytes) -> None:
         if b"\r" in chunk:
             chunk = chunk.replace(b"\r", b"\n")  # CRLF leaves an empty line: pyarrow skips it
-        data = self._carry + chunk if self._carry else chunk
-        self._carry = b""
-        if self._dropping is not None:
-            end = data.find(b"\n")
-            if end < 0:
-                self._drop_more(data)
-                return b""
-            self._drop_more(data[:end])
-            self._end_drop()
-            data = data[end + 1 :]
-        cut = data.rfind(b"\n") + 1
-        body, rest = data[:cut], data[cut:]
-        if len(rest) > MAX_LINE_BYTES:
-            self._dropping = "long"
-            self._drop_more(rest)
+        start = 0
+        if self._dropping is not None or self._carry:
+            first = chunk.find(b"\n")
+            if first < 0:
+                self._hold(chunk)
+                return
+            if self._dropping is not None:
+                self._drop_more(chunk[:first])
+                self._end_drop()
+            else:
+                line, self._carry = self._carry + chunk[: first + 1], b""
+                self._emit(line, 0, len(line))
+            start = first + 1
+        cut = chunk.rfind(b"\n") + 1
+        if cut > start:
+            self._emit(chunk, start, cut)
         else:
-            self._carry = rest
-        return self._clean(body)
+            cut = start
+        if cut < len(chunk):
+            self._hold(chunk[cut:])
 
-    def _finish(self) -> bytes:
+    def _hold(self, part: bytes) -> None:
+        """Keep the start of an unfinished line; past `MAX_LINE_BYTES` it is dropped instead."""
+        if self._dropping is not None:
+            self._drop_more(part)
+            return
+        self._carry += part
+        if len(self._carry) > MAX_LINE_BYTES:
+            self._dropping = "long"
+            self._drop_more(self._carry)
+            self._carry = b""
+
+    def _finish(self) -> None:
         if self._dropping is not None:
             self._end_drop()
         tail, self._carry = self._carry, b""
-        return self._clean(tail)
+        if tail:
+            self._emit(tail, 0, len(tail))
 
     def _drop_more(self, data: bytes) -> None:
         if len(self._dropped_head) < RAW_TEXT_CHARS:
@@ -424,11 +447,26 @@ class LineGuard(_ForwardOnly):
             text += f"... ({size:,} bytes)"
         self.on_malformed(text)
 
+    def _emit(self, buf: bytes, a: int, b: int) -> None:
+        """Queue the whole lines buf[a:b]: as a view when they need nothing, else cleaned."""
+        clean = not (b - a > MAX_LINE_BYTES and _may_hold_long_line(buf, a, b))
+        if clean and not buf.isascii():
+            try:
+                codecs.utf_8_decode(memoryview(buf)[a:b], "strict", True)
+            except UnicodeDecodeError:
+                clean = False
+        if clean and buf.find(b'"', a, b) >= 0 and _unterminated_spans(buf, a, b):
+            clean = False
+        if clean:
+            self._ready.append(memoryview(buf)[a:b])
+        else:
+            cleaned = self._clean(buf[a:b])
+            if cleaned:  # (an empty block would read as the end of the file)
+                self._ready.append(cleaned)
+
     def _clean(self, body: bytes) -> bytes:
         """Whole lines (or the file's last, unended one) made safe for pyarrow."""
-        if not body:
-            return body
-        if _may_hold_long_line(body):
+        if _may_hold_long_line(body, 0, len(body)):
             starts = _line_starts(body)
             ends = np.r_[starts[1:], len(body)]
             long = np.flatnonzero(ends - starts > MAX_LINE_BYTES + 1)
@@ -439,7 +477,7 @@ class LineGuard(_ForwardOnly):
             except UnicodeDecodeError:
                 body = body.decode("utf-8", errors="replace").encode("utf-8")
         if b'"' in body:
-            body = self._cut_unterminated(body)
+            body = self._cut(body, _unterminated_spans(body, 0, len(body)))
         return body
 
     def _cut(self, body: bytes, spans: list[tuple[int, int]]) -> bytes:
@@ -454,19 +492,64 @@ class LineGuard(_ForwardOnly):
         pieces.append(body[pos:])
         return b"".join(pieces)
 
-    def _cut_unterminated(self, body: bytes) -> bytes:
-        """Cut out the lines that end inside a quoted field."""
-        buf = np.frombuffer(body, np.uint8)
-        starts = np.empty(64, np.int64)
-        found = _unterminated_lines(buf, starts)
-        if found > len(starts):
-            starts = np.empty(found, np.int64)
-            _unterminated_lines(buf, starts)
-        spans = []
-        for a in starts[:found]:
-            end = body.find(b"\n", int(a))
-            spans.append((int(a), len(body) if end < 0 else end + 1))
-        return self._cut(body, spans)
+
+def _unterminated_spans(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
+    """The lines [start, end) of buf[a:b] (whole lines) that end inside a quoted field. Only lines
+    holding a quote can; with few of them each is checked on its own, with many (a file that
+    quotes every field) the rest of the block is scanned at once."""
+    spans: list[tuple[int, int]] = []
+    pos, checked = buf.find(b'"', a, b), 0
+    while pos >= 0:
+        line = max(buf.rfind(b"\n", a, pos) + 1, a)
+        if checked == 1000:  # quotes everywhere: one compiled pass over what is left
+            return spans + _scan_unterminated(buf, line, b)
+        end = buf.find(b"\n", pos, b)
+        end = b if end < 0 else end + 1
+        if end - line > 10_000:
+            spans += _scan_unterminated(buf, line, end)
+        elif _ends_in_quotes(buf[line:end]):
+            spans.append((line, end))
+        checked += 1
+        pos = buf.find(b'"', end, b) if end < b else -1
+    return spans
+
+
+def _ends_in_quotes(line: bytes) -> bool:
+    """Whether one line ends inside a quoted field (`_unterminated_lines`'s rules, in Python: a
+    few lines per block hold quotes, and compiling is not worth it for them)."""
+    state, i, n = 0, 0, len(line)  # 0: field start, 1: unquoted or after closing quote, 2: quoted
+    while i < n:
+        c = line[i]
+        if state == 2:
+            if c == 34:
+                if i + 1 < n and line[i + 1] == 34:
+                    i += 1
+                else:
+                    state = 1
+            elif c == 10:
+                return True
+        elif c == 10:
+            return False
+        elif c == 44:
+            state = 0
+        elif state == 0:
+            state = 2 if c == 34 else 1
+        i += 1
+    return state == 2
+
+
+def _scan_unterminated(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
+    view = np.frombuffer(buf, np.uint8, count=b - a, offset=a)
+    starts = np.empty(64, np.int64)
+    found = _unterminated_lines(view, starts)
+    if found > len(starts):
+        starts = np.empty(found, np.int64)
+        _unterminated_lines(view, starts)
+    spans = []
+    for s in starts[:found]:
+        end = buf.find(b"\n", a + int(s), b)
+        spans.append((a + int(s), b if end < 0 else end + 1))
+    return spans
 
 
 @numba.njit(cache=True)
@@ -515,12 +598,12 @@ def _unterminated_lines(buf: np.ndarray, out: np.ndarray) -> int:  # pragma: no 
         done = i
 
 
-def _may_hold_long_line(body: bytes) -> bool:
-    """Cheap test: some window of half `MAX_LINE_BYTES` without a line end (else no line is too
-    long); only then are the lines measured."""
+def _may_hold_long_line(buf: bytes, a: int, b: int) -> bool:
+    """Cheap test: some window of half `MAX_LINE_BYTES` in buf[a:b] without a line end (else no
+    line is too long); only then are the lines measured."""
     half = MAX_LINE_BYTES // 2
-    return len(body) > MAX_LINE_BYTES and any(
-        body.find(b"\n", k, k + half) < 0 for k in range(0, len(body) - half + 1, half)
+    return b - a > MAX_LINE_BYTES and any(
+        buf.find(b"\n", k, k + half) < 0 for k in range(a, b - half + 1, half)
     )
 
 
