@@ -122,23 +122,26 @@ def prepare_output_dir(path: Path, option: str = "--out", outputs: Iterable[str]
     path is a file, lies under a file, cannot be created or written, or one of `outputs` (the
     names about to be written there) is a folder. Then sweep our stale temporaries out of it."""
     path = Path(path)
+
+    def refuse(reason: str) -> UserError:
+        return UserError(f"cannot write to output folder {path} ({option}): {reason}")
+
     if path.exists() and not path.is_dir():
-        raise UserError(f"{option} {path} is a file, not a folder")
+        raise refuse("it is a file, not a folder")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise UserError(f"{option} {path}: cannot create the folder ({_reason(exc)})") from None
+        raise refuse(f"cannot create it, {_reason(exc)}") from None
     probe = path / f".aisdati-write-test.{os.getpid()}.tmp"
     try:
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        raise UserError(f"{option} {path}: cannot write into the folder ({_reason(exc)})") from None
+        raise refuse(_reason(exc)) from None
     for name in outputs:
-        target = path / name
-        if target.is_dir():
-            raise UserError(
-                f"{option} {path}: {name} is a folder there, where the output file goes; "
+        if (path / name).is_dir():
+            raise refuse(
+                f"{name} there is a folder, where the output file goes; "
                 "move it away or choose another folder"
             )
     sweep_stale_temporaries(path)

@@ -214,17 +214,23 @@ def test_train_and_detect_outputs_under_a_file_or_on_a_folder(trained, tmp_path)
     a_file = tmp_path / "file.txt"
     a_file.write_text("x")
     result = run("train", "--cluster", "down", "--data", trained["proc"], "--out", a_file / "m")
-    one_line_error(result, "--out .*cannot create the folder")
+    one_line_error(
+        result,
+        r"cannot write to output folder .* \(--out\): cannot create it, a part of the path is a "
+        "file",
+    )
     result = detect(trained, trained["models"], a_file)
-    one_line_error(result, "--out .*file.txt is a file, not a folder")
+    one_line_error(
+        result, "cannot write to output folder .*file.txt \\(--out\\): it is a file, not a folder"
+    )
     report = tmp_path / "report"
     (report / "scores.parquet").mkdir(parents=True)
     result = detect(trained, trained["models"], report)
-    one_line_error(result, "scores.parquet is a folder")
+    one_line_error(result, "scores.parquet there is a folder")
     models = tmp_path / "models"
     (models / "down.json").mkdir(parents=True)
     result = run("train", "--cluster", "down", "--data", trained["proc"], "--out", models)
-    one_line_error(result, "down.json is a folder")
+    one_line_error(result, "down.json there is a folder")
 
 
 def test_resume_beside_a_damaged_card_trains_without_a_traceback(trained, tmp_path):

@@ -170,11 +170,17 @@ def test_out_is_a_file_or_under_a_file(cli, data, tmp_path):
     a_file = tmp_path / "file.txt"
     a_file.write_text("not a folder")
     result, _ = ingest(cli, a_file, data / NY_HOUR)
-    one_line_error(result, "--out .*file.txt is a file, not a folder")
+    one_line_error(
+        result, "cannot write to output folder .*file.txt \\(--out\\): it is a file, not a folder"
+    )
     # Under a regular file: what a folder without write permission gives a non-root user (the
     # tests run as root, whom permissions do not stop), through the same check.
     result, _ = ingest(cli, a_file / "sub", data / NY_HOUR)
-    one_line_error(result, "cannot create the folder")
+    one_line_error(
+        result,
+        r"cannot write to output folder .* \(--out\): cannot create it, a part of the path is a "
+        "file",
+    )
     assert a_file.read_text() == "not a folder"
 
 
@@ -182,7 +188,7 @@ def test_an_output_name_taken_by_a_folder_leaves_nothing_behind(cli, data, tmp_p
     out = tmp_path / "out"
     (out / "points.parquet").mkdir(parents=True)
     result, _ = ingest(cli, out, data / NY_HOUR)
-    one_line_error(result, "points.parquet is a folder")
+    one_line_error(result, "points.parquet there is a folder")
     assert leftovers(out) == [] and sorted(p.name for p in out.iterdir()) == ["points.parquet"]
 
 
