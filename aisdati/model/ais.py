@@ -135,6 +135,11 @@ class TrainSettings:
     """Downsample the cluster to this many tracks (the paper: 170); None keeps all."""
     patience: int = 10
     epsilon_m: float = EPSILON_M
+    track_ids: tuple[int, ...] | None = None
+    """Train on exactly these tracks of the cluster (`aisdati evaluate`'s split); None: all,
+    downsampled to `max_tracks`."""
+    stem: str | None = None
+    """Model file name in `out_dir` (default: the cluster's name)."""
     resume: bool = False
     """Continue from <out>/<cluster>.ckpt (written after every episode) when it exists."""
 
@@ -169,6 +174,8 @@ def choose_training_tracks(settings: TrainSettings) -> tuple[list[int], int]:
     table = select_cluster(read_track_table(settings.data_dir), settings.cluster, settings.data_dir)
     ids = np.sort(table["track_id"].to_numpy())
     total = len(ids)
+    if settings.track_ids is not None:
+        return sorted(int(i) for i in settings.track_ids), total
     if settings.max_tracks is not None and total > settings.max_tracks:
         rng = np.random.default_rng(settings.seed)
         ids = np.sort(rng.choice(ids, size=settings.max_tracks, replace=False))
@@ -199,17 +206,11 @@ def data_card(settings: TrainSettings, tracks: Sequence[Track], total: int) -> d
     }
 
 
-def model_card(
-    settings: TrainSettings,
-    source: AISTrackSource,
-    data: dict[str, Any],
-    history: Sequence[EpisodeLog],
-    wall: float,
-    steps: int,
+def base_card(
+    settings: TrainSettings, source: AISTrackSource, data: dict[str, Any]
 ) -> dict[str, Any]:
+    """What every AIS detector's card says: the data, the region and the decision ranges."""
     lo, hi = source.bounds
-    logs = list(history)
-    best = min(logs, key=lambda g: g.mean_loss) if logs else None
     return {
         "kind": "ais",
         "cluster": settings.cluster,
@@ -225,6 +226,21 @@ def model_card(
             "max_dt_h": source.rule.max_dt_h,
             "cog_center_deg": source.rule.cog_center,
         },
+    }
+
+
+def model_card(
+    settings: TrainSettings,
+    source: AISTrackSource,
+    data: dict[str, Any],
+    history: Sequence[EpisodeLog],
+    wall: float,
+    steps: int,
+) -> dict[str, Any]:
+    logs = list(history)
+    best = min(logs, key=lambda g: g.mean_loss) if logs else None
+    return {
+        **base_card(settings, source, data),
         "epsilon_m": settings.epsilon_m,
         "epsilon_interpretation": EPSILON_READING,
         "training": {
@@ -243,8 +259,8 @@ def model_card(
     }
 
 
-def model_stem(out_dir: Path, cluster: str) -> Path:
-    return out_dir / cluster
+def model_stem(settings: TrainSettings) -> Path:
+    return settings.out_dir / (settings.stem or settings.cluster)
 
 
 StepCallback = Callable[[DATITrainer, list[EpisodeLog]], None]
@@ -266,7 +282,7 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     config = DATIConfig(episodes=settings.episodes, patience=settings.patience)
     env = make_env(source, settings.epsilon_m)
     trainer = DATITrainer([env], [settings.seed], config)
-    stem = model_stem(settings.out_dir, settings.cluster)
+    stem = model_stem(settings)
     log_path = stem.with_suffix(".log.jsonl")
     ckpt_path = stem.with_suffix(".ckpt")
     log_lines: list[str] = []
