@@ -73,6 +73,53 @@ LAND_MIN_SPAN_DEG = 2.0
 ones (a harbour) it would put land across shipping lanes."""
 
 
+def _lonlat_aspect(ax: plt.Axes, points: np.ndarray) -> None:
+    """True shapes on a lon/lat plot: stretch longitude by 1/cos(mean latitude)."""
+    ax.set_aspect(1.0 / np.cos(np.radians(float(np.mean(points[:, 1])))), adjustable="datalim")
+
+
+def plot_roc_pr(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path) -> None:
+    """ROC and precision-recall curves, one line per detector and score (labels 1 = injected)."""
+    from sklearn.metrics import precision_recall_curve, roc_curve
+
+    fig, (roc, pr) = plt.subplots(1, 2, figsize=(11, 4.6))
+    for name, (y, score) in curves.items():
+        if y.min() == y.max():
+            continue
+        fpr, tpr, _ = roc_curve(y, score)
+        prec, rec, _ = precision_recall_curve(y, score)
+        roc.plot(fpr, tpr, lw=1.5, label=name)
+        pr.plot(rec, prec, lw=1.5, label=name)
+    roc.plot([0, 1], [0, 1], color="0.6", ls=":", lw=1)
+    roc.set(xlabel="false positive rate", ylabel="true positive rate", title="ROC")
+    pr.set(xlabel="recall", ylabel="precision", title="precision-recall", ylim=(0, 1.02))
+    roc.legend(fontsize=8, loc="lower right")
+    fig.suptitle("Detection of injected anomalies (held-out tracks)")
+    _save(fig, path)
+
+
+def plot_injected_examples(
+    panels: Sequence[tuple[str, np.ndarray, np.ndarray, tuple[int, int], np.ndarray | None]],
+    path: Path,
+) -> None:
+    """Per anomaly kind, the top-scored altered track: (title, source track, altered track,
+    altered stretch [start, end), what the detector compared it with or None)."""
+    fig, axes = _grid(len(panels))
+    for ax, (title, source, track, (i, j), evidence) in zip(axes, panels, strict=False):
+        ax.plot(source[:, 0], source[:, 1], color="0.7", lw=2.5, label="original track")
+        if evidence is not None:
+            ax.plot(evidence[:, 0], evidence[:, 1], color="tab:blue", lw=1, label="compared with")
+        ax.plot(track[:, 0], track[:, 1], color="black", lw=1, label="altered track")
+        ax.plot(track[i:j, 0], track[i:j, 1], color="tab:red", lw=2, label="altered stretch")
+        ax.plot(*track[0], "o", color="black", ms=4)
+        _lonlat_aspect(ax, track)
+        ax.set_title(title, fontsize=9)
+        ax.tick_params(labelsize=7)
+    axes[0].legend(fontsize=7, loc="best")
+    fig.suptitle("Top-scored injected anomaly of each kind")
+    _save(fig, path)
+
+
 def land_geometry():
     """Offline land basemap: Natural Earth 1:110m, the Americas (see aisdati/data/README.md)."""
     import json

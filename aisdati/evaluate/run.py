@@ -189,7 +189,7 @@ def _rows(
     normal = y == 0
     groups = [(k, kind == k) for k in kinds]
     pos = tuple(k for k in POSITION_KINDS if k in kinds)
-    if len(pos) > 1:
+    if 1 < len(pos) < len(kinds):
         groups.append(("+".join(pos), np.isin(kind, pos)))
     groups.append(("all", y == 1))
     out = []
