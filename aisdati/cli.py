@@ -348,6 +348,19 @@ def train(
     ),
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
     out: Path = typer.Option(Path("models"), "--out", help="Model folder."),
+    preset: str = typer.Option(
+        "lanes",
+        "--preset",
+        help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
+        "paper's own configuration).",
+    ),
+    lane: list[str] = typer.Option(
+        None,
+        "--lane",
+        help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
+        "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
+        "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
+    ),
     episodes: int = typer.Option(170, help="Maximum training episodes, one track each (paper)."),
     seed: int = typer.Option(0, help="Random seed (networks, noise, track order, downsampling)."),
     max_tracks: int = typer.Option(
@@ -369,6 +382,7 @@ def train(
     from aisdati.detectors import parse_detectors
     from aisdati.detectors.train import train_detector
     from aisdati.model.ais import TrainSettings
+    from aisdati.model.ais_space import lane_config
     from aisdati.progress import TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
@@ -380,6 +394,8 @@ def train(
         data_dir=data,
         cluster=cluster.strip().lower(),
         out_dir=out,
+        preset=preset if not lane else f"{preset} + {', '.join(lane)}",
+        lane=lane_config(preset, lane or ()),
         episodes=episodes,
         seed=seed,
         max_tracks=max_tracks or None,
@@ -484,6 +500,19 @@ def evaluate(
         help="Use the models trained on this cluster in this folder (and their training "
         "tracks) instead of training new ones.",
     ),
+    preset: str = typer.Option(
+        "lanes",
+        "--preset",
+        help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
+        "paper's own configuration).",
+    ),
+    lane: list[str] = typer.Option(
+        None,
+        "--lane",
+        help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
+        "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
+        "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
+    ),
     episodes: int = typer.Option(170, help="Training episodes of dati and bc."),
     patience: int = typer.Option(10, help="DATI early stopping patience; 0 disables."),
     rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts / draws per track."),
@@ -510,6 +539,7 @@ def evaluate(
     from aisdati.evaluate.outputs import report, results_table, write
     from aisdati.evaluate.run import EvaluateSettings, check
     from aisdati.evaluate.run import evaluate as run_evaluate
+    from aisdati.model.ais_space import lane_config
     from aisdati.progress import TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
@@ -528,6 +558,8 @@ def evaluate(
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
+        preset=preset if not lane else f"{preset} + {', '.join(lane)}",
+        lane=lane_config(preset, lane or ()),
     )
     check(settings)
     select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work

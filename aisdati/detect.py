@@ -107,6 +107,14 @@ SCORE_DEFINITIONS = {
 }
 
 
+EVIDENCE = {
+    "rollout": "best rollout",
+    "both": "best rollout",
+    "step": "one-step predictions",
+    "nearest": "nearest training track",
+}
+
+
 # ------------------------------------------------------------------------------------ models
 def load_models(settings: DetectSettings) -> list[Detector]:
     models = load_detectors(settings.models_dir, settings.models)
@@ -269,9 +277,12 @@ def _line(coords: np.ndarray) -> dict[str, Any]:
 
 
 def anomalies_geojson(result: Detection) -> dict[str, Any]:
-    """Flagged tracks (kind=track), their nearest rollouts (kind=rollout) and the points of
-    largest deviation (kind=max_deviation), as one FeatureCollection in lon/lat (WGS84)."""
+    """Flagged tracks (kind=track), what each was compared with (kind=evidence: its best
+    rollout, the nearest training track or its one-step predictions) and the points of largest
+    deviation (kind=max_deviation), as one FeatureCollection in lon/lat (WGS84)."""
     features = []
+    s = result.settings
+    what = EVIDENCE.get(s.method if s and s.method == "nearest" else s.score if s else "", "")
     by_id = {t.track_id: (t, r) for t, r in zip(result.tracks, result.rollouts, strict=True)}
     for row in result.scores[result.scores["flagged"]].sort_values("rank").itertuples():
         track, roll = by_id[row.track_id]
@@ -295,7 +306,7 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
         features.append(
             {
                 "type": "Feature",
-                "properties": {"kind": "rollout", "track_id": props["track_id"]},
+                "properties": {"kind": "evidence", "what": what, "track_id": props["track_id"]},
                 "geometry": _line(roll),
             }
         )

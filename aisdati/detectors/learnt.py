@@ -9,7 +9,6 @@ its unit of scale (a track as typical as the median training track scores 2).
 from __future__ import annotations
 
 import io
-import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -19,28 +18,25 @@ import numpy as np
 import torch
 
 from aisdati.detectors.base import Detector, Scores, ScoreSettings
-from aisdati.detectors.policy import Act, AISPolicy, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
+from aisdati.model.ais_policy import Act, AISPolicy, dati_act, tail_mean
+from aisdati.model.ais_space import AISSpace
 from aisdati.model.baselines import BCConfig, BCPolicy
 from aisdati.model.checkpoint import atomic_write_bytes, load_networks
+from aisdati.model.corridor import Corridor
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
-from aisdati.model.rules import SphericalRule
 from aisdati.trackdata import Track
 
 
 class PolicyDetector(Detector):
     """A detector built on an `AISPolicy`; subclasses say how the policy acts."""
 
+    corridor: Corridor | None = None
+
     def policy(self) -> AISPolicy:
-        r = self.card["rule"]
-        rule = SphericalRule(
-            max_sog=float(r["max_sog_kn"]),
-            max_dt_h=float(r["max_dt_h"]),
-            cog_center=float(r.get("cog_center_deg", 180.0)),
-        )
-        return AISPolicy(rule, self.bounds, self.make_act)
+        return AISPolicy(AISSpace.from_card(self.card, self.corridor), self.make_act)
 
     def make_act(self, n: int, seed: int, temporal: bool) -> Act:
         raise NotImplementedError
@@ -97,25 +93,12 @@ class DATIDetector(PolicyDetector):
         nets, config, meta = load_networks(stem)
         if nets.members != 1 or meta.get("decision_dim", 3) != 3:
             raise UserError(f"{stem}: expected a single-member model with 3 decisions")
-        return cls(stem.name, meta, nets, config)
+        det = cls(stem.name, meta, nets, config)
+        det.corridor = _corridor(stem, meta)
+        return det
 
     def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        nets, cfg = self.nets, self.config
-        gen = torch.Generator().manual_seed(int(seed))
-        latent = cfg.network.latent_dim
-        eta = torch.zeros(1, n, latent)
-        ou = cfg.noise == "ou" and temporal
-
-        def act(obs: np.ndarray) -> np.ndarray:
-            nonlocal eta
-            draw = torch.randn((1, n, latent), generator=gen) * cfg.noise_sigma
-            eta = eta - cfg.ou_theta * eta * cfg.ou_dt + draw * math.sqrt(cfg.ou_dt) if ou else draw
-            x = torch.as_tensor(obs)[None]
-            with torch.no_grad():
-                out = nets.forward_actor(x[..., :2], eta, nets.time_features(x[..., 2:]))
-            return out[0].numpy()
-
-        return act
+        return dati_act(self.nets, self.config)(n, seed, temporal)
 
 
 # ------------------------------------------------------------------------------------- BC
@@ -136,7 +119,7 @@ class BCDetector(PolicyDetector):
         def act(obs: np.ndarray) -> np.ndarray:
             x = torch.as_tensor(obs)[None]
             with torch.no_grad():
-                mean, log_std = self.bc(x[..., :2], x[..., 2:])
+                mean, log_std = self.bc(x[..., :-1], x[..., -1:])
             if self.bc.cfg.deterministic:
                 return mean[0].numpy()
             eps = torch.randn(mean.shape, generator=gen)
@@ -158,10 +141,24 @@ class BCDetector(PolicyDetector):
             raw = dict(card["config"])
             raw["log_std_range"] = tuple(raw["log_std_range"])
             cfg = BCConfig(**raw)
-            policy = BCPolicy(2, 3, cfg, card["seeds"])
+            state_dim = AISSpace.from_card(card).state_dim
+            policy = BCPolicy(state_dim, 3, cfg, card["seeds"])
             state = torch.load(stem.with_suffix(".pt"), map_location="cpu", weights_only=True)
             policy.load_state_dict(state)
         except Exception as exc:  # damaged or foreign files: one line, never a traceback
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise UserError(f"cannot load model {stem}: {first}") from None
-        return cls(stem.name, card, policy)
+        det = cls(stem.name, card, policy)
+        det.corridor = _corridor(stem, card)
+        return det
+
+
+def _corridor(stem: Path, card: dict[str, Any]) -> Corridor | None:
+    """The corridor saved beside a model trained with `region="corridor"`."""
+    if (card.get("lane_config") or {}).get("region") != "corridor":
+        return None
+    path = stem.with_suffix(".corridor.npz")
+    try:
+        return Corridor.from_file(path)
+    except (OSError, ValueError, KeyError) as exc:
+        raise UserError(f"cannot load {path}: {str(exc).splitlines()[0]}") from None

@@ -38,7 +38,7 @@ class NearestDetector(Detector):
     @classmethod
     def fit(cls, name: str, tracks: Sequence[Track], card: dict[str, Any], near_km: float = 10.0):
         det = cls(name, card, [t.positions for t in tracks], np.array([t.mmsi for t in tracks]))
-        own = det._search([t.positions for t in tracks], near_km, exclude=det.mmsi)[0]
+        own = det.search([t.positions for t in tracks], near_km, exclude=det.mmsi)[0]
         card["calibration"] = {"nearest": [round(float(s), 2) for s in own]}
         return det
 
@@ -57,14 +57,14 @@ class NearestDetector(Detector):
             out.append(near if len(near) else np.nonzero(ok)[0])
         return out
 
-    def _search(self, queries: list[np.ndarray], near_km: float, exclude=None):
+    def search(self, queries: list[np.ndarray], near_km: float, exclude=None):
         starts = np.array([q[0] for q in queries])
         cands = self._candidates(starts, near_km, exclude)
         return nearest_mean_dtw_m(queries, self.tracks, cands)
 
     def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
         positions = [t.positions for t in tracks]
-        dist, arg = self._search(positions, how.near_km)
+        dist, arg = self.search(positions, how.near_km)
         evidence = [self.tracks[a] for a in arg]
         profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
         return Scores(dist, profiles, evidence)

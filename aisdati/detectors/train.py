@@ -64,7 +64,7 @@ def train_detector(
         raise UserError(f"--episodes must be at least 1, got {settings.episodes}")
     ids, total = choose_training_tracks(settings)
     tracks = load_tracks(settings.data_dir, ids)
-    source = build_source(tracks)
+    source = build_source(tracks, settings.lane)
     card = base_card(settings, source, data_card(settings, tracks, total))
     stem = model_stem(settings)
     if method == "nearest":
@@ -80,9 +80,12 @@ def train_detector(
             "finished": True,
         }
         det = BCDetector(stem.name, card, policy)
+        det.corridor = source.space.corridor
         det.calibrate(tracks, how)
     else:
         raise UserError(f"unknown method {method!r}")
     card["training"] = {**card.get("training", {}), "wall_seconds": time.perf_counter() - t0}
     det.save(stem)
+    if source.space.corridor is not None:
+        atomic_write_bytes(stem.with_suffix(".corridor.npz"), source.space.corridor.to_bytes())
     return Trained(stem.with_suffix(".json"), det.card, time.perf_counter() - t0)

@@ -30,6 +30,7 @@ from aisdati.errors import UserError
 from aisdati.evaluate import dataset
 from aisdati.evaluate.metrics import flagging, ranking
 from aisdati.model.ais import TrainSettings
+from aisdati.model.ais_space import PRESETS, LaneConfig
 from aisdati.trackdata import load_tracks
 
 POSITION_KINDS = ("detour", "jump", "loiter")
@@ -52,6 +53,8 @@ class EvaluateSettings:
     near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
+    preset: str = "lanes"
+    lane: LaneConfig = field(default_factory=lambda: PRESETS["lanes"])
 
 
 @dataclass
@@ -148,6 +151,8 @@ def evaluate(
                     max_tracks=None,
                     patience=settings.patience,
                     track_ids=tuple(split.train_ids),
+                    preset=settings.preset,
+                    lane=settings.lane,
                 ),
                 how,
             )

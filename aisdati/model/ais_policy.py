@@ -28,13 +28,17 @@ import torch
 
 from aisdati.dtw import batch_mean_dtw_m
 from aisdati.geo import haversine_m
-from aisdati.model.rules import BoxScaler, SphericalRule
+from aisdati.model.ais_space import AISSpace
+from aisdati.model.dati import DATIConfig
+from aisdati.model.networks import DATINetworks
+from aisdati.model.rules import SphericalRule
 
 STEP_TAIL = 0.1
 """Step score: the mean of the largest 10 % of a track's step errors (at least one)."""
 
 Act = Callable[[np.ndarray], np.ndarray]
-"""observations [N, 3] (x, y scaled into [0, 1]; step index t) -> scaled decisions [N, 3]."""
+"""observations [N, state + 1] (`AISSpace.features`, then the time input) -> scaled decisions
+[N, 3]."""
 MakeAct = Callable[[int, int, bool], Act]
 """(batch size N, seed, temporal noise) -> a stateful batched policy; with temporal noise off,
 each call draws independent latent noise (one-step scoring)."""
@@ -42,27 +46,27 @@ each call draws independent latent noise (one-step scoring)."""
 
 @dataclass
 class AISPolicy:
-    """What scoring needs of a trained AIS policy, whatever learnt it."""
+    """What scoring needs of a trained AIS policy, whatever learnt it: its space (region, rule,
+    view of the agent) and a batched policy."""
 
-    rule: SphericalRule
-    bounds: tuple[np.ndarray, np.ndarray]
+    space: AISSpace
     make_act: MakeAct
 
     @property
-    def scaler(self) -> BoxScaler:
-        return BoxScaler(self.bounds[0], self.bounds[1], unit_low=0.0)
+    def rule(self) -> SphericalRule:
+        return self.space.rule
 
-    def observe(self, positions: np.ndarray, t: np.ndarray) -> np.ndarray:
-        scaled = np.clip(self.scaler.scale(positions), 0.0, 1.0)
-        return np.concatenate([scaled, np.asarray(t, np.float64)[:, None]], axis=1).astype(
-            np.float32
-        )
-
-    def inside(self, points: np.ndarray) -> np.ndarray:
-        lo, hi = self.bounds
-        return np.all(np.isfinite(points), axis=-1) & np.all(
-            (points >= lo) & (points <= hi), axis=-1
-        )
+    def observe(
+        self,
+        positions: np.ndarray,
+        previous: np.ndarray,
+        dts: np.ndarray,
+        t: np.ndarray,
+        horizon: np.ndarray,
+    ) -> np.ndarray:
+        state = self.space.features(positions, previous, dts)
+        time = self.space.time_input(t, horizon)
+        return np.concatenate([state, np.asarray(time)[:, None]], axis=1).astype(np.float32)
 
     # ---------------------------------------------------------------- free rollouts
     def generate(
@@ -70,21 +74,24 @@ class AISPolicy:
     ) -> np.ndarray:
         """K rollouts from each start in one batch: positions [N * K, max horizon + 1, 2],
         rollout k of start i at row i * K + k; rows past their horizon hold the last position.
-        A step that would leave the region keeps the agent where it is (sticking)."""
+        A step that would leave the region sticks or slides (`AISSpace.resolve`)."""
         with one_thread():
             n = len(starts) * rollouts
             pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
+            prev, last_dt = pos.copy(), np.zeros(n)
             steps = int(np.max(horizons))
             out = np.empty((n, steps + 1, 2))
             out[:, 0] = pos
             act = self.make_act(n, seed, True)
             limit = np.repeat(np.asarray(horizons), rollouts)
             for t in range(steps):
-                action = act(self.observe(pos, np.full(n, t)))
+                action = act(self.observe(pos, prev, last_dt, np.full(n, t), limit))
                 decision = self.rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
-                proposed = self.rule.step(pos, decision)
-                ok = self.inside(proposed) & (t < limit)
-                pos = np.where(ok[:, None], proposed, pos)
+                moved = self.space.resolve(pos, self.rule.step(pos, decision))
+                live = t < limit
+                prev = np.where(live[:, None], pos, prev)
+                last_dt = np.where(live, decision[:, 2], last_dt)
+                pos = np.where(live[:, None], moved, pos)
                 out[:, t + 1] = pos
         return out
 
@@ -118,7 +125,16 @@ class AISPolicy:
         first ([n - 1] for n reports), the real time step standing in for the decided dt; and
         the best predicted positions [n - 1, 2]."""
         obs = np.concatenate(
-            [self.observe(p[:-1], np.arange(len(p) - 1)) for p in tracks]
+            [
+                self.observe(
+                    p[:-1],
+                    np.vstack([p[:1], p[:-2]]),
+                    np.r_[0.0, d[:-1]],
+                    np.arange(len(p) - 1),
+                    np.full(len(p) - 1, len(p) - 1),
+                )
+                for p, d in zip(tracks, dts, strict=True)
+            ]
         ).repeat(draws, axis=0)
         here = np.concatenate([p[:-1] for p in tracks]).repeat(draws, axis=0)
         there = np.concatenate([p[1:] for p in tracks]).repeat(draws, axis=0)
@@ -138,6 +154,36 @@ class AISPolicy:
         rows = np.arange(len(pick)) * draws + pick
         cuts = np.cumsum([len(p) - 1 for p in tracks])[:-1]
         return np.split(err[rows], cuts), np.split(pred[rows], cuts)
+
+
+def dati_act(nets: DATINetworks, config: DATIConfig, member: int = 0) -> MakeAct:
+    """DATI's forward actor (member `member` of the ensemble) as a batched policy: each row
+    draws its own latent noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
+    latent = config.network.latent_dim
+    state_dim = nets.forward_actor.input_features.weight.shape[1]
+
+    def make(n: int, seed: int, temporal: bool) -> Act:
+        gen = torch.Generator().manual_seed(int(seed))
+        eta = torch.zeros(nets.members, n, latent)
+        ou = config.noise == "ou" and temporal
+
+        def act(obs: np.ndarray) -> np.ndarray:
+            nonlocal eta
+            draw = torch.randn((1, n, latent), generator=gen).expand(nets.members, n, latent)
+            draw = draw * config.noise_sigma
+            if ou:
+                eta = eta - config.ou_theta * eta * config.ou_dt + draw * math.sqrt(config.ou_dt)
+            else:
+                eta = draw
+            x = torch.as_tensor(obs)[None].expand(nets.members, *obs.shape)
+            with torch.no_grad():
+                time = nets.time_features(x[..., state_dim:].contiguous())
+                out = nets.forward_actor(x[..., :state_dim].contiguous(), eta, time)
+            return out[member].numpy()
+
+        return act
+
+    return make
 
 
 def tail_mean(errors: np.ndarray, fraction: float = STEP_TAIL) -> float:
