@@ -20,11 +20,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from aisdati import ENV_ID as ENV_ID  # registered with Gymnasium by aisdati/__init__.py
 from aisdati.dtw import IncrementalDTW
 from aisdati.model.families import Family, get_family
 from aisdati.model.rules import PlanarRule, UpdateRule
-
-ENV_ID = "aisdati/TrajectoryImitation-v0"
 
 
 @dataclass(frozen=True)
@@ -218,7 +217,3 @@ def make_family_env(family: str | Family = "circles", **kwargs: Any) -> Trajecto
     """Environment over a synthetic family, by name or object (the entry point of `ENV_ID`)."""
     fam = get_family(family) if isinstance(family, str) else family
     return TrajectoryImitationEnv(FamilySource(fam), **kwargs)
-
-
-if ENV_ID not in gym.registry:
-    gym.register(id=ENV_ID, entry_point=make_family_env)
