@@ -369,8 +369,26 @@ def train(
     cluster: str = typer.Option(
         ..., "--cluster", "-c", help="Cluster to learn: up, down or other."
     ),
+    method: str = typer.Option(
+        "dati",
+        "--method",
+        help="Detector: dati (the paper's), bc (behavioural cloning) or nearest (no learning).",
+    ),
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
     out: Path = typer.Option(Path("models"), "--out", help="Model folder."),
+    preset: str = typer.Option(
+        "lanes",
+        "--preset",
+        help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
+        "paper's own configuration).",
+    ),
+    lane: list[str] = typer.Option(
+        None,
+        "--lane",
+        help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
+        "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
+        "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
+    ),
     episodes: int = typer.Option(170, help="Maximum training episodes, one track each (paper)."),
     seed: int = typer.Option(0, help="Random seed (networks, noise, track order, downsampling)."),
     max_tracks: int = typer.Option(
@@ -383,30 +401,39 @@ def train(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the model card as JSON on stdout."),
 ) -> None:
-    """Train DATI on one cluster's tracks: writes <out>/<cluster>.pt (weights only), the model
-    card <cluster>.json, the training log <cluster>.log.jsonl and a resume checkpoint
-    <cluster>.ckpt after every episode (the checkpoint is removed when training finishes)."""
+    """Train a detector on one cluster's tracks. DATI writes <out>/<cluster>.pt (weights only),
+    the model card <cluster>.json, the training log <cluster>.log.jsonl and a resume checkpoint
+    <cluster>.ckpt after every episode (removed when training finishes); bc and nearest write
+    <cluster>-<method>.json beside their weights or tracks."""
     import json
 
-    from aisdati.model.ais import TrainSettings, train_ais
+    from aisdati.detectors import model_name, parse_detectors
+    from aisdati.detectors.train import train_detector
+    from aisdati.model.ais import TrainSettings
+    from aisdati.model.ais_space import lane_config
     from aisdati.progress import TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
     check_options({"--seed": seed})
+    (method,) = parse_detectors(method)[:1]
+
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
-    name = cluster.strip().lower()
-    prepare_output_dir(out, "--out", [name + x for x in (".pt", ".json", ".log.jsonl", ".ckpt")])
+    stem = model_name(cluster.strip().lower(), method)
+    suffixes = (".pt", ".json", ".npz", ".corridor.npz", ".log.jsonl", ".ckpt")
+    prepare_output_dir(out, "--out", [stem + x for x in suffixes])
     settings = TrainSettings(
         data_dir=data,
         cluster=cluster.strip().lower(),
         out_dir=out,
+        preset=preset if not lane else f"{preset} + {', '.join(lane)}",
+        lane=lane_config(preset, lane or ()),
         episodes=episodes,
         seed=seed,
         max_tracks=max_tracks or None,
         patience=patience,
         resume=resume,
     )
-    resuming = resume and (out / f"{settings.cluster}.ckpt").is_file()
+    resuming = resume and (out / f"{stem}.ckpt").is_file()
     episodes_done = [0]  # episodes this run finished (each one saves the model)
     with TrainingProgress(
         episodes, f"training {settings.cluster}", disable=quiet or as_json
@@ -429,9 +456,11 @@ def train(
             )
 
         try:
-            result = train_ais(settings, on_step)
+            result = train_detector(method, settings, on_step=on_step)
         except KeyboardInterrupt as exc:
-            if episodes_done[0] or resuming:
+            if method != "dati":
+                message = "stopped before the model was saved; run the same command again"
+            elif episodes_done[0] or resuming:
                 message = (
                     f"the model of the best episode so far is in {out}; "
                     "run the same command with --resume to continue"
@@ -449,6 +478,13 @@ def train(
         print(json.dumps({"model": str(result.model), "card": card}, default=str))
         return
     if quiet:
+        return
+    if method != "dati":
+        console.print(
+            f"{method} model of cluster {settings.cluster!r} on {card['data']['tracks_used']} "
+            f"tracks in {result.wall_seconds:.1f} s: wrote [bold]{result.model}[/]",
+            highlight=False,
+        )
         return
     tr = card["training"]
     used = card["data"]["tracks_used"]
@@ -469,6 +505,150 @@ def train(
             table.add_row(*row)
     console.print(table)
     console.print(f"wrote [bold]{result.model}[/] and its card and log", highlight=False)
+
+
+# --------------------------------------------------------------------------------- evaluate
+@app.command()
+@user_errors
+def evaluate(
+    cluster: str = typer.Option(
+        ..., "--cluster", "-c", help="Cluster (or route) whose tracks are split and altered."
+    ),
+    data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
+    out: Path | None = typer.Option(
+        None, "--out", help="Output folder (default runs/evaluate-<time>)."
+    ),
+    detectors: str = typer.Option(
+        "nearest,dati,bc", "--detectors", "-d", help="Detectors to compare, comma-separated."
+    ),
+    kinds: str = typer.Option(
+        "detour,jump,loiter,speed,gap,noise",
+        "--kinds",
+        help="Anomaly kinds to inject, comma-separated (round-robin over the altered tracks).",
+    ),
+    param: list[str] = typer.Option(
+        None,
+        "--param",
+        help="Change an anomaly parameter, KIND.NAME=LO-HI (repeatable): detour.span=0.2-0.35, "
+        "detour.km=2-5, jump.span=0.1-0.2, jump.km=3-6, loiter.radius_km=0.5-1.5, "
+        "loiter.loops=1-2, speed.span, speed.slow=0.3, speed.fast=2-3, gap.span=0.2-0.4, "
+        "noise.fraction=0.2, noise.km=0.5-1.",
+    ),
+    train_fraction: float = typer.Option(
+        0.6, "--train-fraction", help="Share of the tracks (by vessel) to train on."
+    ),
+    models: Path | None = typer.Option(
+        None,
+        "--models",
+        help="Use the models trained on this cluster in this folder (and their training "
+        "tracks) instead of training new ones.",
+    ),
+    preset: str = typer.Option(
+        "lanes",
+        "--preset",
+        help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
+        "paper's own configuration).",
+    ),
+    lane: list[str] = typer.Option(
+        None,
+        "--lane",
+        help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
+        "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
+        "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
+    ),
+    episodes: int = typer.Option(170, help="Training episodes of dati and bc."),
+    patience: int = typer.Option(10, help="DATI early stopping patience; 0 disables."),
+    rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts / draws per track."),
+    near_km: float = typer.Option(10.0, "--near-km", help="nearest: start-distance filter."),
+    contamination: float = typer.Option(
+        0.05, help="Calibrated flagging: share of training tracks a detector would flag."
+    ),
+    seed: int = typer.Option(0, help="Seed of the split, the injections and the training."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress or table."),
+    as_json: bool = typer.Option(False, "--json", help="Print evaluation.json on stdout."),
+) -> None:
+    """Measure detection on your own data: split a cluster's tracks by vessel, write anomalies
+    (detours, position jumps, loitering, speed changes, gaps, point noise) into half of the
+    held-out tracks, train the detectors on the rest and report how well each ranks and flags
+    the altered tracks (ROC AUC, average precision, precision/recall/F1), per anomaly kind.
+    Writes data/ (the injected set in ingest's schema, with labels.csv), models/,
+    evaluation.json, scores.parquet, roc_pr.png and examples.png."""
+    import json
+    from datetime import datetime
+
+    from aisdati.detectors import parse_detectors
+    from aisdati.detectors.train import train_detector
+    from aisdati.evaluate.inject import parse_kinds, parse_params
+    from aisdati.evaluate.outputs import report, results_table, write
+    from aisdati.evaluate.run import EvaluateSettings, check
+    from aisdati.evaluate.run import evaluate as run_evaluate
+    from aisdati.model.ais_space import lane_config
+    from aisdati.progress import TrainingProgress
+    from aisdati.trackdata import read_track_table, select_cluster
+
+    check_options(
+        {
+            "--train-fraction": train_fraction,
+            "--near-km": near_km,
+            "--contamination": contamination,
+            "--seed": seed,
+        }
+    )
+    settings = EvaluateSettings(
+        data_dir=data,
+        cluster=cluster.strip().lower(),
+        out_dir=out or Path("runs") / f"evaluate-{datetime.now():%Y%m%d-%H%M%S}",
+        detectors=parse_detectors(detectors),
+        kinds=parse_kinds(kinds),
+        params=parse_params(param),
+        train_fraction=train_fraction,
+        seed=seed,
+        episodes=episodes,
+        patience=patience,
+        rollouts=rollouts,
+        near_km=near_km,
+        contamination=contamination,
+        models_dir=models,
+        preset=preset if not lane else f"{preset} + {', '.join(lane)}",
+        lane=lane_config(preset, lane or ()),
+    )
+    check(settings)
+    select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work
+    prepare_output_dir(settings.out_dir, "--out", ("evaluation.json", "scores.parquet"))
+    show = not (quiet or as_json)
+
+    def train_with_bars(method: str, train_settings: Any, how: Any) -> Any:
+        if method != "dati" or not show:
+            with err_console.status(f"training {method}", spinner="dots") if show else _null():
+                return train_detector(method, train_settings, how)
+        with TrainingProgress(settings.episodes, "training dati") as bar:
+
+            def on_step(trainer: Any, logs: list[Any]) -> None:
+                for log in logs:
+                    bar.episode_done(log.episode, log.mean_reward, log.final_dtw)
+
+            return train_detector(method, train_settings, how, on_step=on_step)
+
+    def stage(text: str) -> None:
+        if show:
+            err_console.print(f"[dim]{text}[/]", highlight=False)
+
+    result = run_evaluate(settings, stage, train_with_bars)
+    files = write(result, settings.out_dir)
+    if as_json:
+        print(json.dumps(report(result), default=str))
+        return
+    if quiet:
+        return
+    console.print(results_table(result))
+    for method, t in result.timings.items():
+        line = f"{method}: training {t['train_s']:.1f} s, scoring {t['score_s']:.1f} s"
+        console.print(line, highlight=False)
+    console.print(
+        f"wrote {', '.join(f.name for f in files)}, data/ and models/ to "
+        f"[bold]{settings.out_dir}[/]",
+        highlight=False,
+    )
 
 
 # ----------------------------------------------------------------------------------- detect
@@ -518,6 +698,15 @@ def detect(
     model: list[str] = typer.Option(
         None, "--model", "-m", help="Model name in --models (repeatable); default: all."
     ),
+    method: str = typer.Option(
+        "dati", "--method", help="Use the models of this detector: dati, bc or nearest."
+    ),
+    score: str = typer.Option(
+        "step",
+        "--score",
+        help="How a policy judges a track: step (teacher-forced one-step errors), rollout "
+        "(free rollouts, the paper's) or both.",
+    ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(
         "other", "--cluster", help="Test tracks' cluster: up, down, other or all."
@@ -530,6 +719,12 @@ def detect(
     top_percent: float | None = typer.Option(
         None, "--top-percent", help="Flag this percentage of highest scores instead."
     ),
+    contamination: float | None = typer.Option(
+        None,
+        "--contamination",
+        help="Flag scores above the model's calibrated threshold instead: the share of its own "
+        "training tracks it would flag (e.g. 0.05); independent of the test set.",
+    ),
     near_km: float = typer.Option(
         10.0, "--near-km", help="Test tracks start within this distance of a training start."
     ),
@@ -540,36 +735,48 @@ def detect(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No table."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON on stdout."),
 ) -> None:
-    """Score test tracks against trained models: writes scores.parquet, anomalies.geojson,
-    map.png and report.json to --out and prints the flagged tracks."""
+    """Score test tracks against trained models: writes scores.parquet, profiles.parquet,
+    anomalies.geojson, map.png, map.html and report.json to --out and prints the flagged
+    tracks."""
     import json
     from datetime import datetime
 
     from aisdati.detect import DetectSettings, check_settings, report_dict, write_outputs
     from aisdati.detect import detect as run_detect
+    from aisdati.detectors import parse_detectors
     from aisdati.model.card import unfinished_models
 
-    check_options({"--threshold": threshold, "--top-percent": top_percent, "--near-km": near_km})
+    check_options(
+        {
+            "--threshold": threshold,
+            "--top-percent": top_percent,
+            "--contamination": contamination,
+            "--near-km": near_km,
+        }
+    )
     settings = DetectSettings(
         data_dir=data,
         models_dir=models_dir,
         out_dir=out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
         models=tuple(model or ()),
+        method=parse_detectors(method)[0],
         cluster=cluster.strip().lower(),
         track_ids=tuple(track or ()),
+        score=score.strip().lower(),
         rollouts=rollouts,
         threshold=threshold,
         top_percent=top_percent,
+        contamination=contamination,
         near_km=near_km,
         seed=seed,
         labels=labels,
     )
     check_settings(settings)
     prepare_output_dir(settings.out_dir, "--out", DETECT_OUTPUTS)
-    for message in unfinished_models(models_dir, settings.models):
+    for message in unfinished_models(models_dir, settings.models, settings.method):
         warn(message)
     status = err_console if as_json else console
-    with status.status("rolling out and scoring", spinner="dots") if not quiet else _null():
+    with status.status("scoring", spinner="dots") if not quiet else _null():
         result = run_detect(settings)
         files = write_outputs(result, settings.out_dir)
     if as_json:
@@ -591,7 +798,7 @@ def detect(
         )
     t = result.timings
     console.print(
-        f"rollouts {t['rollout_s']:.1f} s, scoring {t['score_s']:.1f} s; "
+        f"scoring {t['score_s']:.1f} s; "
         f"wrote {', '.join(f.name for f in files)} to [bold]{settings.out_dir}[/]",
         highlight=False,
     )
@@ -599,6 +806,7 @@ def detect(
 
 DETECT_OUTPUTS = (
     "scores.parquet",
+    "profiles.parquet",
     "anomalies.geojson",
     "map.png",
     "map.html",

@@ -1,21 +1,17 @@
-"""Detection of abnormal tracks (section 6.2 of the paper): rollouts -> scores -> flags -> outputs.
+"""Detection of abnormal tracks (section 6.2 of the paper): scores -> flags -> outputs.
 
-For each test track, the model that learnt the traffic entering where the track enters is rolled
-out K times from the track's first point, for as many steps as the track has (the agent acts with
-its own latent noise, through the spherical rule, sticking at its region's box). A rollout's
-distance to the track is the great-circle DTW divided by the number of cells on the optimal
-warping path: the mean distance in metres between matched points, so long and short tracks
-compare (the same reading as ε in training). A track's raw score is the smallest of its K
-distances (K = 1 is the paper's protocol; the agent is stochastic, so more rollouts give a fairer
-"could the model have generated this?"). Raw scores are divided by their maximum over the test
-set, as in the paper, and tracks above `threshold` (paper: Λ = 0.75), or in the top `top_percent`,
-are flagged. For every track the point of maximum local distance along the best warping path
-tells where it deviates most.
+Each test track goes to the model whose training tracks start nearest to where it starts, and is
+scored by that model's detector (`aisdati.detectors`): by default DATI, judged either by its free
+rollouts from the track's first point (`--score rollout`, the paper's), by its teacher-forced
+one-step predictions along the track (`--score step`) or by both. Every score is in metres and
+higher means more abnormal. Flags: scores divided by their maximum over the test set above
+`threshold` (the paper's Λ = 0.75), or the `top_percent` highest, or scores above the model's
+calibrated threshold (`contamination`: the share of its own training tracks it would flag),
+which does not depend on the test set. For every track the point of largest local deviation
+(the peak of its deviation profile) tells where it strays most.
 
 Default test set (section 6.2): tracks of the `other` cluster, not used in training, whose first
-point lies within `near_km` (default 10 km) of some training track's first point: a model of `up`
-traffic judges tracks that enter from the same boundary. With several models, each track goes to
-the model with the nearest training start.
+point lies within `near_km` (default 10 km) of some training track's first point.
 """
 
 from __future__ import annotations
@@ -33,17 +29,12 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
-import torch
-from numba import njit, prange
 
-from aisdati.dtw import dtw_path, dtw_path_length
+from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.errors import UserError
-from aisdati.geo import EARTH_RADIUS_M, haversine_m
-from aisdati.model.card import card_warnings, training_mask, validate_ais_card
-from aisdati.model.checkpoint import atomic_write_bytes, load_networks
-from aisdati.model.dati import DATIConfig
-from aisdati.model.networks import DATINetworks
-from aisdati.model.rules import BoxScaler, SphericalRule
+from aisdati.geo import haversine_m
+from aisdati.model.card import card_warnings, training_mask
+from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.trackdata import CLUSTERS, Track, load_tracks, read_track_table
 
 SCORES_SCHEMA = pa.schema(
@@ -67,68 +58,31 @@ mean great-circle distance along the warping path (metres); score: score_m / max
 set; max_dev_*: the track point with the largest distance to its matched rollout point."""
 
 
-@dataclass
-class AISModel:
-    name: str
-    nets: DATINetworks
-    config: DATIConfig
-    card: dict[str, Any]
-    warnings: list[str] = field(default_factory=list)
-    """What the operator should know before trusting this model (e.g. unfinished training)."""
-
-    @property
-    def rule(self) -> SphericalRule:
-        r = self.card["rule"]
-        return SphericalRule(
-            max_sog=float(r["max_sog_kn"]),
-            max_dt_h=float(r["max_dt_h"]),
-            cog_center=float(r.get("cog_center_deg", 180.0)),
-        )
-
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        reg = self.card["region"]
-        return (
-            np.array([reg["lon"][0], reg["lat"][0]], np.float64),
-            np.array([reg["lon"][1], reg["lat"][1]], np.float64),
-        )
-
-    @property
-    def start_points(self) -> np.ndarray:
-        return np.asarray(self.card["data"]["start_points"], np.float64).reshape(-1, 2)
-
-    @property
-    def training_ids(self) -> set[int]:
-        return {int(i) for i in self.card["data"]["track_ids"]}
-
-    def training_mask(self, tracks: pd.DataFrame) -> np.ndarray:
-        """Which rows of a tracks table are this model's training tracks (by vessel and time
-        span where the card has them: track ids change when the data is ingested again)."""
-        return training_mask(self.card, tracks)
-
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        lo, hi = self.bounds
-        return np.all((points >= lo) & (points <= hi), axis=-1)
-
-
 @dataclass(frozen=True)
 class DetectSettings:
     data_dir: Path
     models_dir: Path
     out_dir: Path
     models: tuple[str, ...] = ()
-    """Model names (<models_dir>/<name>.pt/.json); empty: every model in the folder."""
+    """Model names (<models_dir>/<name>.json); empty: every model of `method` in the folder."""
+    method: str = "dati"
     cluster: str = "other"
     """Cluster of the test tracks: up, down, other or all."""
     track_ids: tuple[int, ...] = ()
     """Explicit test tracks (overrides the cluster and the start rule)."""
+    score: str = "step"
     rollouts: int = 10
     threshold: float = 0.75
     top_percent: float | None = None
+    contamination: float | None = None
     near_km: float = 10.0
     seed: int = 0
     labels: Path | None = None
     """CSV of hand labels (track_id or mmsi + start, label 0/1) for precision/recall/F1/AUC."""
+
+    @property
+    def how(self) -> ScoreSettings:
+        return ScoreSettings(self.score, self.rollouts, self.near_km, self.seed)
 
 
 @dataclass
@@ -136,44 +90,49 @@ class Detection:
     scores: pd.DataFrame
     tracks: list[Track]
     rollouts: list[np.ndarray]
-    """The best rollout per track, in the order of `tracks`."""
-    models: list[AISModel]
+    """What each track was compared with (best rollout, nearest training track or one-step
+    predictions), in the order of `tracks`."""
+    models: list[Detector]
+    profiles: list[np.ndarray] = field(default_factory=list)
+    """Each track's local deviation (m) at each of its points."""
     timings: dict[str, float] = field(default_factory=dict)
     settings: DetectSettings | None = None
     metrics: dict[str, Any] | None = None
 
 
+SCORE_DEFINITIONS = {
+    "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
+    "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
+    "both": "rollout / median training rollout score + step / median training step score",
+    "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
+    "track starting within near_km",
+}
+
+
+EVIDENCE = {
+    "rollout": "best rollout",
+    "both": "best rollout",
+    "step": "one-step predictions",
+    "nearest": "nearest training track",
+}
+
+
 # ------------------------------------------------------------------------------------ models
-def load_ais_model(stem: Path) -> AISModel:
-    weights = stem.with_suffix(".pt")
-    if weights.is_file():
-        with weights.open("rb") as fh:
-            if fh.read(2) != b"PK":  # torch.save writes a zip archive
-                raise UserError(f"{weights} is not a model weights file (damaged or foreign)")
-    nets, config, card = load_networks(stem)
-    needed = ("rule", "region", "data")
-    if card.get("kind") != "ais" or any(k not in card for k in needed):
-        raise UserError(f"{stem}.json is not an AIS model card (train one with `aisdati train`)")
-    if nets.members != 1 or card.get("decision_dim", 3) != 3:
-        raise UserError(f"{stem}: expected a single-member model with 3 decisions")
-    validate_ais_card(card, stem.with_suffix(".json"))
-    return AISModel(stem.name, nets, config, card, card_warnings(card, stem.name))
-
-
-def load_models(models_dir: Path, names: Sequence[str]) -> list[AISModel]:
-    if names:
-        stems = [models_dir / n for n in names]
-    else:
-        stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
-        stems = [s for s in stems if s.with_suffix(".pt").is_file()]
-        if not stems:
-            raise UserError(f"no models in {models_dir}: run `aisdati train --cluster up` first")
-    return [load_ais_model(s) for s in stems]
+def load_models(settings: DetectSettings) -> list[Detector]:
+    models = load_detectors(settings.models_dir, settings.models)
+    if not settings.models:
+        models = [m for m in models if m.method == settings.method]
+        if not models:
+            raise UserError(
+                f"no {settings.method} models in {settings.models_dir}: run "
+                f"`aisdati train --method {settings.method} --cluster ...` first"
+            )
+    return models
 
 
 # --------------------------------------------------------------------------------- test set
 def select_test_tracks(
-    settings: DetectSettings, models: Sequence[AISModel]
+    settings: DetectSettings, models: Sequence[Detector]
 ) -> tuple[list[int], list[int]]:
     """Test track ids and, for each, the index of the model that judges it."""
     table = read_track_table(settings.data_dir)
@@ -203,7 +162,7 @@ def select_test_tracks(
             d = haversine_m(starts[:, None, 0], starts[:, None, 1], chunk[:, 0], chunk[:, 1])
             near[:, m] = np.minimum(near[:, m], d.min(axis=1) / 1000.0)
         if not settings.track_ids:
-            trained = model.training_mask(table)
+            trained = training_mask(model.card, table)  # by vessel and time where it can
             near[trained, m] = np.inf  # a model does not judge its own training tracks
     inside = np.zeros(len(ids), dtype=bool)
     for model in models:
@@ -225,154 +184,6 @@ def select_test_tracks(
     return [int(i) for i in ids[keep]], [int(b) for b in best[keep]]
 
 
-# ---------------------------------------------------------------------------------- rollouts
-def generate(
-    model: AISModel,
-    starts: np.ndarray,
-    horizons: np.ndarray,
-    rollouts: int,
-    seed: int = 0,
-) -> np.ndarray:
-    """K rollouts from each start, all in one batch: positions [N * K, max horizon + 1, 2], rollout
-    k of start i at row i * K + k; rows past their horizon hold the last position."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # small matmuls: extra threads cost 10x on 2 busy cores
-    try:
-        return _generate(model, starts, horizons, rollouts, seed)
-    finally:
-        torch.set_num_threads(threads)
-
-
-def _generate(
-    model: AISModel, starts: np.ndarray, horizons: np.ndarray, rollouts: int, seed: int
-) -> np.ndarray:
-    nets, cfg, rule = model.nets, model.config, model.rule
-    lo, hi = model.bounds
-    scaler = BoxScaler(lo, hi, unit_low=0.0)
-    n = len(starts) * rollouts
-    pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
-    steps = int(np.max(horizons))
-    out = np.empty((n, steps + 1, 2))
-    out[:, 0] = pos
-    gen = torch.Generator().manual_seed(int(seed))
-    latent = cfg.network.latent_dim
-    eta = torch.zeros(1, n, latent)
-    limit = np.repeat(np.asarray(horizons), rollouts)
-    for t in range(steps):
-        draw = torch.randn((1, n, latent), generator=gen) * cfg.noise_sigma
-        if cfg.noise == "ou":
-            eta = eta - cfg.ou_theta * eta * cfg.ou_dt + draw * math.sqrt(cfg.ou_dt)
-        else:
-            eta = draw
-        state = torch.as_tensor(np.clip(scaler.scale(pos), 0.0, 1.0), dtype=torch.float32)[None]
-        tt = torch.full((1, n, 1), float(t))
-        with torch.no_grad():
-            action = nets.forward_actor(state, eta, nets.time_features(tt))[0].numpy()
-        decision = rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
-        proposed = rule.step(pos, decision)
-        ok = np.all(np.isfinite(proposed), axis=1) & np.all(
-            (proposed >= lo) & (proposed <= hi), axis=1
-        )
-        ok &= t < limit
-        pos = np.where(ok[:, None], proposed, pos)
-        out[:, t + 1] = pos
-    return out
-
-
-def _unit_vectors(lonlat: np.ndarray) -> np.ndarray:
-    lon, lat = np.radians(lonlat[..., 0]), np.radians(lonlat[..., 1])
-    return np.ascontiguousarray(
-        np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
-    )
-
-
-@njit(cache=True, parallel=True)
-def _batch_dtw(rolls, lengths, tracks, offsets, owner):  # pragma: no cover - compiled
-    """Exact great-circle DTW cost and path length of rollout b (its first lengths[b] points)
-    against track owner[b] (tracks[offsets[o]:offsets[o + 1]]), for every b in parallel.
-    Points are unit vectors; the great-circle distance 2R asin(chord / 2) equals the haversine
-    formula. Ties prefer diagonal, then up, then left, as `aisdati.dtw`."""
-    nb = rolls.shape[0]
-    cost = np.empty(nb)
-    plen = np.empty(nb, dtype=np.int64)
-    for b in prange(nb):
-        o = owner[b]
-        lo, hi = offsets[o], offsets[o + 1]
-        m = hi - lo
-        n = lengths[b]
-        prev_d = np.full(m, np.inf)
-        prev_l = np.zeros(m, dtype=np.int64)
-        cur_d = np.empty(m)
-        cur_l = np.empty(m, dtype=np.int64)
-        for i in range(n):
-            ax, ay, az = rolls[b, i, 0], rolls[b, i, 1], rolls[b, i, 2]
-            for j in range(m):
-                dx = ax - tracks[lo + j, 0]
-                dy = ay - tracks[lo + j, 1]
-                dz = az - tracks[lo + j, 2]
-                half = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz)
-                d = 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
-                if i == 0 and j == 0:
-                    cur_d[0] = d
-                    cur_l[0] = 1
-                    continue
-                best = np.inf
-                move = 0
-                if j > 0:
-                    best = prev_d[j - 1]
-                if prev_d[j] < best:
-                    best = prev_d[j]
-                    move = 1
-                if j > 0 and cur_d[j - 1] < best:
-                    best = cur_d[j - 1]
-                    move = 2
-                cur_d[j] = d + best
-                if move == 0:
-                    cur_l[j] = prev_l[j - 1] + 1
-                elif move == 1:
-                    cur_l[j] = prev_l[j] + 1
-                else:
-                    cur_l[j] = cur_l[j - 1] + 1
-            prev_d, cur_d = cur_d, prev_d
-            prev_l, cur_l = cur_l, prev_l
-        cost[b] = prev_d[m - 1]
-        plen[b] = prev_l[m - 1]
-    return cost, plen
-
-
-def batch_mean_dtw_m(
-    rollouts: np.ndarray, lengths: np.ndarray, tracks: Sequence[np.ndarray], owner: np.ndarray
-) -> np.ndarray:
-    """`mean_dtw_m(rollouts[b, :lengths[b]], tracks[owner[b]])` for every b, on all cores."""
-    offsets = np.zeros(len(tracks) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(t) for t in tracks])
-    flat = _unit_vectors(np.concatenate(tracks))
-    cost, plen = _batch_dtw(
-        _unit_vectors(rollouts),
-        np.asarray(lengths, np.int64),
-        flat,
-        offsets,
-        np.asarray(owner, np.int64),
-    )
-    return cost / plen
-
-
-def mean_dtw_m(a: np.ndarray, b: np.ndarray) -> float:
-    """Great-circle DTW / warping-path length: the mean distance (m) between matched points."""
-    cost, length = dtw_path_length(a, b, "haversine")
-    return cost / length
-
-
-def max_deviation(rollout: np.ndarray, track: np.ndarray) -> tuple[float, int]:
-    """The largest local distance (m) along the optimal warping path, and the track index."""
-    _, path = dtw_path(rollout, track, "haversine")
-    d = haversine_m(
-        rollout[path[:, 0], 0], rollout[path[:, 0], 1], track[path[:, 1], 0], track[path[:, 1], 1]
-    )
-    k = int(np.argmax(d))
-    return float(d[k]), int(path[k, 1])
-
-
 def flag(scores: np.ndarray, threshold: float, top_percent: float | None) -> np.ndarray:
     if top_percent is not None:
         count = math.ceil(len(scores) * top_percent / 100.0)
@@ -388,57 +199,57 @@ def check_settings(settings: DetectSettings) -> None:
         raise UserError(f"--threshold must be in (0, 1], got {settings.threshold:g}")
     if settings.top_percent is not None and not (0.0 < settings.top_percent <= 100.0):
         raise UserError(f"--top-percent must be in (0, 100], got {settings.top_percent:g}")
+    if settings.contamination is not None and not (0.0 < settings.contamination < 1.0):
+        raise UserError(f"--contamination must be in (0, 1), got {settings.contamination:g}")
+    if settings.top_percent is not None and settings.contamination is not None:
+        raise UserError("give --top-percent or --contamination, not both")
     if settings.rollouts < 1:
         raise UserError(f"--rollouts must be at least 1, got {settings.rollouts}")
-    if settings.near_km <= 0:
+    if not settings.near_km > 0:
         raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
+    if settings.score not in SCORES:
+        raise UserError(f"--score must be one of {', '.join(SCORES)}, got {settings.score!r}")
 
 
 def detect(settings: DetectSettings) -> Detection:
     """Score the test tracks; see the module docstring."""
     check_settings(settings)
     if settings.labels is not None:
-        read_labels(settings.labels)  # fail on a bad file before the rollouts
+        read_labels(settings.labels)  # fail on a bad file before the scoring
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    models = load_models(settings.models_dir, settings.models)
+    models = load_models(settings)
     ids, owner = select_test_tracks(settings, models)
     tracks = load_tracks(settings.data_dir, ids)
     timings["load_s"] = time.perf_counter() - t0
     n = len(tracks)
-    k = settings.rollouts
     raw = np.full(n, np.nan)
-    best_rollouts: list[np.ndarray] = [np.empty((0, 2))] * n
+    threshold = np.full(n, np.nan)
+    evidence: list[np.ndarray] = [np.empty((0, 2))] * n
+    profiles: list[np.ndarray] = [np.empty(0)] * n
     t1 = time.perf_counter()
-    gen_s = 0.0
     for m, model in enumerate(models):
         idx = [i for i in range(n) if owner[i] == m]
         if not idx:
             continue
-        starts = np.array([tracks[i].positions[0] for i in idx])
-        horizons = np.array([tracks[i].steps for i in idx])
-        tg = time.perf_counter()
-        paths = generate(model, starts, horizons, k, settings.seed + m)
-        gen_s += time.perf_counter() - tg
-        dists = batch_mean_dtw_m(
-            paths,
-            np.repeat(horizons + 1, k),
-            [tracks[i].positions for i in idx],
-            np.repeat(np.arange(len(idx)), k),
-        ).reshape(len(idx), k)
+        scored = model.score([tracks[i] for i in idx], settings.how)
+        if settings.contamination is not None:
+            threshold[idx] = model.threshold(settings.how, settings.contamination)
         for j, i in enumerate(idx):
-            best = int(np.argmin(dists[j]))
-            raw[i] = dists[j, best]
-            best_rollouts[i] = paths[j * k + best, : horizons[j] + 1].copy()
-    timings["rollout_s"] = gen_s
-    timings["score_s"] = time.perf_counter() - t1 - gen_s
+            raw[i] = scored.score_m[j]
+            evidence[i] = scored.evidence[j]
+            profiles[i] = scored.profiles[j]
+    timings["score_s"] = time.perf_counter() - t1
     top = float(np.max(raw)) if n else 1.0
     norm = raw / top if top > 0 else np.zeros(n)
-    flagged = flag(norm, settings.threshold, settings.top_percent)
+    if settings.contamination is not None:
+        flagged = raw > threshold
+    else:
+        flagged = flag(norm, settings.threshold, settings.top_percent)
     order = np.argsort(-norm, kind="stable")
     rank = np.empty(n, dtype=np.int64)
     rank[order] = np.arange(1, n + 1)
-    devs = [max_deviation(best_rollouts[i], tracks[i].positions) for i in range(n)]
+    peak = [int(np.argmax(p)) for p in profiles]
     scores = pd.DataFrame(
         {
             "track_id": [t.track_id for t in tracks],
@@ -449,14 +260,14 @@ def detect(settings: DetectSettings) -> Detection:
             "score": norm,
             "flagged": flagged,
             "rank": rank,
-            "max_dev_m": [d for d, _ in devs],
-            "max_dev_lon": [tracks[i].positions[j, 0] for i, (_, j) in enumerate(devs)],
-            "max_dev_lat": [tracks[i].positions[j, 1] for i, (_, j) in enumerate(devs)],
-            "max_dev_index": [j for _, j in devs],
+            "max_dev_m": [float(p[k]) for p, k in zip(profiles, peak, strict=True)],
+            "max_dev_lon": [t.positions[k, 0] for t, k in zip(tracks, peak, strict=True)],
+            "max_dev_lat": [t.positions[k, 1] for t, k in zip(tracks, peak, strict=True)],
+            "max_dev_index": peak,
         }
     )
     timings["total_s"] = time.perf_counter() - t0
-    result = Detection(scores, tracks, best_rollouts, models, timings, settings)
+    result = Detection(scores, tracks, evidence, models, profiles, timings, settings)
     if settings.labels is not None:
         result.metrics = evaluate_labels(result, settings.labels)
     return result
@@ -468,9 +279,12 @@ def _line(coords: np.ndarray) -> dict[str, Any]:
 
 
 def anomalies_geojson(result: Detection) -> dict[str, Any]:
-    """Flagged tracks (kind=track), their nearest rollouts (kind=rollout) and the points of
-    largest deviation (kind=max_deviation), as one FeatureCollection in lon/lat (WGS84)."""
+    """Flagged tracks (kind=track), what each was compared with (kind=evidence: its best
+    rollout, the nearest training track or its one-step predictions) and the points of largest
+    deviation (kind=max_deviation), as one FeatureCollection in lon/lat (WGS84)."""
     features = []
+    s = result.settings
+    what = EVIDENCE.get(s.method if s and s.method == "nearest" else s.score if s else "", "")
     by_id = {t.track_id: (t, r) for t, r in zip(result.tracks, result.rollouts, strict=True)}
     for row in result.scores[result.scores["flagged"]].sort_values("rank").itertuples():
         track, roll = by_id[row.track_id]
@@ -494,7 +308,7 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
         features.append(
             {
                 "type": "Feature",
-                "properties": {"kind": "rollout", "track_id": props["track_id"]},
+                "properties": {"kind": "evidence", "what": what, "track_id": props["track_id"]},
                 "geometry": _line(roll),
             }
         )
@@ -526,10 +340,11 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
         schema=SCORES_SCHEMA,
         preserve_index=False,
     )
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
     path = out / "scores.parquet"
-    atomic_write_bytes(path, sink.getvalue().to_pybytes())
+    atomic_write_bytes(path, _parquet_bytes(table))
+    files.append(path)
+    path = out / "profiles.parquet"
+    atomic_write_bytes(path, _parquet_bytes(profiles_table(result)))
     files.append(path)
     path = out / "anomalies.geojson"
     atomic_write_bytes(path, json.dumps(anomalies_geojson(result)).encode())
@@ -566,6 +381,29 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
     return files
 
 
+def _parquet_bytes(table: pa.Table) -> bytes:
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    return sink.getvalue().to_pybytes()
+
+
+def profiles_table(result: Detection) -> pa.Table:
+    """profiles.parquet: every test track's local deviation (m) at each of its reports (the
+    step error for `--score step`, the distance to the matched rollout point otherwise)."""
+    tracks, profiles = result.tracks, result.profiles
+    return pa.table(
+        {
+            "track_id": np.concatenate(
+                [np.full(len(t.positions), t.track_id, np.int64) for t in tracks]
+            ),
+            "index": np.concatenate([np.arange(len(t.positions)) for t in tracks]),
+            "lon": np.concatenate([t.positions[:, 0] for t in tracks]),
+            "lat": np.concatenate([t.positions[:, 1] for t in tracks]),
+            "deviation_m": np.concatenate(profiles),
+        }
+    )
+
+
 def _track_props(row: Any) -> dict[str, Any]:
     return {
         "track_id": int(row.track_id),
@@ -583,7 +421,10 @@ def _map_title(result: Detection) -> str:
     s = result.settings
     n, f = len(result.scores), int(result.scores["flagged"].sum())
     rule = f"top {s.top_percent:g}%" if s and s.top_percent else f"score > {s.threshold:g}"
-    return f"DATI anomalies: {f} of {n} test tracks flagged ({rule})"
+    if s and s.contamination is not None:
+        rule = f"calibrated, contamination {s.contamination:g}"
+    what = f"{s.method} ({s.score})" if s else "DATI"
+    return f"{what} anomalies: {f} of {n} test tracks flagged ({rule})"
 
 
 def report_dict(result: Detection) -> dict[str, Any]:
@@ -594,14 +435,15 @@ def report_dict(result: Detection) -> dict[str, Any]:
         if s
         else {},
         "models": [m.name for m in result.models],
-        "warnings": [w for m in result.models for w in m.warnings],
+        "warnings": [w for m in result.models for w in card_warnings(m.card, m.name)],
         "test_tracks": len(sc),
         "flagged": int(sc["flagged"].sum()),
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,
-        "score_definition": "best of K rollouts of great-circle DTW / warping-path length (m), "
-        "divided by the maximum over the test set",
+        "score_definition": SCORE_DEFINITIONS[s.method if s.method == "nearest" else s.score]
+        if s
+        else None,
     }
 
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from aisdati.geo import EARTH_RADIUS_M
 
@@ -360,3 +360,164 @@ class IncrementalDTW:
     def mean_distance(self) -> float:
         """Mean point distance along the optimal path: distance / path_length (0 when empty)."""
         return self.distance / self.path_length if self._n else 0.0
+
+
+# ------------------------------------------------------------------ batched great-circle DTW
+def unit_vectors(lonlat: np.ndarray) -> np.ndarray:
+    """(lon, lat) degrees [..., 2] -> unit vectors [..., 3]: the batched kernels below measure
+    great-circle distance as 2R asin(chord / 2), which equals the haversine formula."""
+    lon, lat = np.radians(lonlat[..., 0]), np.radians(lonlat[..., 1])
+    return np.ascontiguousarray(
+        np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+    )
+
+
+@njit(cache=True)
+def _chord_m(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:
+    dx = a[i, 0] - b[j, 0]
+    dy = a[i, 1] - b[j, 1]
+    dz = a[i, 2] - b[j, 2]
+    half = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
+
+
+@njit(cache=True)
+def _gc_cost_length(a, a_lo, n, b, b_lo, m, abandon):  # pragma: no cover - compiled
+    """Great-circle DTW cost and path length of a[a_lo:a_lo+n] against b[b_lo:b_lo+m] (unit
+    vectors), rolling rows; gives up (inf, 0) as soon as every cell of a row costs more than
+    `abandon` (the final cost can only be larger). Ties as `_best`."""
+    prev_d = np.full(m, np.inf)
+    prev_l = np.zeros(m, dtype=np.int64)
+    cur_d = np.empty(m)
+    cur_l = np.empty(m, dtype=np.int64)
+    for i in range(n):
+        row_min = np.inf
+        for j in range(m):
+            d = _chord_m(a, a_lo + i, b, b_lo + j)
+            if i == 0 and j == 0:
+                cur_d[0] = d
+                cur_l[0] = 1
+                row_min = d
+                continue
+            best = np.inf
+            move = 0
+            if j > 0:
+                best = prev_d[j - 1]
+            if prev_d[j] < best:
+                best = prev_d[j]
+                move = 1
+            if j > 0 and cur_d[j - 1] < best:
+                best = cur_d[j - 1]
+                move = 2
+            cur_d[j] = d + best
+            if move == 0:
+                cur_l[j] = prev_l[j - 1] + 1
+            elif move == 1:
+                cur_l[j] = prev_l[j] + 1
+            else:
+                cur_l[j] = cur_l[j - 1] + 1
+            if cur_d[j] < row_min:
+                row_min = cur_d[j]
+        if row_min > abandon:
+            return np.inf, 0
+        prev_d, cur_d = cur_d, prev_d
+        prev_l, cur_l = cur_l, prev_l
+    return prev_d[m - 1], prev_l[m - 1]
+
+
+@njit(cache=True, parallel=True)
+def _pairs_mean(a, a_off, a_len, b, b_off, pair_a, pair_b):  # pragma: no cover - compiled
+    out = np.empty(len(pair_a))
+    for p in prange(len(pair_a)):
+        ia, ib = pair_a[p], pair_b[p]
+        cost, length = _gc_cost_length(
+            a, a_off[ia], a_len[p], b, b_off[ib], b_off[ib + 1] - b_off[ib], np.inf
+        )
+        out[p] = cost / length
+    return out
+
+
+def _flatten(series: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    offsets = np.zeros(len(series) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(s) for s in series])
+    return unit_vectors(np.concatenate(series)), offsets
+
+
+def batch_mean_dtw_m(
+    rollouts: np.ndarray, lengths: np.ndarray, tracks: list[np.ndarray], owner: np.ndarray
+) -> np.ndarray:
+    """Great-circle DTW / warping-path length (the mean distance in metres between matched
+    points) of rollouts[b, :lengths[b]] against tracks[owner[b]], for every b, on all cores."""
+    rolls = unit_vectors(rollouts).reshape(-1, 3)
+    width = rollouts.shape[1]
+    a_off = np.arange(len(rollouts) + 1, dtype=np.int64) * width
+    b, b_off = _flatten(list(tracks))
+    pairs = np.arange(len(rollouts), dtype=np.int64)
+    return _pairs_mean(
+        rolls, a_off, np.asarray(lengths, np.int64), b, b_off, pairs, np.asarray(owner, np.int64)
+    )
+
+
+@njit(cache=True, parallel=True)
+def _nearest(q, q_off, r, r_off, cand, cand_off, lower):  # pragma: no cover - compiled
+    """For each query, the smallest mean DTW over its candidates (tried in the given order,
+    which should be by increasing `lower`), skipping those whose lower bound cannot win and
+    abandoning a DTW once its cost passes best * (n + m - 1) (the longest path)."""
+    nq = len(q_off) - 1
+    best = np.full(nq, np.inf)
+    arg = np.full(nq, -1, dtype=np.int64)
+    for k in prange(nq):
+        n = q_off[k + 1] - q_off[k]
+        for c in range(cand_off[k], cand_off[k + 1]):
+            if lower[c] >= best[k]:
+                break
+            j = cand[c]
+            m = r_off[j + 1] - r_off[j]
+            cost, length = _gc_cost_length(
+                q, q_off[k], n, r, r_off[j], m, best[k] * (n + m - 1)
+            )
+            if length > 0 and cost / length < best[k]:
+                best[k] = cost / length
+                arg[k] = j
+    return best, arg
+
+
+def nearest_mean_dtw_m(
+    queries: list[np.ndarray], references: list[np.ndarray], candidates: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact nearest reference of each query in mean great-circle DTW (metres), searching only
+    `candidates[k]` (reference indices) for query k. Returns (distance, index); inf and -1 for
+    a query without candidates. Pruning is exact: the endpoints are always matched, so
+    (d(first, first) + d(last, last)) / (n + m - 1) bounds the mean from below; candidates are
+    tried from the smallest bound and the search stops when the bound cannot beat the best."""
+    q, q_off = _flatten(list(queries))
+    r, r_off = _flatten(list(references))
+    order, lower = [], []
+    for k, cand in enumerate(candidates):
+        cand = np.asarray(cand, np.int64)
+        a0, a1 = q[q_off[k]], q[q_off[k + 1] - 1]
+        b0, b1 = r[r_off[cand]], r[r_off[cand + 1] - 1]
+        chord = np.linalg.norm(b0 - a0, axis=1), np.linalg.norm(b1 - a1, axis=1)
+        ends = sum(2 * EARTH_RADIUS_M * np.arcsin(np.minimum(c / 2, 1.0)) for c in chord)
+        lb = ends / (q_off[k + 1] - q_off[k] + np.diff(r_off)[cand] - 1)
+        by = np.argsort(lb, kind="stable")
+        order.append(cand[by])
+        lower.append(lb[by])
+    cand_off = np.zeros(len(candidates) + 1, dtype=np.int64)
+    cand_off[1:] = np.cumsum([len(o) for o in order])
+    flat = np.concatenate(order) if order else np.empty(0, np.int64)
+    bounds = np.concatenate(lower) if lower else np.empty(0)
+    return _nearest(q, q_off, r, r_off, flat.astype(np.int64), cand_off, bounds)
+
+
+def matched_distances(track: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """For each point of `track` (lon, lat), the great-circle distance (m) to the nearest point
+    of `other` that the optimal warping path matches it with: where along the track it strays."""
+    _, path = dtw_path(other, track, "haversine")
+    a, b = other[path[:, 0]], track[path[:, 1]]
+    d = 2 * EARTH_RADIUS_M * np.arcsin(
+        np.minimum(np.linalg.norm(unit_vectors(a) - unit_vectors(b), axis=1) / 2, 1.0)
+    )
+    out = np.full(len(track), np.inf)
+    np.minimum.at(out, path[:, 1], d)
+    return out

@@ -91,6 +91,9 @@ OPTION_RANGES: dict[str, Range] = {
     "--threshold": Range(low=0.0, low_open=True, high=1.0),
     "--top-percent": Range(low=0.0, low_open=True, high=100.0),
     "--near-km": Range(low=0.0, low_open=True, high=20_037.5),  # half the Earth's circumference
+    "--contamination": Range(low=0.0, low_open=True, high=1.0, high_open=True),
+    # evaluate
+    "--train-fraction": Range(low=0.1, high=0.9),
     # integers that reach a random generator (numpy refuses negative seeds, torch huge ones)
     "--seed": Range(low=0, high=SEED_MAX),
 }
@@ -162,7 +165,7 @@ def _reason(exc: OSError) -> str:
 INGEST_DIR = re.compile(r"^\.ingest-(?:(\d+)-)?[A-Za-z0-9_]+$")
 """Ingest's spill folder: `.ingest-<pid>-<random>` (older versions: `.ingest-<random>`)."""
 TMP_FILE = re.compile(
-    r"^\.(?:aisdati-write-test|.+\.(?:parquet|json|jsonl|geojson|pt|ckpt|png|html|csv))"
+    r"^\.(?:aisdati-write-test|.+\.(?:parquet|json|jsonl|geojson|pt|ckpt|npz|png|html|csv))"
     r"\.(?:(\d+)|[A-Za-z0-9_]{8})\.tmp$"
 )
 """Our temporary files: `.<output>.<pid>.tmp` (staged) and `.<output>.<8 random>.tmp` (mkstemp)."""

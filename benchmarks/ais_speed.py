@@ -3,9 +3,9 @@ rollout + scoring time for 143 test tracks of 900-1500 points with K rollouts ea
 
 The tracks are synthetic but AIS-like (Florida Straits, ~12 kn, reports every 2-60 s, a slowly
 turning course), since speed does not depend on where the ships go; the machinery is exactly the
-one `aisdati train` / `aisdati detect` run (AISTrackSource + DATITrainer, `generate` +
-`batch_mean_dtw_m`). Training is timed after a short warm-up; scoring uses an untrained model
-(the cost does not depend on the weights).
+one `aisdati train` / `aisdati detect --score rollout` run (AISTrackSource + DATITrainer,
+`AISPolicy.generate` + `batch_mean_dtw_m`). Training is timed after a short warm-up; scoring
+uses an untrained model (the cost does not depend on the weights).
 
 Run: python benchmarks/ais_speed.py [--train-steps 300] [--tracks 143] [--rollouts 10]
 (not part of the test suite; writes a markdown table to stdout).
@@ -20,8 +20,10 @@ import time
 import numpy as np
 import torch
 
-from aisdati.detect import AISModel, batch_mean_dtw_m, generate
+from aisdati.dtw import batch_mean_dtw_m
 from aisdati.model.ais import build_source, make_env
+from aisdati.model.ais_policy import AISPolicy, dati_act
+from aisdati.model.ais_space import LaneConfig
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.networks import DATINetworks
 from aisdati.trackdata import Track
@@ -44,7 +46,8 @@ def bench_training(steps: int, seed: int = 0) -> dict[str, float]:
     rng = np.random.default_rng(seed)
     tracks = [synthetic_track(rng, 901, i) for i in range(4)]
     torch.set_num_threads(1)
-    trainer = DATITrainer([make_env(build_source(tracks))], [seed], DATIConfig(episodes=10))
+    env = make_env(build_source(tracks, LaneConfig()))
+    trainer = DATITrainer([env], [seed], DATIConfig(episodes=10))
     for _ in range(20):
         trainer.step()
     t0 = time.perf_counter()
@@ -57,20 +60,14 @@ def bench_training(steps: int, seed: int = 0) -> dict[str, float]:
 def bench_scoring(n_tracks: int, rollouts: int, seed: int = 0) -> dict[str, float]:
     rng = np.random.default_rng(seed)
     tracks = [synthetic_track(rng, int(rng.integers(900, 1501)), i) for i in range(n_tracks)]
-    source = build_source(tracks)
-    lo, hi = source.bounds
+    source = build_source(tracks, LaneConfig())
     cfg = DATIConfig()
-    card = {
-        "rule": {"max_sog_kn": source.rule.max_sog, "max_dt_h": source.rule.max_dt_h},
-        "region": {"lon": [lo[0], hi[0]], "lat": [lo[1], hi[1]]},
-        "data": {"start_points": [t.positions[0].tolist() for t in tracks], "track_ids": []},
-    }
-    model = AISModel("bench", DATINetworks(2, 3, cfg.network, [seed]), cfg, card)
+    policy = AISPolicy(source.space, dati_act(DATINetworks(2, 3, cfg.network, [seed]), cfg))
     starts = np.array([t.positions[0] for t in tracks])
     horizons = np.array([t.steps for t in tracks])
     batch_mean_dtw_m(np.zeros((1, 2, 2)), np.array([2]), [np.zeros((2, 2))], np.array([0]))
     t0 = time.perf_counter()
-    paths = generate(model, starts, horizons, rollouts, seed)
+    paths = policy.generate(starts, horizons, rollouts, seed)
     t1 = time.perf_counter()
     batch_mean_dtw_m(
         paths,

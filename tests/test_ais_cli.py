@@ -106,7 +106,7 @@ def test_detect_outputs_parse(run):
     doc = json.loads((report / "anomalies.geojson").read_text())
     assert doc["type"] == "FeatureCollection"
     kinds = [f["properties"]["kind"] for f in doc["features"]]
-    assert kinds.count("track") == scores["flagged"].sum() == kinds.count("rollout")
+    assert kinds.count("track") == scores["flagged"].sum() == kinds.count("evidence")
     for f in doc["features"]:
         geom = f["geometry"]
         if geom["type"] == "LineString":

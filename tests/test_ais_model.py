@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aisdati.detect import flag, max_deviation, mean_dtw_m
+from aisdati.detect import flag
+from aisdati.dtw import batch_mean_dtw_m, dtw_path_length, matched_distances
 from aisdati.geo import haversine_m, spherical_step
 from aisdati.model.ais import build_source, make_env, track_reference
 from aisdati.trackdata import load_tracks, read_track_table
@@ -55,6 +56,11 @@ def test_spherical_rule_one_step_error_below_0_1_percent(lat):
     assert np.max(np.abs(true - dist_m) / dist_m) < 1e-3
 
 
+def mean_dtw_m(a: np.ndarray, b: np.ndarray) -> float:
+    cost, length = dtw_path_length(a, b, "haversine")
+    return cost / length
+
+
 def _detour(track: np.ndarray, km: float) -> np.ndarray:
     """The track with a smooth bump of `km` peak in its middle third, perpendicular to the line
     from its first to its last point."""
@@ -80,7 +86,8 @@ def test_planted_detour_scores_above_its_untouched_twin(processed):
     assert score_detour > 5 * score_twin
     scores = np.array([score_twin, score_detour]) / max(score_twin, score_detour)
     assert flag(scores, 0.75, None).tolist() == [False, True]
-    dev, idx = max_deviation(rollouts[0], detoured)
+    profile = matched_distances(detoured, rollouts[0])
+    dev, idx = profile.max(), int(profile.argmax())
     assert dev > 4000
     assert abs(idx - len(detoured) / 2) <= len(detoured) / 10
 
@@ -105,8 +112,6 @@ def test_label_metrics_weighted_f1_and_auc():
 
 
 def test_batched_parallel_dtw_equals_reference_dtw():
-    from aisdati.detect import batch_mean_dtw_m
-
     rng = np.random.default_rng(0)
     origin = np.array([-80.0, 25.0])
     tracks = [np.cumsum(rng.normal(0, 0.001, (n, 2)), 0) + origin for n in (50, 80, 33)]

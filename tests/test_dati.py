@@ -199,7 +199,7 @@ def test_warmup_fills_the_buffer_with_near_perfect_decisions():
         steps = data["time"][:, 0].long().numpy()
         assert steps[0] == 0 and len(set(steps.tolist())) == cfg.batch_size
         ref = env.reference
-        expected_states = env.state_scaler.scale(ref.positions[steps])
+        expected_states = env.source.features(ref.positions[steps], None, None)
         np.testing.assert_allclose(data["state"].numpy(), expected_states, atol=1e-6)
         np.testing.assert_allclose(data["perfect"].numpy(), env.perfect_actions[steps], atol=1e-6)
         spread = (data["action"] - data["perfect"]).abs()

@@ -111,8 +111,8 @@ def test_numeric_times_in_every_unit():
 
 def _card() -> dict:
     return {
-        "kind": "ais", "state_dim": 2, "decision_dim": 3, "seeds": [0], "cluster": "up",
-        "seed": 0, "epsilon_m": 500.0,
+        "format": "aisdati-dati/1", "kind": "ais", "state_dim": 2, "decision_dim": 3,
+        "seeds": [0], "cluster": "up", "seed": 0, "epsilon_m": 500.0,
         "config": {"noise": "gaussian", "noise_sigma": 0.3, "ou_theta": 0.15, "ou_dt": 0.01,
                    "network": {"latent_dim": 64}},
         "rule": {"max_sog_kn": 20.0, "max_dt_h": 0.1, "cog_center_deg": 10.0},

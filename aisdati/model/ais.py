@@ -22,7 +22,7 @@ import json
 import subprocess
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,8 @@ import torch
 
 from aisdati import __version__
 from aisdati.errors import UserError
+from aisdati.model.ais_policy import AISPolicy, dati_act
+from aisdati.model.ais_space import PRESETS, AISSpace, LaneConfig
 from aisdati.model.card import track_keys
 from aisdati.model.checkpoint import atomic_write_bytes, save_networks
 from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
@@ -42,7 +44,6 @@ from aisdati.model.resume import (
     read_checkpoint,
     save_checkpoint,
 )
-from aisdati.model.rules import SphericalRule, mean_course
 from aisdati.trackdata import Track, load_tracks, read_track_table, select_cluster
 
 EPSILON_M = 500.0
@@ -51,12 +52,6 @@ EPSILON_READING = (
     "epsilon (metres) is compared with the exponentially smoothed mean great-circle distance "
     "along the optimal DTW warping path (DTW sum / number of path cells), not with the DTW sum"
 )
-BOX_MARGIN = 0.1
-"""The region is the training tracks' box widened by this fraction of its span on each side."""
-MIN_MARGIN_DEG = 0.01
-DECISION_HEADROOM = 1.1
-
-
 def track_reference(track: Track) -> Reference:
     return Reference(
         track.positions,
@@ -65,41 +60,40 @@ def track_reference(track: Track) -> Reference:
     )
 
 
-def region_box(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    allpos = np.concatenate(positions)
-    lo, hi = allpos.min(axis=0), allpos.max(axis=0)
-    margin = np.maximum((hi - lo) * BOX_MARGIN, MIN_MARGIN_DEG)
-    return lo - margin, hi + margin
-
-
-def fit_rule(tracks: Sequence[Track]) -> SphericalRule:
-    """The spherical rule with decision ranges covering every training track's perfect decisions,
-    its COG window centred on the tracks' distance-weighted mean course."""
-    base = SphericalRule(max_sog=1.0, max_dt_h=1.0)
-    decisions = np.concatenate([base.perfect_decisions(t.positions, t.dts) for t in tracks])
-    max_sog = float(decisions[:, 0].max()) * DECISION_HEADROOM
-    max_dt = float(decisions[:, 2].max()) * DECISION_HEADROOM
-    center = mean_course(decisions[:, 1], weights=decisions[:, 0] * decisions[:, 2])
-    return SphericalRule(max_sog=max(max_sog, 1.0), max_dt_h=max(max_dt, 1e-3), cog_center=center)
-
-
 class AISTrackSource(ReferenceSource):
     """References from real tracks, one per episode, each track once per pass in shuffled order."""
 
-    def __init__(
-        self,
-        references: Sequence[Reference],
-        rule: SphericalRule,
-        bounds: tuple[np.ndarray, np.ndarray],
-    ) -> None:
+    def __init__(self, references: Sequence[Reference], space: AISSpace) -> None:
         if not references:
             raise ValueError("no references")
         self.references = list(references)
-        self.rule = rule
-        self.bounds = (np.asarray(bounds[0], np.float64), np.asarray(bounds[1], np.float64))
+        self.space = space
+        self.rule = space.rule
+        self.bounds = space.bounds
         self.max_steps = max(r.steps for r in self.references)
         self.order: list[int] = []
         self.position = 0
+
+    # the agent's view and moves are the space's (the same functions score tracks later)
+    @property
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.space.state_bounds
+
+    @property
+    def time_high(self) -> float:
+        return self.space.time_high(self.max_steps)
+
+    def contains(self, position: np.ndarray) -> bool:
+        return bool(self.space.contains(position))
+
+    def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
+        return self.space.resolve(position, proposed)
+
+    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        return self.space.features(positions, previous, dts)
+
+    def time_input(self, t: np.ndarray, horizon: int) -> np.ndarray:
+        return self.space.time_input(t, horizon)
 
     def sample(self, rng: np.random.Generator) -> Reference:
         if self.position >= len(self.order):
@@ -108,6 +102,9 @@ class AISTrackSource(ReferenceSource):
         ref = self.references[self.order[self.position]]
         self.position += 1
         return ref
+
+    def restart(self) -> None:
+        self.order, self.position = [], 0
 
     def normalize(self, distance: float, path_length: int) -> float:
         """Mean great-circle distance along the warping path, metres."""
@@ -136,6 +133,14 @@ class TrainSettings:
     """Downsample the cluster to this many tracks (the paper: 170); None keeps all."""
     patience: int = 10
     epsilon_m: float = EPSILON_M
+    preset: str = "lanes"
+    """Name of the lane configuration (`aisdati.model.ais_space.PRESETS`) and its overrides."""
+    lane: LaneConfig = field(default_factory=lambda: PRESETS["lanes"])
+    track_ids: tuple[int, ...] | None = None
+    """Train on exactly these tracks of the cluster (`aisdati evaluate`'s split); None: all,
+    downsampled to `max_tracks`."""
+    stem: str | None = None
+    """Model file name in `out_dir` (default: the cluster's name)."""
     resume: bool = False
     """Continue from <out>/<cluster>.ckpt (written after every episode) when it exists."""
 
@@ -170,15 +175,19 @@ def choose_training_tracks(settings: TrainSettings) -> tuple[list[int], int]:
     table = select_cluster(read_track_table(settings.data_dir), settings.cluster, settings.data_dir)
     ids = np.sort(table["track_id"].to_numpy())
     total = len(ids)
+    if settings.track_ids is not None:
+        return sorted(int(i) for i in settings.track_ids), total
     if settings.max_tracks is not None and total > settings.max_tracks:
         rng = np.random.default_rng(settings.seed)
         ids = np.sort(rng.choice(ids, size=settings.max_tracks, replace=False))
     return [int(i) for i in ids], total
 
 
-def build_source(tracks: Sequence[Track]) -> AISTrackSource:
-    refs = [track_reference(t) for t in tracks]
-    return AISTrackSource(refs, fit_rule(tracks), region_box([t.positions for t in tracks]))
+def build_source(tracks: Sequence[Track], config: LaneConfig | None = None) -> AISTrackSource:
+    space = AISSpace.fit(
+        [t.positions for t in tracks], [t.dts for t in tracks], config or LaneConfig()
+    )
+    return AISTrackSource([track_reference(t) for t in tracks], space)
 
 
 def data_card(settings: TrainSettings, tracks: Sequence[Track], total: int) -> dict[str, Any]:
@@ -201,6 +210,23 @@ def data_card(settings: TrainSettings, tracks: Sequence[Track], total: int) -> d
     }
 
 
+def base_card(
+    settings: TrainSettings, source: AISTrackSource, data: dict[str, Any]
+) -> dict[str, Any]:
+    """What every AIS detector's card says: the data, the region, the decision ranges and the
+    lane configuration (with the preset it came from)."""
+    return {
+        "kind": "ais",
+        "cluster": settings.cluster,
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "code_version": code_version(),
+        "seed": settings.seed,
+        "data": data,
+        "preset": settings.preset,
+        **source.space.card(),
+    }
+
+
 def model_card(
     settings: TrainSettings,
     source: AISTrackSource,
@@ -209,24 +235,11 @@ def model_card(
     wall: float,
     steps: int,
 ) -> dict[str, Any]:
-    lo, hi = source.bounds
     logs = list(history)
-    best = min(logs, key=lambda g: g.mean_loss) if logs else None
+    key = (lambda g: g.validation) if source.space.config.validation else (lambda g: g.mean_loss)
+    best = min(logs, key=key) if logs else None
     return {
-        "kind": "ais",
-        "cluster": settings.cluster,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "code_version": code_version(),
-        "seed": settings.seed,
-        "data": data,
-        "region": {"lon": [float(lo[0]), float(hi[0])], "lat": [float(lo[1]), float(hi[1])]},
-        "rule": {
-            "name": "spherical (eq. 5)",
-            "decisions": ["sog_kn", "cog_deg", "dt_h"],
-            "max_sog_kn": source.rule.max_sog,
-            "max_dt_h": source.rule.max_dt_h,
-            "cog_center_deg": source.rule.cog_center,
-        },
+        **base_card(settings, source, data),
         "epsilon_m": settings.epsilon_m,
         "epsilon_interpretation": EPSILON_READING,
         "training": {
@@ -238,6 +251,10 @@ def model_card(
             "mean_reward": [round(g.mean_reward, 4) for g in logs],
             "final_dtw_m": [round(g.final_dtw, 1) for g in logs],
             "mean_loss": [round(g.mean_loss, 5) for g in logs],
+            "validation_dtw_m": [
+                None if g.validation is None else round(g.validation, 1) for g in logs
+            ],
+            "selected_by": "validation rollouts" if source.space.config.validation else "loss",
             "steps": steps,
             "wall_seconds": round(wall, 2),
             "steps_per_second": round(steps / wall, 2) if wall > 0 else None,
@@ -245,8 +262,43 @@ def model_card(
     }
 
 
-def model_stem(out_dir: Path, cluster: str) -> Path:
-    return out_dir / cluster
+def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
+    """The paper's hyperparameters, with OU latent noise at the data's median report interval
+    (hours) when the lane configuration asks for it."""
+    config = DATIConfig(episodes=settings.episodes, patience=settings.patience)
+    if settings.lane.noise == "ou":
+        dt = float(np.median(np.concatenate([t.dts for t in tracks])))
+        config = replace(config, noise="ou", ou_dt=dt)
+    return config
+
+
+class Validator:
+    """Scores a live DATI actor by its rollouts (best of R, from each validation track's first
+    point) against `validation_tracks` of the training tracks: the median mean great-circle DTW
+    in metres. Lower is better; the trainer keeps the best actor and stops on it."""
+
+    def __init__(
+        self,
+        space: AISSpace,
+        config: DATIConfig,
+        tracks: Sequence[Track],
+        lane: LaneConfig,
+        seed: int,
+    ):
+        rng = np.random.default_rng([seed, 7])
+        pick = rng.permutation(len(tracks))[: lane.validation_tracks]
+        self.tracks = [tracks[i].positions for i in sorted(pick)]
+        self.space, self.config = space, config
+        self.rollouts, self.seed = lane.validation_rollouts, seed
+
+    def __call__(self, trainer: DATITrainer, k: int) -> float:
+        policy = AISPolicy(self.space, dati_act(trainer.nets, self.config, member=k))
+        scores, _ = policy.rollout_scores(self.tracks, self.rollouts, self.seed)
+        return float(np.median(scores))
+
+
+def model_stem(settings: TrainSettings) -> Path:
+    return settings.out_dir / (settings.stem or settings.cluster)
 
 
 StepCallback = Callable[[DATITrainer, list[EpisodeLog]], None]
@@ -263,12 +315,15 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     torch.set_num_threads(1)  # one member of small networks: one thread is fastest (3x on 2 cores)
     ids, total = choose_training_tracks(settings)
     tracks = load_tracks(settings.data_dir, ids)
-    source = build_source(tracks)
+    source = build_source(tracks, settings.lane)
     data = data_card(settings, tracks, total)
-    config = DATIConfig(episodes=settings.episodes, patience=settings.patience)
+    config = dati_config(settings, tracks)
     env = make_env(source, settings.epsilon_m)
-    trainer = DATITrainer([env], [settings.seed], config)
-    stem = model_stem(settings.out_dir, settings.cluster)
+    validate = None
+    if settings.lane.validation:
+        validate = Validator(source.space, config, tracks, settings.lane, settings.seed)
+    trainer = DATITrainer([env], [settings.seed], config, validate)
+    stem = model_stem(settings)
     log_path = stem.with_suffix(".log.jsonl")
     ckpt_path = stem.with_suffix(".ckpt")
     log_lines: list[str] = []
@@ -311,6 +366,10 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
         card = model_card(settings, source, data, trainer.history, elapsed(), steps)
         card["training"]["finished"] = trainer.done
         save_networks(stem, trainer.final, config, card)
+        if source.space.corridor is not None:
+            corridor_path = stem.with_suffix(".corridor.npz")
+            if not corridor_path.is_file():
+                atomic_write_bytes(corridor_path, source.space.corridor.to_bytes())
         atomic_write_bytes(log_path, "".join(log_lines).encode())
         if trainer.done:
             ckpt_path.unlink(missing_ok=True)

@@ -143,26 +143,18 @@ def _show(value: Any) -> str:
 
 
 def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
-    """Check an AIS model card as a whole (what `load_ais_model` and `detect` rely on) and return
-    it; the first field out of type, range or finiteness raises a one-line `UserError`."""
+    """Check an AIS model card as a whole (what loading a detector and `detect` rely on) and
+    return it; the first field out of type, range or finiteness raises a one-line `UserError`.
+    Every detector's card (dati, bc, nearest) shares the data, region, rule and lane fields;
+    DATI's and BC's add their networks' settings."""
     card = _Card(doc, path)
     if not isinstance(doc, dict):
         raise UserError(f"model card {path}: expected a JSON object, got {type(doc).__name__}")
     if doc.get("kind") != "ais":
         raise UserError(f"{path} is not an AIS model card (train one with `aisdati train`)")
-    card.integer("state_dim", 2, 2)
-    card.integer("decision_dim", 3, 3)
-    seeds = card.array("seeds", length=1)
-    card.integer("seeds[0]", value=seeds[0])
+    fmt = doc.get("format")
     card.text("cluster")
     card.integer("seed")
-
-    # the networks' noise at rollout time
-    card.choice("config.noise", ("gaussian", "ou"))
-    card.number("config.noise_sigma", 0.0, 100.0)
-    card.number("config.ou_theta", 0.0, 100.0)
-    card.number("config.ou_dt", 0.0, 100.0, low_open=True)
-    card.integer("config.network.latent_dim", 1)
 
     # the update rule and the region it sticks to
     card.number("rule.max_sog_kn", 0.0, 1000.0, low_open=True)
@@ -171,7 +163,36 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
         card.number("rule.cog_center_deg", -360.0, 360.0)
     card.interval("region.lon", -360.0, 360.0)
     card.interval("region.lat", -91.0, 91.0)
-    card.number("epsilon_m", 0.0, low_open=True)
+    lane = card.get("lane_config", None)
+    if lane is not None:
+        if not isinstance(lane, dict):
+            raise card.fail("lane_config", "an object", lane)
+        if "corridor_km" in lane:
+            card.number("lane_config.corridor_km", 0.0, 1000.0, low_open=True)
+        for key in ("validation_tracks", "validation_rollouts"):
+            if key in lane:
+                card.integer(f"lane_config.{key}", 1)
+
+    # the networks
+    if fmt in ("aisdati-dati/1", "aisdati-bc/1"):
+        seeds = card.array("seeds", length=1)
+        card.integer("seeds[0]", value=seeds[0])
+    if fmt == "aisdati-dati/1":
+        card.choice("state_dim", (2, 5))
+        card.integer("decision_dim", 3, 3)
+        card.choice("config.noise", ("gaussian", "ou"))
+        card.number("config.noise_sigma", 0.0, 100.0)
+        card.number("config.ou_theta", 0.0, 100.0)
+        card.number("config.ou_dt", 0.0, 100.0, low_open=True)
+        card.integer("config.network.latent_dim", 1)
+        card.number("epsilon_m", 0.0, low_open=True)
+    elif fmt == "aisdati-bc/1":
+        config = card.get("config")
+        if not isinstance(config, dict):
+            raise card.fail("config", "an object", config)
+        for key, value in config.items():
+            if _is_number(value):
+                card.number(f"config.{key}", value=value)
 
     # the training data: ids, starts and (since 0.1.0) stable keys
     ids = card.array("data.track_ids", min_length=1)
@@ -189,9 +210,20 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
         card.array("data.track_keys", length=len(ids))
         parse_track_keys(keys, card)
 
+    # scores of the training tracks, which thresholds and `--score both` divide by
+    calibration = card.get("calibration", None)
+    if calibration is not None:
+        if not isinstance(calibration, dict):
+            raise card.fail("calibration", "an object", calibration)
+        for key, values in calibration.items():
+            card.array(f"calibration.{key}", min_length=1)
+            for i, v in enumerate(values):
+                card.number(f"calibration.{key}[{i}]", 0.0, value=v)
+
     # training state: `detect` warns about a model whose training did not finish
     card.boolean("training.finished", None)
-    card.integer("training.episodes_run", 0)
+    if card.get("training.episodes_run", None) is not None:
+        card.integer("training.episodes_run", 0)
     return doc
 
 
@@ -278,21 +310,25 @@ def card_warnings(card: dict[str, Any], name: str) -> list[str]:
     return warnings
 
 
-def unfinished_models(models_dir: Path, names: Sequence[str]) -> list[str]:
-    """`card_warnings` of the models `detect` is about to load (the named ones, or every model in
-    the folder), read from their cards alone so that they are shown before any work. Cards that
-    cannot be read are skipped here: loading them gives the error."""
+def unfinished_models(
+    models_dir: Path, names: Sequence[str], method: str | None = None
+) -> list[str]:
+    """`card_warnings` of the models `detect` is about to load (the named ones, or every model of
+    `method` in the folder), read from their cards alone so that they are shown before any work.
+    Cards that cannot be read are skipped here: loading them gives the error."""
     if names:
         stems = [models_dir / n for n in names]
     else:
         stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
-        stems = [s for s in stems if s.with_suffix(".pt").is_file()]
     warnings = []
     for stem in stems:
         try:
             doc = json.loads(stem.with_suffix(".json").read_text(encoding="utf-8"))
         except (OSError, ValueError):
             continue
-        if isinstance(doc, dict) and doc.get("kind") == "ais":
-            warnings += card_warnings(doc, stem.name)
+        if not isinstance(doc, dict) or doc.get("kind") != "ais":
+            continue
+        if not names and method and not str(doc.get("format", "")).startswith(f"aisdati-{method}/"):
+            continue
+        warnings += card_warnings(doc, stem.name)
     return warnings

@@ -96,6 +96,8 @@ class EpisodeLog:
     final_dtw: float
     mean_loss: float
     stopped: bool
+    validation: float | None = None
+    """The validation score of the episode's actor, when the trainer validates."""
 
 
 class LatentNoise:
@@ -182,10 +184,16 @@ class DATITrainer:
         envs: Sequence[TrajectoryImitationEnv],
         seeds: Sequence[int],
         config: DATIConfig | None = None,
+        validate: Callable[[DATITrainer, int], float] | None = None,
     ):
+        """`validate(trainer, k)`, when given, scores live member k at the end of each of its
+        episodes (lower is better); the best actor and early stopping then follow that score
+        instead of the episode's loss (see `aisdati.model.ais` for the AIS one: the DTW of the
+        actor's rollouts on validation tracks)."""
         if len(envs) != len(seeds) or not envs:
             raise ValueError("give one environment per seed, at least one")
         self.cfg = config or DATIConfig()
+        self.validate = validate
         self.seeds = [int(s) for s in seeds]
         self.state_dim = envs[0].observation_space.shape[0] - 1
         self.decision_dim = envs[0].action_space.shape[0]
@@ -242,14 +250,15 @@ class DATITrainer:
             perfect = torch.as_tensor(env.perfect_actions[steps.numpy()], dtype=torch.float32)
             spread = torch.randn(perfect.shape, generator=gen) * WARMUP_SPREAD
             spread[0] = 0.0
-            states = env.state_scaler.scale(ref.positions[steps.numpy()])
+            states = env.source.reference_states(ref)[steps.numpy()]
             rows["state"].append(torch.as_tensor(states, dtype=torch.float32))
             rows["action"].append((perfect + spread).clamp(-1, 1))
             rows["perfect"].append(perfect)
             ok = spread.abs().amax(dim=1, keepdim=True) < WARMUP_SPREAD
             rows["reward"].append(torch.where(ok, 1.0, -1.0))
             rows["noise"].append(torch.cat([self.noise.draw(k) for _ in range(b)]))
-            rows["time"].append(steps[:, None].float())
+            time = env.source.time_input(steps.numpy(), ref.steps)
+            rows["time"].append(torch.as_tensor(time, dtype=torch.float32)[:, None])
         stacked = {key: torch.stack(v) for key, v in rows.items()}
         for i in range(b):
             self.buffer.add(**{key: v[:, i] for key, v in stacked.items()})
@@ -350,8 +359,9 @@ class DATITrainer:
         steps = self._episode_steps[k]
         mean_loss = self._episode_loss[k] / steps
         self.episode[member] += 1
-        if mean_loss < self.best_loss[member]:
-            self.best_loss[member] = mean_loss
+        metric = mean_loss if self.validate is None else self.validate(self, k)
+        if metric < self.best_loss[member]:
+            self.best_loss[member] = metric
             self.best_episode[member] = self.episode[member]
             self.wait[member] = 0
             self._save_best(k)
@@ -368,6 +378,7 @@ class DATITrainer:
             final_dtw,
             mean_loss,
             stopped,
+            None if self.validate is None else metric,
         )
         self.history.append(log)
         self._episode_loss[k], self._episode_reward[k], self._episode_steps[k] = 0.0, 0.0, 0

@@ -20,11 +20,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from aisdati import ENV_ID as ENV_ID  # registered with Gymnasium by aisdati/__init__.py
 from aisdati.dtw import IncrementalDTW
 from aisdati.model.families import Family, get_family
-from aisdati.model.rules import BoxScaler, PlanarRule, UpdateRule
-
-ENV_ID = "aisdati/TrajectoryImitation-v0"
+from aisdati.model.rules import PlanarRule, UpdateRule
 
 
 @dataclass(frozen=True)
@@ -58,6 +57,44 @@ class ReferenceSource(ABC):
         """Whether a position lies in the region; the default region is the bounding box."""
         lo, hi = self.bounds
         return bool(np.all(position >= lo) and np.all(position <= hi))
+
+    def restart(self) -> None:
+        """Called on a seeded reset: forget any sampling state, so that the same seed draws
+        the same references (Gymnasium's reset contract). Sources that draw afresh from the
+        environment's generator every time have nothing to forget."""
+        return None
+
+    def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
+        """Where a move ends: the proposed point, or where the agent is when it would leave the
+        region (the paper's sticking)."""
+        ok = bool(np.all(np.isfinite(proposed))) and self.contains(proposed)
+        return proposed if ok else position
+
+    # The networks' view of the agent. By default (the paper's) the state is the position
+    # scaled into [0, 1] by the region's box and the time input is the step index.
+    @property
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Low and high of the state features (the observation space)."""
+        return np.zeros(2), np.ones(2)
+
+    @property
+    def time_high(self) -> float:
+        return float(self.max_steps)
+
+    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """States [..., d] of agents at `positions` that were at `previous` `dts` earlier."""
+        lo, hi = self.bounds
+        return np.clip((np.asarray(positions, np.float64) - lo) / (hi - lo), 0.0, 1.0)
+
+    def time_input(self, t: np.ndarray, horizon: int) -> np.ndarray:
+        return np.asarray(t, np.float64)
+
+    def reference_states(self, ref: Reference) -> np.ndarray:
+        """The states [n, d] of the reference's own points 0..n-1 (each from its predecessor)."""
+        pos = ref.positions[:-1]
+        prev = np.vstack([pos[:1], pos[:-1]])
+        dts = np.r_[0.0, ref.dts[:-1]]
+        return self.features(pos, prev, dts)
 
 
 class FamilySource(ReferenceSource):
@@ -96,18 +133,20 @@ class TrajectoryImitationEnv(gym.Env):
         self.rule = rule or source.rule
         self.epsilon = epsilon
         self.smoothing = smoothing
-        self.state_scaler = BoxScaler(*source.bounds, unit_low=0.0)
         self.decision_scaler = self.rule.decision_scaler
         n_decisions = len(self.rule.decision_names)
+        low, high = source.state_bounds
         self.observation_space = gym.spaces.Box(
-            low=np.array([0.0, 0.0, 0.0], dtype=np.float32),
-            high=np.array([1.0, 1.0, float(source.max_steps)], dtype=np.float32),
+            low=np.r_[low, 0.0].astype(np.float32),
+            high=np.r_[high, source.time_high].astype(np.float32),
             dtype=np.float32,
         )
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n_decisions,), dtype=np.float32)
         self._dtw = IncrementalDTW(metric=self.rule.metric, capacity=source.max_steps + 1)
         self.reference: Reference | None = None
         self.position = np.zeros(2)
+        self.previous = np.zeros(2)
+        self.last_dt = 0.0
         self.t = 0
         self.smoothed = 0.0
         self._perfect = np.zeros((0, n_decisions))
@@ -117,6 +156,8 @@ class TrajectoryImitationEnv(gym.Env):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start a new episode; `options={"reference": Reference}` pins the reference."""
         super().reset(seed=seed)
+        if seed is not None:
+            self.source.restart()
         options = options or {}
         ref = options.get("reference") or self.source.sample(self.np_random)
         self.reference = ref
@@ -124,6 +165,8 @@ class TrajectoryImitationEnv(gym.Env):
             self.decision_scaler.scale(self.rule.perfect_decisions(ref.positions, ref.dts)), -1, 1
         )
         self.position = ref.positions[0].astype(np.float64).copy()
+        self.previous = self.position.copy()
+        self.last_dt = 0.0
         self.t = 0
         self.smoothed = 0.0
         self._dtw.reset()
@@ -144,9 +187,10 @@ class TrajectoryImitationEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         decision = self.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
         proposed = self.rule.step(self.position, decision)
-        stuck = not (np.all(np.isfinite(proposed)) and self.source.contains(proposed))
-        if not stuck:
-            self.position = proposed
+        moved = self.source.resolve(self.position, proposed)
+        stuck = bool(np.all(moved == self.position))
+        self.previous, self.position = self.position, moved
+        self.last_dt = float(self.reference.dts[self.t])
         self.t += 1
         revealed = self.reference.positions[self.t]
         distance = self._dtw.push(self.position, revealed)
@@ -164,15 +208,12 @@ class TrajectoryImitationEnv(gym.Env):
         return self._observation(), reward, terminated, False, info
 
     def _observation(self) -> np.ndarray:
-        scaled = np.clip(self.state_scaler.scale(self.position), 0.0, 1.0)
-        return np.array([scaled[0], scaled[1], self.t], dtype=np.float32)
+        state = self.source.features(self.position, self.previous, self.last_dt)
+        time = self.source.time_input(self.t, self.horizon)
+        return np.r_[state, time].astype(np.float32)
 
 
 def make_family_env(family: str | Family = "circles", **kwargs: Any) -> TrajectoryImitationEnv:
     """Environment over a synthetic family, by name or object (the entry point of `ENV_ID`)."""
     fam = get_family(family) if isinstance(family, str) else family
     return TrajectoryImitationEnv(FamilySource(fam), **kwargs)
-
-
-if ENV_ID not in gym.registry:
-    gym.register(id=ENV_ID, entry_point=make_family_env)

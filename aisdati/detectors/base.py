@@ -1,0 +1,103 @@
+"""One interface for every detector (PyOD's `BaseDetector` is the model): fit on training
+tracks, score tracks (higher = more abnormal, in metres), and a flagging threshold calibrated on
+the training tracks' own scores (`contamination`: the share of normal traffic one accepts to
+flag), which does not depend on the test set."""
+
+from __future__ import annotations
+
+import json
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from aisdati.errors import UserError
+from aisdati.trackdata import Track
+
+SCORES = ("rollout", "step", "both")
+
+
+@dataclass(frozen=True)
+class ScoreSettings:
+    score: str = "step"
+    """rollout (the paper's), step (teacher-forced) or both; see `aisdati.detectors.policy`."""
+    rollouts: int = 10
+    """K: free rollouts per track, and one-step draws per report."""
+    near_km: float = 10.0
+    """`nearest`: compare with training tracks that start within this distance."""
+    seed: int = 0
+
+
+@dataclass
+class Scores:
+    """What a detector says about N tracks."""
+
+    score_m: np.ndarray
+    """[N] raw scores, metres; higher = more abnormal."""
+    profiles: list[np.ndarray]
+    """Per track, the local deviation (m) at each of its points: where it strays."""
+    evidence: list[np.ndarray]
+    """Per track, what it was compared with ([m, 2] lon/lat): best rollout, nearest training
+    track, or the one-step predictions."""
+    parts: dict[str, np.ndarray] = field(default_factory=dict)
+    """Component scores when several are combined (`both`)."""
+
+
+class Detector(ABC):
+    """A trained detector of one group of tracks (a cluster or route), saved as `<stem>.json`
+    (its card) beside method-specific files."""
+
+    method: ClassVar[str]
+    format: ClassVar[str]
+
+    def __init__(self, name: str, card: dict[str, Any]):
+        self.name = name
+        self.card = card
+
+    # ------------------------------------------------------------------ identity
+    @property
+    def training_ids(self) -> set[int]:
+        return {int(i) for i in self.card["data"]["track_ids"]}
+
+    @property
+    def start_points(self) -> np.ndarray:
+        return np.asarray(self.card["data"]["start_points"], np.float64).reshape(-1, 2)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        reg = self.card["region"]
+        return (
+            np.array([reg["lon"][0], reg["lat"][0]], np.float64),
+            np.array([reg["lon"][1], reg["lat"][1]], np.float64),
+        )
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds
+        return np.all((points >= lo) & (points <= hi), axis=-1)
+
+    # ------------------------------------------------------------------- scoring
+    @abstractmethod
+    def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
+        """Score tracks; higher = more abnormal."""
+
+    def calibration_key(self, how: ScoreSettings) -> str:
+        return how.score
+
+    def threshold(self, how: ScoreSettings, contamination: float) -> float:
+        """The (1 - contamination) quantile of the training tracks' own scores."""
+        cal = self.card.get("calibration", {}).get(self.calibration_key(how))
+        if not cal:
+            raise UserError(
+                f"model {self.name} has no calibration scores for --score {how.score}: "
+                "retrain it, or flag with --threshold / --top-percent"
+            )
+        return float(np.quantile(np.asarray(cal, np.float64), 1.0 - contamination))
+
+    def save_card(self, stem: Path) -> None:
+        from aisdati.model.checkpoint import atomic_write_bytes
+
+        doc = {"format": self.format, "method": self.method, **self.card}
+        atomic_write_bytes(stem.with_suffix(".json"), json.dumps(doc, indent=2).encode())

@@ -1,0 +1,164 @@
+"""Detectors that judge tracks with a learnt policy: `dati` (the paper's) and `bc`.
+
+Both score the same two ways (`aisdati.detectors.policy`): free rollouts (`rollout`, the
+paper's), teacher-forced one-step errors (`step`), or `both`: the sum of the two scores, each
+divided by the median of the training tracks' own scores of that kind, so neither dominates by
+its unit of scale (a track as typical as the median training track scores 2).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from aisdati.detectors.base import Detector, Scores, ScoreSettings
+from aisdati.dtw import matched_distances
+from aisdati.errors import UserError
+from aisdati.model.ais_policy import Act, AISPolicy, dati_act, tail_mean
+from aisdati.model.ais_space import AISSpace
+from aisdati.model.baselines import BCConfig, BCPolicy
+from aisdati.model.checkpoint import atomic_write_bytes, load_networks
+from aisdati.model.corridor import Corridor
+from aisdati.model.dati import DATIConfig
+from aisdati.model.networks import DATINetworks
+from aisdati.trackdata import Track
+
+
+class PolicyDetector(Detector):
+    """A detector built on an `AISPolicy`; subclasses say how the policy acts."""
+
+    corridor: Corridor | None = None
+
+    def policy(self) -> AISPolicy:
+        return AISPolicy(AISSpace.from_card(self.card, self.corridor), self.make_act)
+
+    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
+        raise NotImplementedError
+
+    def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
+        policy = self.policy()
+        positions = [t.positions for t in tracks]
+        parts: dict[str, np.ndarray] = {}
+        evidence: list[np.ndarray] = []
+        profiles: list[np.ndarray] = []
+        if how.score in ("rollout", "both"):
+            parts["rollout"], evidence = policy.rollout_scores(positions, how.rollouts, how.seed)
+            profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
+        if how.score in ("step", "both"):
+            errors, predicted = policy.step_errors(
+                positions, [t.dts for t in tracks], how.rollouts, how.seed
+            )
+            parts["step"] = np.array([tail_mean(e) for e in errors])
+            profiles = [np.concatenate([[0.0], e]) for e in errors]
+            if how.score == "step":
+                evidence = [
+                    np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
+                ]
+        if how.score == "both":
+            cal = self.card.get("calibration", {})
+            if not cal.get("rollout") or not cal.get("step"):
+                raise UserError(f"model {self.name} has no calibration scores: retrain it")
+            score = sum(parts[k] / float(np.median(cal[k])) for k in ("rollout", "step"))
+        else:
+            score = parts[how.score]
+        return Scores(np.asarray(score, np.float64), profiles, evidence, parts)
+
+    def calibrate(self, tracks: Sequence[Track], how: ScoreSettings) -> None:
+        """Score the training tracks each way; `threshold` and `both` read these."""
+        cal = {
+            k: [round(float(v), 2) for v in self.score(tracks, replace(how, score=k)).score_m]
+            for k in ("rollout", "step")
+        }
+        both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
+        self.card["calibration"] = {**cal, "both": [round(float(v), 4) for v in both]}
+
+
+# ----------------------------------------------------------------------------------- DATI
+class DATIDetector(PolicyDetector):
+    method = "dati"
+    format = "aisdati-dati/1"
+
+    def __init__(self, name: str, card: dict[str, Any], nets: DATINetworks, config: DATIConfig):
+        super().__init__(name, card)
+        self.nets, self.config = nets, config
+
+    @classmethod
+    def load(cls, stem: Path, card: dict[str, Any]) -> DATIDetector:
+        nets, config, meta = load_networks(stem)
+        if nets.members != 1 or meta.get("decision_dim", 3) != 3:
+            raise UserError(f"{stem}: expected a single-member model with 3 decisions")
+        det = cls(stem.name, meta, nets, config)
+        det.corridor = _corridor(stem, meta)
+        return det
+
+    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
+        return dati_act(self.nets, self.config)(n, seed, temporal)
+
+
+# ------------------------------------------------------------------------------------- BC
+class BCDetector(PolicyDetector):
+    """Behavioural cloning (a Gaussian policy on position and step index, the self-test's BC),
+    rolled out and scored exactly like DATI: the learnt baseline DATI has to beat."""
+
+    method = "bc"
+    format = "aisdati-bc/1"
+
+    def __init__(self, name: str, card: dict[str, Any], policy: BCPolicy):
+        super().__init__(name, card)
+        self.bc = policy
+
+    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
+        gen = torch.Generator().manual_seed(int(seed))
+
+        def act(obs: np.ndarray) -> np.ndarray:
+            x = torch.as_tensor(obs)[None]
+            with torch.no_grad():
+                mean, log_std = self.bc(x[..., :-1], x[..., -1:])
+            if self.bc.cfg.deterministic:
+                return mean[0].numpy()
+            eps = torch.randn(mean.shape, generator=gen)
+            return (mean + log_std.exp() * eps)[0].numpy()
+
+        return act
+
+    def save(self, stem: Path) -> None:
+        buf = io.BytesIO()
+        torch.save(self.bc.state_dict(), buf)
+        atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
+        self.card["config"] = self.bc.cfg.to_dict()
+        self.card["seeds"] = self.bc.seeds
+        self.save_card(stem)
+
+    @classmethod
+    def load(cls, stem: Path, card: dict[str, Any]) -> BCDetector:
+        try:
+            raw = dict(card["config"])
+            raw["log_std_range"] = tuple(raw["log_std_range"])
+            cfg = BCConfig(**raw)
+            state_dim = AISSpace.from_card(card).state_dim
+            policy = BCPolicy(state_dim, 3, cfg, card["seeds"])
+            state = torch.load(stem.with_suffix(".pt"), map_location="cpu", weights_only=True)
+            policy.load_state_dict(state)
+        except Exception as exc:  # damaged or foreign files: one line, never a traceback
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise UserError(f"cannot load model {stem}: {first}") from None
+        det = cls(stem.name, card, policy)
+        det.corridor = _corridor(stem, card)
+        return det
+
+
+def _corridor(stem: Path, card: dict[str, Any]) -> Corridor | None:
+    """The corridor saved beside a model trained with `region="corridor"`."""
+    if (card.get("lane_config") or {}).get("region") != "corridor":
+        return None
+    path = stem.with_suffix(".corridor.npz")
+    try:
+        return Corridor.from_file(path)
+    except (OSError, ValueError, KeyError) as exc:
+        raise UserError(f"cannot load {path}: {str(exc).splitlines()[0]}") from None

@@ -1,0 +1,90 @@
+"""`nearest`: the distance to the closest normal track, with no learning at all.
+
+A track's score is its mean great-circle DTW (metres along the warping path, the same unit as
+DATI's scores) to the nearest training track that starts within `near_km` of its start (all
+training tracks when none does). It is the bar every learnt detector has to clear: if imitating
+the traffic does not beat remembering it, the imitation adds nothing to detection. The search is
+exact (see `aisdati.dtw.nearest_mean_dtw_m` for the pruning). Its calibration scores are
+leave-one-vessel-out: each training track against the training tracks of other vessels.
+"""
+
+from __future__ import annotations
+
+import io
+import itertools
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aisdati.detectors.base import Detector, Scores, ScoreSettings
+from aisdati.dtw import matched_distances, nearest_mean_dtw_m
+from aisdati.errors import UserError
+from aisdati.geo import haversine_m
+from aisdati.model.checkpoint import atomic_write_bytes
+from aisdati.trackdata import Track
+
+
+class NearestDetector(Detector):
+    method = "nearest"
+    format = "aisdati-nearest/1"
+
+    def __init__(self, name: str, card: dict[str, Any], tracks: list[np.ndarray], mmsi: np.ndarray):
+        super().__init__(name, card)
+        self.tracks = tracks
+        self.mmsi = np.asarray(mmsi, np.int64)
+
+    @classmethod
+    def fit(cls, name: str, tracks: Sequence[Track], card: dict[str, Any], near_km: float = 10.0):
+        det = cls(name, card, [t.positions for t in tracks], np.array([t.mmsi for t in tracks]))
+        own = det.search([t.positions for t in tracks], near_km, exclude=det.mmsi)[0]
+        card["calibration"] = {"nearest": [round(float(s), 2) for s in own]}
+        return det
+
+    def calibration_key(self, how: ScoreSettings) -> str:
+        return "nearest"
+
+    def _candidates(self, starts: np.ndarray, near_km: float, exclude: np.ndarray | None):
+        own = np.array([t[0] for t in self.tracks])
+        d = haversine_m(starts[:, None, 0], starts[:, None, 1], own[None, :, 0], own[None, :, 1])
+        out = []
+        for k in range(len(starts)):
+            ok = np.ones(len(self.tracks), dtype=bool)
+            if exclude is not None:
+                ok &= self.mmsi != exclude[k]
+            near = np.nonzero(ok & (d[k] <= near_km * 1000.0))[0]
+            out.append(near if len(near) else np.nonzero(ok)[0])
+        return out
+
+    def search(self, queries: list[np.ndarray], near_km: float, exclude=None):
+        starts = np.array([q[0] for q in queries])
+        cands = self._candidates(starts, near_km, exclude)
+        return nearest_mean_dtw_m(queries, self.tracks, cands)
+
+    def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
+        positions = [t.positions for t in tracks]
+        dist, arg = self.search(positions, how.near_km)
+        evidence = [self.tracks[a] for a in arg]
+        profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
+        return Scores(dist, profiles, evidence)
+
+    # -------------------------------------------------------------------- files
+    def save(self, stem: Path) -> None:
+        flat = np.concatenate(self.tracks)
+        offsets = np.concatenate([[0], np.cumsum([len(t) for t in self.tracks])])
+        buf = io.BytesIO()
+        np.savez_compressed(buf, positions=flat, offsets=offsets, mmsi=self.mmsi)
+        atomic_write_bytes(stem.with_suffix(".npz"), buf.getvalue())
+        self.save_card(stem)
+
+    @classmethod
+    def load(cls, stem: Path, card: dict[str, Any]) -> NearestDetector:
+        path = stem.with_suffix(".npz")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                flat, offsets, mmsi = z["positions"], z["offsets"], z["mmsi"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise UserError(f"cannot load {path}: {str(exc).splitlines()[0]}") from None
+        tracks = [flat[a:b] for a, b in itertools.pairwise(offsets)]
+        return cls(stem.name, card, tracks, mmsi)

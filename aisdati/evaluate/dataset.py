@@ -1,0 +1,183 @@
+"""The evaluation's data set: a seeded split of one group's tracks by vessel, anomalies written
+into half of the held-out tracks, all saved in ingest's own schema (points.parquet,
+tracks.parquet) with `labels.csv` beside them, so `aisdati train` and `aisdati detect` read it
+like any ingest output."""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+import shapely
+
+from aisdati.errors import UserError
+from aisdati.evaluate.inject import MIN_POINTS, Injected, inject
+from aisdati.geo import haversine_m, initial_bearing_deg
+from aisdati.model.checkpoint import atomic_write_bytes
+from aisdati.trackdata import read_track_table, select_cluster
+
+KNOT_MPS = 1852.0 / 3600.0
+MIN_SPLIT = 4
+"""Each side of the split needs at least this many tracks (and the held-out side twice this,
+half of it to take anomalies)."""
+
+
+@dataclass
+class Split:
+    train_ids: list[int]
+    heldout_ids: list[int]
+    """Held-out tracks kept normal, and (after injection) the new ids of the altered ones."""
+    labels: pd.DataFrame
+    """track_id, label (0/1), kind ('' for normal), source_track_id, start, end (the altered
+    stretch's [start, end) report indices)."""
+
+
+def split_by_vessel(
+    table: pd.DataFrame, train_fraction: float, seed: int
+) -> tuple[list[int], list[int]]:
+    """Vessels in seeded random order go to training until it holds `train_fraction` of the
+    tracks: no vessel is on both sides."""
+    rng = np.random.default_rng(seed)
+    vessels = np.sort(table["mmsi"].unique())
+    counts = table.groupby("mmsi").size()
+    target = train_fraction * len(table)
+    train_v: list[int] = []
+    have = 0
+    for v in rng.permutation(vessels):
+        if have >= target:
+            break
+        train_v.append(int(v))
+        have += int(counts[v])
+    is_train = table["mmsi"].isin(train_v)
+    return (
+        sorted(int(i) for i in table.loc[is_train, "track_id"]),
+        sorted(int(i) for i in table.loc[~is_train, "track_id"]),
+    )
+
+
+def _sog_cog(pos: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SOG and COG of each report towards the next (the last repeats the one before)."""
+    d = haversine_m(pos[:-1, 0], pos[:-1, 1], pos[1:, 0], pos[1:, 1])
+    dt = np.maximum(np.diff(t), 1e-3)
+    sog = np.r_[d / dt / KNOT_MPS, 0.0]
+    cog = np.r_[initial_bearing_deg(pos[:-1, 0], pos[:-1, 1], pos[1:, 0], pos[1:, 1]), 0.0]
+    sog[-1], cog[-1] = sog[-2], cog[-2]
+    return sog.astype(np.float32), (cog % 360.0).astype(np.float32)
+
+
+def build(
+    data_dir: Path,
+    cluster: str,
+    out: Path,
+    kinds: tuple[str, ...],
+    params: dict,
+    train_fraction: float = 0.6,
+    seed: int = 0,
+    train_ids: list[int] | None = None,
+) -> Split:
+    """Split, inject and write the evaluation data set to `out`; see the module docstring."""
+    table = select_cluster(read_track_table(data_dir), cluster, data_dir)
+    table = table[table["n_points"] >= MIN_POINTS]
+    if train_ids is None:
+        train, held = split_by_vessel(table, train_fraction, seed)
+    else:
+        train = sorted(set(train_ids) & set(table["track_id"]))
+        vessels = set(table.loc[table["track_id"].isin(train), "mmsi"])
+        held = sorted(int(i) for i in table.loc[~table["mmsi"].isin(vessels), "track_id"])
+    if len(train) < MIN_SPLIT or len(held) < 2 * MIN_SPLIT:
+        raise UserError(
+            f"cluster {cluster!r} has {len(table)} tracks of at least {MIN_POINTS} reports "
+            f"({len(train)} for training, {len(held)} held out); evaluate needs at least "
+            f"{MIN_SPLIT} for training and {2 * MIN_SPLIT} held out (from different vessels)"
+        )
+    rng = np.random.default_rng([seed, 1])
+    order = [held[i] for i in rng.permutation(len(held))]
+    altered = order[: len(held) // 2]
+    assign = {tid: kinds[k % len(kinds)] for k, tid in enumerate(altered)}
+    points = pq.read_table(
+        data_dir / "points.parquet", filters=[("track_id", "in", train + held)]
+    ).sort_by([("track_id", "ascending"), ("time", "ascending")])
+    tracks = pq.read_table(data_dir / "tracks.parquet")
+    next_id = int(pc.max(tracks["track_id"]).as_py()) + 1
+    tracks = tracks.filter(pc.is_in(tracks["track_id"], pa.array(train + held, pa.int64())))
+    keep_pts = [points.filter(pc.invert(pc.is_in(points["track_id"], pa.array(altered))))]
+    keep_trk = [tracks.filter(pc.invert(pc.is_in(tracks["track_id"], pa.array(altered))))]
+    rows = [(tid, 0, "", tid, -1, -1) for tid in held if tid not in assign]
+    for k, src in enumerate(sorted(assign)):
+        kind = assign[src]
+        pts = points.filter(pc.equal(points["track_id"], src))
+        pos = np.column_stack([pts["lon"].to_numpy(), pts["lat"].to_numpy()])
+        t_us = pts["time"].cast(pa.int64()).to_numpy()
+        t0 = int(t_us[0])
+        rng_k = np.random.default_rng([seed, 2, k])
+        got: Injected = inject(kind, pos, (t_us - t0) / 1e6, rng_k, params)
+        new_id = next_id + k
+        keep_pts.append(_points(new_id, pts["mmsi"][0].as_py(), t0, got))
+        source_row = tracks.filter(pc.equal(tracks["track_id"], src))
+        keep_trk.append(_track_row(source_row, new_id, t0, got))
+        rows.append((new_id, 1, kind, src, *got.stretch))
+    labels = pd.DataFrame(
+        rows, columns=["track_id", "label", "kind", "source_track_id", "start", "end"]
+    ).sort_values("track_id", kind="stable")
+    _write(out, pa.concat_tables(keep_pts), pa.concat_tables(keep_trk), labels)
+    heldout = sorted(int(i) for i in labels["track_id"])
+    return Split(train, heldout, labels.reset_index(drop=True))
+
+
+def _points(track_id: int, mmsi: int, t0_us: int, got: Injected) -> pa.Table:
+    from aisdati.preprocess.output import POINTS_SCHEMA, UTC_US
+
+    n = len(got.positions)
+    sog, cog = _sog_cog(got.positions, got.times_s)
+    time_us = t0_us + np.round(got.times_s * 1e6).astype(np.int64)
+    return pa.table(
+        [
+            np.full(n, track_id, np.int64),
+            np.full(n, mmsi, np.int64),
+            pa.array(time_us).view(UTC_US),
+            got.positions[:, 0],
+            got.positions[:, 1],
+            sog,
+            cog,
+        ],
+        schema=POINTS_SCHEMA,
+    )
+
+
+def _track_row(row: pa.Table, track_id: int, t0_us: int, got: Injected) -> pa.Table:
+    """The source track's row (cluster, route, ...) with what the anomaly changed."""
+    p = got.positions
+    length = float(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1]).sum()) / 1000.0
+    end_us = t0_us + round(float(got.times_s[-1]) * 1e6)
+    changes = {
+        "track_id": pa.array([track_id], pa.int64()),
+        "end": pa.array([end_us], pa.int64()).cast(row.schema.field("end").type),
+        "n_points": pa.array([len(p)], pa.int64()),
+        "length_km": pa.array([length]),
+        "stage": pa.array(["inject"]),
+        "geometry": pa.array([shapely.to_wkb(shapely.linestrings(p))], pa.binary()),
+    }
+    for name, value in changes.items():
+        if name in row.column_names:
+            i = row.column_names.index(name)
+            row = row.set_column(i, row.schema.field(i), value.cast(row.schema.field(i).type))
+    return row
+
+
+def _write(out: Path, points: pa.Table, tracks: pa.Table, labels: pd.DataFrame) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    points = points.sort_by([("track_id", "ascending"), ("time", "ascending")])
+    tracks = tracks.sort_by("track_id")
+    for name, table in (("points.parquet", points), ("tracks.parquet", tracks)):
+        sink = pa.BufferOutputStream()
+        pq.write_table(table, sink)
+        atomic_write_bytes(out / name, sink.getvalue().to_pybytes())
+    buf = io.StringIO()
+    labels.to_csv(buf, index=False)
+    atomic_write_bytes(out / "labels.csv", buf.getvalue().encode())

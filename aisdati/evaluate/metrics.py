@@ -1,0 +1,29 @@
+"""Ranking and flagging metrics of a detector against known labels (1 = anomaly)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from sklearn.metrics import average_precision_score, roc_auc_score
+
+
+def ranking(y: np.ndarray, score: np.ndarray) -> dict[str, float | None]:
+    """ROC AUC and average precision; None when only one class is present."""
+    y = np.asarray(y, int)
+    if y.min() == y.max():
+        return {"roc_auc": None, "average_precision": None}
+    return {
+        "roc_auc": float(roc_auc_score(y, score)),
+        "average_precision": float(average_precision_score(y, score)),
+    }
+
+
+def flagging(y: np.ndarray, flagged: np.ndarray) -> dict[str, Any]:
+    """Precision, recall and F1 of the anomaly class for a set of flags."""
+    y, p = np.asarray(y, bool), np.asarray(flagged, bool)
+    tp = int((y & p).sum())
+    precision = tp / max(int(p.sum()), 1)
+    recall = tp / max(int(y.sum()), 1)
+    f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+    return {"flagged": int(p.sum()), "precision": precision, "recall": recall, "f1": f1}

@@ -1,0 +1,203 @@
+"""A learnt AIS policy (DATI's forward actor, or BC) and the two ways it judges a track.
+
+Both read the same observation as in training, (position scaled by the model's box, step index
+t), and decide (SOG, COG, dt) scaled into [-1, 1], which the spherical rule turns into a move.
+
+- **rollout** (the paper's score, section 6.2): K free rollouts from the track's first point,
+  for as many steps as the track has; the score is the best rollout's mean great-circle distance
+  along the DTW warping path (metres). A free rollout compounds every small error of the policy,
+  so this mostly measures how well the model generates whole tracks.
+- **step** (teacher-forced, a departure from the paper): at every real report s_t, K decisions
+  are drawn at (s_t, t), moved by the rule over the track's *real* time step, and the error is the
+  great-circle distance from the predicted position to the real s_{t+1}; the best of the K is the
+  step error (the model as a one-step predictive density, as likelihood-based AIS detectors do).
+  Each draw takes fresh latent noise. A track's score aggregates its step errors (`STEP_TAIL`):
+  the mean of the largest `STEP_TAIL` fraction, so a short jump or loiter counts as much as a
+  long detour, whatever the track's length.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from aisdati.dtw import batch_mean_dtw_m
+from aisdati.geo import haversine_m
+from aisdati.model.ais_space import AISSpace
+from aisdati.model.dati import DATIConfig
+from aisdati.model.networks import DATINetworks
+from aisdati.model.rules import SphericalRule
+
+STEP_TAIL = 0.1
+"""Step score: the mean of the largest 10 % of a track's step errors (at least one)."""
+
+Act = Callable[[np.ndarray], np.ndarray]
+"""observations [N, state + 1] (`AISSpace.features`, then the time input) -> scaled decisions
+[N, 3]."""
+MakeAct = Callable[[int, int, bool], Act]
+"""(batch size N, seed, temporal noise) -> a stateful batched policy; with temporal noise off,
+each call draws independent latent noise (one-step scoring)."""
+
+
+@dataclass
+class AISPolicy:
+    """What scoring needs of a trained AIS policy, whatever learnt it: its space (region, rule,
+    view of the agent) and a batched policy."""
+
+    space: AISSpace
+    make_act: MakeAct
+
+    @property
+    def rule(self) -> SphericalRule:
+        return self.space.rule
+
+    def observe(
+        self,
+        positions: np.ndarray,
+        previous: np.ndarray,
+        dts: np.ndarray,
+        t: np.ndarray,
+        horizon: np.ndarray,
+    ) -> np.ndarray:
+        state = self.space.features(positions, previous, dts)
+        time = self.space.time_input(t, horizon)
+        return np.concatenate([state, np.asarray(time)[:, None]], axis=1).astype(np.float32)
+
+    # ---------------------------------------------------------------- free rollouts
+    def generate(
+        self, starts: np.ndarray, horizons: np.ndarray, rollouts: int, seed: int = 0
+    ) -> np.ndarray:
+        """K rollouts from each start in one batch: positions [N * K, max horizon + 1, 2],
+        rollout k of start i at row i * K + k; rows past their horizon hold the last position.
+        A step that would leave the region sticks or slides (`AISSpace.resolve`)."""
+        with one_thread():
+            n = len(starts) * rollouts
+            pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
+            prev, last_dt = pos.copy(), np.zeros(n)
+            steps = int(np.max(horizons))
+            out = np.empty((n, steps + 1, 2))
+            out[:, 0] = pos
+            act = self.make_act(n, seed, True)
+            limit = np.repeat(np.asarray(horizons), rollouts)
+            for t in range(steps):
+                action = act(self.observe(pos, prev, last_dt, np.full(n, t), limit))
+                decision = self.rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
+                moved = self.space.resolve(pos, self.rule.step(pos, decision))
+                live = t < limit
+                prev = np.where(live[:, None], pos, prev)
+                last_dt = np.where(live, decision[:, 2], last_dt)
+                pos = np.where(live[:, None], moved, pos)
+                out[:, t + 1] = pos
+        return out
+
+    def rollout_scores(
+        self, tracks: Sequence[np.ndarray], rollouts: int, seed: int = 0
+    ) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Best-of-K mean great-circle DTW (metres) of each track, and its best rollout."""
+        starts = np.array([t[0] for t in tracks])
+        horizons = np.array([len(t) - 1 for t in tracks])
+        paths = self.generate(starts, horizons, rollouts, seed)
+        dists = batch_mean_dtw_m(
+            paths,
+            np.repeat(horizons + 1, rollouts),
+            list(tracks),
+            np.repeat(np.arange(len(tracks)), rollouts),
+        ).reshape(len(tracks), rollouts)
+        best = dists.argmin(axis=1)
+        chosen = [paths[i * rollouts + b, : horizons[i] + 1].copy() for i, b in enumerate(best)]
+        return dists[np.arange(len(tracks)), best], chosen
+
+    # ------------------------------------------------------------- one-step errors
+    def step_errors(
+        self,
+        tracks: Sequence[np.ndarray],
+        dts: Sequence[np.ndarray],
+        draws: int,
+        seed: int = 0,
+        chunk: int = 200_000,
+    ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Per track, the best-of-K one-step prediction error (metres) at each report after the
+        first ([n - 1] for n reports), the real time step standing in for the decided dt; and
+        the best predicted positions [n - 1, 2]."""
+        obs = np.concatenate(
+            [
+                self.observe(
+                    p[:-1],
+                    np.vstack([p[:1], p[:-2]]),
+                    np.r_[0.0, d[:-1]],
+                    np.arange(len(p) - 1),
+                    np.full(len(p) - 1, len(p) - 1),
+                )
+                for p, d in zip(tracks, dts, strict=True)
+            ]
+        ).repeat(draws, axis=0)
+        here = np.concatenate([p[:-1] for p in tracks]).repeat(draws, axis=0)
+        there = np.concatenate([p[1:] for p in tracks]).repeat(draws, axis=0)
+        dt = np.concatenate(list(dts)).repeat(draws)
+        err = np.empty(len(obs))
+        pred = np.empty((len(obs), 2))
+        with one_thread():
+            for lo in range(0, len(obs), chunk):
+                sl = slice(lo, lo + chunk)
+                act = self.make_act(len(obs[sl]), seed + lo, False)
+                decision = self.rule.decision_scaler.unscale(np.clip(act(obs[sl]), -1.0, 1.0))
+                decision[:, 2] = dt[sl]
+                p = self.rule.step(here[sl], decision)
+                pred[sl] = p
+                err[sl] = haversine_m(p[:, 0], p[:, 1], there[sl, 0], there[sl, 1])
+        pick = err.reshape(-1, draws).argmin(axis=1)
+        rows = np.arange(len(pick)) * draws + pick
+        cuts = np.cumsum([len(p) - 1 for p in tracks])[:-1]
+        return np.split(err[rows], cuts), np.split(pred[rows], cuts)
+
+
+def dati_act(nets: DATINetworks, config: DATIConfig, member: int = 0) -> MakeAct:
+    """DATI's forward actor (member `member` of the ensemble) as a batched policy: each row
+    draws its own latent noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
+    latent = config.network.latent_dim
+    state_dim = nets.forward_actor.input_features.weight.shape[1]
+
+    def make(n: int, seed: int, temporal: bool) -> Act:
+        gen = torch.Generator().manual_seed(int(seed))
+        eta = torch.zeros(nets.members, n, latent)
+        ou = config.noise == "ou" and temporal
+
+        def act(obs: np.ndarray) -> np.ndarray:
+            nonlocal eta
+            draw = torch.randn((1, n, latent), generator=gen).expand(nets.members, n, latent)
+            draw = draw * config.noise_sigma
+            if ou:
+                eta = eta - config.ou_theta * eta * config.ou_dt + draw * math.sqrt(config.ou_dt)
+            else:
+                eta = draw
+            x = torch.as_tensor(obs)[None].expand(nets.members, *obs.shape)
+            with torch.no_grad():
+                time = nets.time_features(x[..., state_dim:].contiguous())
+                out = nets.forward_actor(x[..., :state_dim].contiguous(), eta, time)
+            return out[member].numpy()
+
+        return act
+
+    return make
+
+
+def tail_mean(errors: np.ndarray, fraction: float = STEP_TAIL) -> float:
+    """Mean of the largest `fraction` of the values (at least one)."""
+    k = max(1, math.ceil(len(errors) * fraction))
+    return float(np.partition(errors, len(errors) - k)[-k:].mean())
+
+
+class one_thread:
+    """Small batched matmuls: extra torch threads cost 10x on 2 busy cores."""
+
+    def __enter__(self) -> None:
+        self.threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+
+    def __exit__(self, *exc: Any) -> None:
+        torch.set_num_threads(self.threads)

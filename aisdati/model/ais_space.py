@@ -1,0 +1,260 @@
+"""How the AIS agent sees and moves, shared by training (`AISTrackSource`) and scoring
+(`AISPolicy`), with the levers that make DATI follow real lanes as one configuration.
+
+`LaneConfig()` is the paper's reading (preset `paper`): the state is the position scaled by a
+lon/lat box around the training tracks (10 % margin), the time input is the step index, decision
+ranges come from the largest perfect decisions, the kept actor is the one of the episode with the
+lowest total loss, latent noise is Gaussian. Each lever departs from it in one documented way:
+
+- `validation`: keep the actor whose rollouts from the first points of `validation_tracks`
+  training tracks (best of `validation_rollouts`) are closest in mean great-circle DTW to those
+  tracks, and stop early on that score: the WGAN loss is ~99 % critic offset and says nothing
+  about how good the rollouts are.
+- `region="corridor"`: the training tracks buffered by `corridor_km`, minus land where a
+  coastline is available; moves that would leave it slide along its edge (`Corridor`).
+- `state="motion"`: the state adds the agent's current course (sin, cos) and speed (scaled by the
+  SOG range), from its last move, so the policy can continue a course ("the state space of DATI
+  may easily be enlarged", section 7).
+- `time="progress"`: the time input is the fraction of the track done (x `PROGRESS_SCALE`, to stay
+  in the range of step indices that Time2Vec's initialisation suits) instead of the step index,
+  which means different places on tracks of different speed and reporting rate.
+- `ranges="quantile"`: SOG and dt ranges from the 99th percentile of the perfect decisions
+  (x 1.1) instead of the maxima: one 1-hour gap made the typical 3-minute dt sit at -0.91 on the
+  tanh axis, where an error of 0.02 is 40 s.
+- `noise="ou"`: Ornstein-Uhlenbeck latent noise at the data's median dt (hours), as the authors'
+  code does for most of its families.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from aisdati.errors import UserError
+from aisdati.geo import spherical_decision
+from aisdati.model.corridor import Corridor
+from aisdati.model.rules import SphericalRule, mean_course
+
+BOX_MARGIN = 0.1
+"""The region box is the training tracks' box widened by this fraction of its span."""
+MIN_MARGIN_DEG = 0.01
+DECISION_HEADROOM = 1.1
+RANGE_QUANTILE = 0.99
+PROGRESS_SCALE = 100.0
+
+
+@dataclass(frozen=True)
+class LaneConfig:
+    """The AIS set-up of DATI; the defaults are the paper's (preset `paper`)."""
+
+    validation: bool = False
+    validation_tracks: int = 8
+    validation_rollouts: int = 3
+    region: str = "box"
+    corridor_km: float = 2.0
+    state: str = "position"
+    time: str = "step"
+    ranges: str = "max"
+    noise: str = "gaussian"
+
+    def __post_init__(self) -> None:
+        choices = {
+            "region": ("box", "corridor"),
+            "state": ("position", "motion"),
+            "time": ("step", "progress"),
+            "ranges": ("max", "quantile"),
+            "noise": ("gaussian", "ou"),
+        }
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise UserError(f"{name} must be one of {', '.join(allowed)}")
+        if not (np.isfinite(self.corridor_km) and self.corridor_km > 0):
+            raise UserError(f"corridor_km must be positive, got {self.corridor_km}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None) -> LaneConfig:
+        return cls(**(data or {}))
+
+
+PRESETS: dict[str, LaneConfig] = {
+    "paper": LaneConfig(),
+    "lanes": LaneConfig(validation=True, region="corridor", ranges="quantile"),
+}
+"""Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
+combination that measured best with `aisdati evaluate` (README, "Lane learning")."""
+DEFAULT_PRESET = "lanes"
+
+
+def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:
+    """A preset with `KEY=VALUE` overrides (`validation=true`, `region=corridor`, ...); any
+    mistake is a one-line `UserError`."""
+    if preset not in PRESETS:
+        raise UserError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
+    values = PRESETS[preset].to_dict()
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or key not in values:
+            known = ", ".join(values)
+            raise UserError(f"--lane {item!r}: expected KEY=VALUE with KEY one of {known}")
+        kind = type(values[key])
+        try:
+            if kind is bool:
+                if value.strip().lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError(value)
+                values[key] = value.strip().lower() in ("true", "1", "yes")
+            else:
+                values[key] = kind(value.strip())
+        except ValueError:
+            raise UserError(f"--lane {item!r}: {value!r} is not a {kind.__name__}") from None
+    return LaneConfig(**values)
+
+
+def region_box(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    allpos = np.concatenate(positions)
+    lo, hi = allpos.min(axis=0), allpos.max(axis=0)
+    margin = np.maximum((hi - lo) * BOX_MARGIN, MIN_MARGIN_DEG)
+    return lo - margin, hi + margin
+
+
+def fit_rule(
+    positions: Sequence[np.ndarray], dts: Sequence[np.ndarray], ranges: str = "max"
+) -> SphericalRule:
+    """The spherical rule with decision ranges covering the training tracks' perfect decisions
+    (all of them, or all but the top 1 %), its COG window centred on the tracks'
+    distance-weighted mean course."""
+    base = SphericalRule(max_sog=1.0, max_dt_h=1.0)
+    decisions = np.concatenate(
+        [base.perfect_decisions(p, d) for p, d in zip(positions, dts, strict=True)]
+    )
+    pick = np.max if ranges == "max" else lambda x: np.quantile(x, RANGE_QUANTILE)
+    max_sog = float(pick(decisions[:, 0])) * DECISION_HEADROOM
+    max_dt = float(pick(decisions[:, 2])) * DECISION_HEADROOM
+    center = mean_course(decisions[:, 1], weights=decisions[:, 0] * decisions[:, 2])
+    return SphericalRule(max_sog=max(max_sog, 1.0), max_dt_h=max(max_dt, 1e-3), cog_center=center)
+
+
+@dataclass
+class AISSpace:
+    """The agent's region, decision rule and view of itself."""
+
+    bounds: tuple[np.ndarray, np.ndarray]
+    rule: SphericalRule
+    config: LaneConfig
+    corridor: Corridor | None = None
+
+    @classmethod
+    def fit(
+        cls, positions: Sequence[np.ndarray], dts: Sequence[np.ndarray], config: LaneConfig
+    ) -> AISSpace:
+        corridor = None
+        if config.region == "corridor":
+            corridor = Corridor.from_tracks(positions, config.corridor_km, on_land=_on_land())
+        return cls(region_box(positions), fit_rule(positions, dts, config.ranges), config, corridor)
+
+    @property
+    def state_dim(self) -> int:
+        return 5 if self.config.state == "motion" else 2
+
+    @property
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.config.state == "motion":
+            return np.array([0.0, 0.0, -1.0, -1.0, 0.0]), np.array([1.0, 1.0, 1.0, 1.0, 2.0])
+        return np.zeros(2), np.ones(2)
+
+    def time_high(self, max_steps: int) -> float:
+        return PROGRESS_SCALE if self.config.time == "progress" else float(max_steps)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, np.float64)
+        lo, hi = self.bounds
+        inside = np.all(np.isfinite(points), axis=-1) & np.all(
+            (points >= lo) & (points <= hi), axis=-1
+        )
+        if self.corridor is not None:
+            inside &= self.corridor.allowed(points)
+        return inside
+
+    def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
+        """Rows [N, 2] (or one point): where each move ends (sticking or sliding)."""
+        single = np.ndim(proposed) == 1
+        pos, prop = np.atleast_2d(position), np.atleast_2d(proposed)
+        if self.corridor is not None:
+            out = self.corridor.slide(pos, prop)
+            out = np.where(self.contains(out)[:, None], out, pos)
+        else:
+            out = np.where(self.contains(prop)[:, None], prop, pos)
+        return out[0] if single else out
+
+    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds
+        positions = np.asarray(positions, np.float64)
+        scaled = np.clip((positions - lo) / (hi - lo), 0.0, 1.0)
+        if self.config.state != "motion":
+            return scaled
+        previous = np.asarray(previous, np.float64)
+        dts = np.asarray(dts, np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sog, cog = spherical_decision(
+                previous[..., 0], previous[..., 1], positions[..., 0], positions[..., 1], dts
+            )
+        moving = (dts > 0) & (sog > 0) & np.isfinite(sog)
+        rad = np.radians(cog)
+        motion = np.stack(
+            [
+                np.where(moving, np.sin(rad), 0.0),
+                np.where(moving, np.cos(rad), 0.0),
+                np.where(moving, np.clip(sog / self.rule.max_sog, 0.0, 2.0), 0.0),
+            ],
+            axis=-1,
+        )
+        return np.concatenate([scaled, motion], axis=-1)
+
+    def time_input(self, t: np.ndarray, horizon: int | np.ndarray) -> np.ndarray:
+        t = np.asarray(t, np.float64)
+        if self.config.time == "progress":
+            return PROGRESS_SCALE * t / np.maximum(np.asarray(horizon, np.float64), 1.0)
+        return t
+
+    def card(self) -> dict[str, Any]:
+        lo, hi = self.bounds
+        return {
+            "region": {"lon": [float(lo[0]), float(hi[0])], "lat": [float(lo[1]), float(hi[1])]},
+            "rule": {
+                "name": "spherical (eq. 5)",
+                "decisions": ["sog_kn", "cog_deg", "dt_h"],
+                "max_sog_kn": self.rule.max_sog,
+                "max_dt_h": self.rule.max_dt_h,
+                "cog_center_deg": self.rule.cog_center,
+            },
+            "lane_config": self.config.to_dict(),
+        }
+
+    @classmethod
+    def from_card(cls, card: dict[str, Any], corridor: Corridor | None = None) -> AISSpace:
+        r, reg = card["rule"], card["region"]
+        rule = SphericalRule(
+            max_sog=float(r["max_sog_kn"]),
+            max_dt_h=float(r["max_dt_h"]),
+            cog_center=float(r.get("cog_center_deg", 180.0)),
+        )
+        bounds = (
+            np.array([reg["lon"][0], reg["lat"][0]], np.float64),
+            np.array([reg["lon"][1], reg["lat"][1]], np.float64),
+        )
+        return cls(bounds, rule, LaneConfig.from_dict(card.get("lane_config")), corridor)
+
+
+def _on_land():
+    """The coastline's land test, where the package that ships one is installed."""
+    try:
+        from aisdati.coastline import on_land
+    except ImportError:
+        return None
+    return on_land

@@ -1,0 +1,111 @@
+"""The navigable corridor of a group of tracks: where a generated track may go.
+
+The paper keeps the agent inside a region of interest drawn around the traffic, sticking at its
+edge. A lon/lat box around winding channels contains the land between them, so rollouts that
+stick only at the box cut across islands and leave the lanes. The corridor is the union of the
+training tracks buffered by `buffer_km`, minus land where a coastline is available, rasterised on
+a grid of `cell_m` cells so that a lookup costs O(1). A move that would leave it *slides*: the
+same step length is tried with the course turned by 15°, 30°, ... up to 90° either way (the
+smaller turn first), so a rollout follows a channel's bend instead of stopping dead; when no
+turn fits, the agent stays where it is (the paper's sticking).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from aisdati.geo import EARTH_RADIUS_M
+
+M_PER_DEG = np.pi * EARTH_RADIUS_M / 180.0
+TURNS_DEG = (15, -15, 30, -30, 45, -45, 60, -60, 75, -75, 90, -90)
+"""Courses tried, in this order, when a step would leave the corridor."""
+
+
+@dataclass
+class Corridor:
+    mask: np.ndarray
+    """[rows (lat), cols (lon)] True where a position is allowed."""
+    origin: np.ndarray
+    """(lon, lat) of the grid's lower-left corner."""
+    step: np.ndarray
+    """(dlon, dlat) cell size in degrees."""
+
+    @classmethod
+    def from_tracks(
+        cls,
+        tracks: Sequence[np.ndarray],
+        buffer_km: float = 2.0,
+        cell_m: float = 200.0,
+        on_land: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    ) -> Corridor:
+        pts = np.concatenate(list(tracks))
+        lat0 = float(np.mean(pts[:, 1]))
+        step = np.array([cell_m / (M_PER_DEG * np.cos(np.radians(lat0))), cell_m / M_PER_DEG])
+        margin = (buffer_km * 1000.0 / cell_m + 2) * step
+        origin = pts.min(axis=0) - margin
+        shape = np.ceil((pts.max(axis=0) + margin - origin) / step).astype(int)[::-1]
+        visited = np.zeros(shape, dtype=bool)
+        for t in tracks:  # densify each segment to half a cell so no cell is skipped
+            seg = np.diff(t, axis=0)
+            n = np.maximum(np.ceil(np.abs(seg / step).max(axis=1) * 2).astype(int), 1)
+            frac = np.concatenate([np.arange(k) / k for k in n])
+            base = np.repeat(t[:-1], n, axis=0) + np.repeat(seg, n, axis=0) * frac[:, None]
+            ij = np.floor((np.vstack([base, t[-1:]]) - origin) / step).astype(int)
+            visited[ij[:, 1], ij[:, 0]] = True
+        mask = distance_transform_edt(~visited) * cell_m <= buffer_km * 1000.0
+        if on_land is not None:
+            rows, cols = np.nonzero(mask)
+            centres = origin + (np.column_stack([cols, rows]) + 0.5) * step
+            land = on_land(centres[:, 0], centres[:, 1])
+            mask[rows[land], cols[land]] = False
+            mask[visited] = True  # where ships sailed is water, whatever the coastline says
+        return cls(mask, origin, step)
+
+    def allowed(self, points: np.ndarray) -> np.ndarray:
+        ij = np.floor((points - self.origin) / self.step)
+        ok = np.all(np.isfinite(ij), axis=-1)
+        ij = np.where(ok[..., None], ij, -1).astype(int)
+        rows, cols = self.mask.shape
+        ok &= (ij[..., 0] >= 0) & (ij[..., 0] < cols) & (ij[..., 1] >= 0) & (ij[..., 1] < rows)
+        out = np.zeros(ok.shape, dtype=bool)
+        out[ok] = self.mask[ij[ok][:, 1], ij[ok][:, 0]]
+        return out
+
+    def slide(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
+        """Where each agent ends up: the proposed point if allowed, else the smallest turn of the
+        same step that is allowed, else where it is. Rows of [N, 2] arrays."""
+        out = np.where(self.allowed(proposed)[:, None], proposed, position)
+        todo = ~self.allowed(proposed) & np.all(np.isfinite(proposed), axis=1)
+        if not todo.any():
+            return out
+        coslat = np.cos(np.radians(position[todo, 1]))
+        d = (proposed[todo] - position[todo]) * np.column_stack([coslat, np.ones_like(coslat)])
+        found = np.zeros(todo.sum(), dtype=bool)
+        result = position[todo].copy()
+        for turn in TURNS_DEG:
+            a = np.radians(turn)  # clockwise turn of a course (x east, y north)
+            rx = d[:, 0] * np.cos(a) + d[:, 1] * np.sin(a)
+            ry = -d[:, 0] * np.sin(a) + d[:, 1] * np.cos(a)
+            cand = position[todo] + np.column_stack([rx / coslat, ry])
+            ok = ~found & self.allowed(cand)
+            result[ok] = cand[ok]
+            found |= ok
+            if found.all():
+                break
+        out[todo] = result
+        return out
+
+    def to_bytes(self) -> bytes:
+        buf = io.BytesIO()
+        np.savez_compressed(buf, mask=self.mask, origin=self.origin, step=self.step)
+        return buf.getvalue()
+
+    @classmethod
+    def from_file(cls, path) -> Corridor:
+        with np.load(path, allow_pickle=False) as z:
+            return cls(z["mask"].astype(bool), z["origin"], z["step"])

@@ -1,0 +1,94 @@
+"""Speed of the two cheap detectors' scoring at the issue's scale: teacher-forced step scoring of
+1,000 tracks of 500 reports with K = 10 draws (target <= 20 s on 2 cores), and the exact
+nearest-track search of 1,000 test tracks among 1,000 training tracks of 500 points (target
+<= 60 s on 2 cores).
+
+The tracks are synthetic lanes (a few shared routes, each track jittered around its route, ~12 kn,
+3-minute reports), so that many training tracks start near every test track, as in real traffic;
+speed does not depend on where the ships are. Step scoring uses an untrained DATI actor (its cost
+does not depend on the weights).
+
+Run: python benchmarks/detection_speed.py [--tracks 1000] [--points 500] [--draws 10]
+(not part of the test suite; prints a markdown table).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+import torch
+
+from aisdati.detectors.base import ScoreSettings
+from aisdati.detectors.nearest import NearestDetector
+from aisdati.model.ais import build_source
+from aisdati.model.ais_policy import AISPolicy, dati_act, tail_mean
+from aisdati.model.ais_space import LaneConfig
+from aisdati.model.dati import DATIConfig
+from aisdati.model.networks import DATINetworks
+from aisdati.trackdata import Track
+
+
+def lanes(rng: np.random.Generator, n_tracks: int, points: int, routes: int = 5) -> list[Track]:
+    out = []
+    heads = rng.uniform(0, 360, routes)
+    for i in range(n_tracks):
+        r = i % routes
+        dt = np.full(points - 1, 0.05)
+        cog = np.radians(heads[r] + 20 * np.sin(np.linspace(0, 3, points - 1)) + rng.normal(0, 2))
+        step = 12 * dt / 60
+        lat = 53.0 + np.r_[0, np.cumsum(np.cos(cog) * step)] + rng.normal(0, 0.003)
+        lon = -129.0 + np.r_[0, np.cumsum(np.sin(cog) * step)] / np.cos(np.radians(53.0))
+        lon = lon + rng.normal(0, 0.004)
+        out.append(Track(i, 100000000 + i, None, np.stack([lon, lat], 1), dt, "other"))
+    return out
+
+
+def bench_step(tracks: list[Track], draws: int) -> float:
+    source = build_source(tracks[:50], LaneConfig())
+    cfg = DATIConfig()
+    policy = AISPolicy(source.space, dati_act(DATINetworks(2, 3, cfg.network, [0]), cfg))
+    policy.step_errors([t.positions for t in tracks[:2]], [t.dts for t in tracks[:2]], draws)
+    t0 = time.perf_counter()
+    errors, _ = policy.step_errors([t.positions for t in tracks], [t.dts for t in tracks], draws)
+    [tail_mean(e) for e in errors]
+    return time.perf_counter() - t0
+
+
+def bench_nearest(train: list[Track], test: list[Track]) -> tuple[float, float]:
+    mmsi = np.array([t.mmsi for t in train])
+    det = NearestDetector("bench", {}, [t.positions for t in train], mmsi)
+    det.search([t.positions for t in test[:2]], 10.0)  # compile
+    t0 = time.perf_counter()
+    dist, _ = det.search([t.positions for t in test], ScoreSettings().near_km)
+    return time.perf_counter() - t0, float(np.median(dist))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tracks", type=int, default=1000)
+    ap.add_argument("--points", type=int, default=500)
+    ap.add_argument("--draws", type=int, default=10)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(0)
+    test = lanes(rng, args.tracks, args.points)
+    train = lanes(rng, args.tracks, args.points)
+    step_s = bench_step(test, args.draws)
+    near_s, med = bench_nearest(train, test)
+    n, p = args.tracks, args.points
+    print(f"Detection speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
+    print("| what | measured | target |")
+    print("|---|---|---|")
+    k = args.draws
+    print(f"| step scoring: {n} tracks x {p} reports, K = {k} | {step_s:.1f} s | <= 20 s |")
+    print(
+        f"| nearest: {n} test x {n} training tracks of {p} points (exact, pruned; median "
+        f"distance {med:,.0f} m) | {near_s:.1f} s | <= 60 s |"
+    )
+
+
+if __name__ == "__main__":
+    main()

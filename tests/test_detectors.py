@@ -1,0 +1,240 @@
+"""The detectors and what DATI needs to follow lanes, on real Kitimat tracks: exact nearest-track
+search, teacher-forced step scores, the corridor, validation selection, the enlarged state, the
+presets through the model card."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors.nearest import NearestDetector
+from aisdati.dtw import dtw_path_length, nearest_mean_dtw_m
+from aisdati.evaluate.inject import inject
+from aisdati.model.ais import TrainSettings, build_source, make_env, track_reference
+from aisdati.model.ais_policy import AISPolicy
+from aisdati.model.ais_space import PRESETS, LaneConfig, lane_config
+from aisdati.model.corridor import Corridor
+from aisdati.trackdata import load_tracks, read_track_table
+
+KITIMAT = Path(__file__).parent / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
+
+
+@pytest.fixture(scope="module")
+def kitimat(tmp_path_factory):
+    from typer.testing import CliRunner
+
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("kitimat")
+    args = ["ingest", "--input", str(KITIMAT), "--roi", "none", "--min-points", "100"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def tracks(kitimat):
+    ids = read_track_table(kitimat)["track_id"].tolist()[:30]
+    return load_tracks(kitimat, ids)
+
+
+def test_nearest_search_is_exact_despite_pruning(tracks):
+    queries = [t.positions for t in tracks[:6]]
+    refs = [t.positions for t in tracks[6:]]
+    cands = [np.arange(len(refs))] * len(queries)
+    dist, arg = nearest_mean_dtw_m(queries, refs, cands)
+    for q, d, a in zip(queries, dist, arg, strict=True):
+        brute = [c / n for c, n in (dtw_path_length(q, r, "haversine") for r in refs)]
+        assert d == pytest.approx(min(brute), rel=1e-9)
+        assert brute[a] == pytest.approx(d, rel=1e-9)
+
+
+def test_nearest_calibration_leaves_each_vessel_out(tracks):
+    det = NearestDetector.fit("n", tracks, {}, near_km=10.0)
+    cal = np.asarray(det.card["calibration"]["nearest"])
+    assert np.all(cal > 0)  # no track is compared with itself or its own vessel
+    scored = det.score(tracks[:3], ScoreSettings())
+    np.testing.assert_allclose(scored.score_m, 0.0, atol=1e-6)  # its own training tracks
+
+
+def _perfect_policy(space, tracks, draws):
+    """A policy that takes every track's own perfect decisions: it reproduces them exactly."""
+    scaled = np.concatenate(
+        [space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
+         for t in tracks]
+    ).repeat(draws, axis=0)
+
+    def make(n, seed, temporal):
+        return lambda obs: scaled[: len(obs)]
+
+    return AISPolicy(space, make)
+
+
+def test_step_errors_of_a_model_that_reproduces_the_tracks_are_zero(tracks):
+    space = build_source(tracks, LaneConfig()).space
+    policy = _perfect_policy(space, tracks[:5], draws=3)
+    errors, predicted = policy.step_errors(
+        [t.positions for t in tracks[:5]], [t.dts for t in tracks[:5]], 3
+    )
+    for e, p, t in zip(errors, predicted, tracks[:5], strict=True):
+        assert len(e) == len(t.positions) - 1
+        assert e.max() < 1e-3  # metres
+        np.testing.assert_allclose(p, t.positions[1:], atol=1e-9)
+
+
+def _dead_reckoning(space):
+    """Continue at the current course and speed (read from the motion state)."""
+
+    def make(n, seed, temporal):
+        def act(obs):
+            sog = obs[:, 4] * space.rule.max_sog
+            cog = np.degrees(np.arctan2(obs[:, 2], obs[:, 3]))
+            decision = np.stack([sog, cog, np.full(len(obs), 0.05)], axis=1)
+            return space.rule.decision_scaler.scale(decision)
+
+        return act
+
+    return make
+
+
+def test_a_position_jump_gives_the_largest_step_error(tracks):
+    t = tracks[3]
+    times = np.r_[0.0, np.cumsum(t.dts)] * 3600.0
+    got = inject("jump", t.positions, times, np.random.default_rng(0))
+    i, j = got.stretch
+    space = build_source(tracks, LaneConfig(state="motion")).space
+    policy = AISPolicy(space, _dead_reckoning(space))
+    (errors,), _ = policy.step_errors([got.positions], [np.diff(got.times_s) / 3600.0], 1)
+    peak = int(np.argmax(errors)) + 1  # error k is at report k + 1
+    # at the jump itself, or the report after it (dead reckoning carries the jump one step on)
+    assert min(abs(peak - i), abs(peak - j)) <= 1, (peak, i, j)
+    assert errors.max() > 2500
+
+
+def test_corridor_refuses_steps_out_of_it_and_onto_land(tracks):
+    positions = [t.positions for t in tracks]
+    corridor = Corridor.from_tracks(positions, buffer_km=1.0)
+    assert corridor.allowed(np.concatenate(positions)).all()
+    far = positions[0][:1] + np.array([0.3, 0.3])
+    assert not corridor.allowed(far).any()
+    # a step straight out of the corridor is refused or turned into it, never taken
+    here = positions[0][10:11]
+    out = corridor.slide(here, here + np.array([0.2, 0.0]))
+    assert corridor.allowed(out).all()
+    # with a coastline saying "land" east of a meridian, no cell there is allowed
+    cut = float(np.median(np.concatenate(positions)[:, 0]))
+    dry = Corridor.from_tracks(positions, 1.0, on_land=lambda lon, lat: lon > cut + 0.05)
+    pts = np.concatenate(positions)
+    east = pts[pts[:, 0] > cut + 0.06]
+    assert dry.allowed(east).all()  # where ships sailed stays water
+    probe = east + np.array([0.008, 0.0])
+    onland = probe[~corridor.allowed(probe) | (probe[:, 0] > cut + 0.05)]
+    assert not (dry.allowed(onland) & ~corridor.allowed(onland)).any()
+
+
+def test_env_with_a_corridor_never_leaves_it(tracks):
+    source = build_source(tracks[:8], LaneConfig(region="corridor", corridor_km=1.0))
+    env = make_env(source)
+    env.reset(seed=0, options={"reference": track_reference(tracks[0])})
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        env.step(rng.uniform(-1, 1, 3).astype(np.float32))
+        assert source.space.contains(env.position)
+
+
+def test_enlarged_state_shape_scaling_and_env_checker(tracks):
+    from gymnasium.utils.env_checker import check_env
+
+    source = build_source(tracks[:8], LaneConfig(state="motion", time="progress"))
+    env = make_env(source)
+    assert env.observation_space.shape == (6,)
+    check_env(env, skip_render_check=True)
+    ref = track_reference(tracks[0])
+    obs, _ = env.reset(seed=0, options={"reference": ref})
+    assert np.all(obs[2:5] == 0) and obs[5] == 0  # no motion yet, no progress
+    for k, action in enumerate(env.perfect_actions[:20]):
+        obs, *_ = env.step(action)
+        sog, cog, _ = source.rule.perfect_decisions(ref.positions, ref.dts)[k]
+        assert obs[2] == pytest.approx(np.sin(np.radians(cog)), abs=1e-4)
+        assert obs[3] == pytest.approx(np.cos(np.radians(cog)), abs=1e-4)
+        assert obs[4] == pytest.approx(sog / source.rule.max_sog, abs=1e-4)
+        assert obs[5] == pytest.approx(100 * (k + 1) / ref.steps, rel=1e-5)
+        assert env.observation_space.contains(obs)
+
+
+def test_validation_selects_the_actor_with_the_best_validation_score():
+    from aisdati.model.dati import DATIConfig, DATITrainer
+    from aisdati.model.env import make_family_env
+
+    scores = iter([5.0, 3.0, 4.0, 6.0, 7.0])
+    snapshots = []
+
+    def validate(trainer, k):
+        snapshots.append(trainer.nets.forward_actor.out.weight.detach().clone())
+        return next(scores)
+
+    env = make_family_env("circles")
+    env.source.max_steps = env.source.family.steps
+    cfg = DATIConfig(episodes=5, patience=0)
+    trainer = DATITrainer([env], [0], cfg, validate)
+    # short episodes: pin a short reference each time
+    trainer.train()
+    assert trainer.best_episode[0] == 2
+    kept = trainer.final.forward_actor.out.weight
+    assert torch.equal(kept, snapshots[1])
+    assert [h.validation for h in trainer.history] == [5.0, 3.0, 4.0, 6.0, 7.0]
+
+
+def test_lane_presets_and_overrides():
+    from aisdati.errors import UserError
+
+    assert lane_config("paper") == LaneConfig()
+    cfg = lane_config("paper", ["validation=true", "region=corridor", "corridor_km=3"])
+    assert cfg.validation and cfg.region == "corridor" and cfg.corridor_km == 3.0
+    assert lane_config("lanes") == PRESETS["lanes"]
+    for bad in (["validation=maybe"], ["nope=1"], ["corridor_km=-1"], ["time=hours"]):
+        with pytest.raises(UserError):
+            lane_config("paper", bad)
+    with pytest.raises(UserError):
+        lane_config("fancy")
+
+
+def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, tmp_path):
+    from aisdati.detectors.train import train_detector
+
+    table = read_track_table(kitimat)
+    ids = tuple(int(i) for i in table["track_id"][:5])
+    lane = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1)
+    settings = TrainSettings(
+        data_dir=kitimat, cluster="other", out_dir=tmp_path, episodes=1, track_ids=ids,
+        preset="lanes", lane=lane,
+    )
+    trained = train_detector("dati", settings, ScoreSettings(rollouts=2))
+    card = json.loads(trained.model.with_suffix(".json").read_text())
+    assert card["preset"] == "lanes" and LaneConfig.from_dict(card["lane_config"]) == lane
+    assert card["training"]["selected_by"] == "validation rollouts"
+    assert card["training"]["validation_dtw_m"][0] > 0
+    assert (tmp_path / "other.corridor.npz").is_file()
+    det = load_detector(tmp_path / "other")
+    assert det.policy().space.config == lane and det.corridor is not None
+    # a card from before lane configurations and calibration: the paper's set-up, step score
+    old = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    (tmp_path / "old.pt").write_bytes((tmp_path / "other.pt").read_bytes())
+    det = load_detector(tmp_path / "old")
+    assert det.policy().space.config == LaneConfig()
+    tracks = load_tracks(kitimat, list(ids[:2]))
+    assert np.isfinite(det.score(tracks, ScoreSettings(rollouts=2)).score_m).all()
+
+
+def test_gym_space_of_the_paper_state_is_unchanged(tracks):
+    env = make_env(build_source(tracks[:4], LaneConfig()))
+    assert env.observation_space.shape == (3,)
+    assert isinstance(env.action_space, gym.spaces.Box)

@@ -1,0 +1,185 @@
+"""`aisdati evaluate` and the injected anomalies, on the real Kitimat tracks."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from aisdati.evaluate.inject import DEFAULTS, inject, parse_params
+from aisdati.geo import haversine_m
+from aisdati.trackdata import load_tracks, read_track_table
+
+KITIMAT = Path(__file__).parent / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
+
+
+@pytest.fixture(scope="module")
+def kitimat(tmp_path_factory):
+    from typer.testing import CliRunner
+
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("kitimat")
+    args = ["ingest", "--input", str(KITIMAT), "--roi", "none", "--min-points", "100"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def track(kitimat):
+    table = read_track_table(kitimat)
+    tid = int(table.sort_values("n_points").iloc[len(table) // 2]["track_id"])
+    (t,) = load_tracks(kitimat, [tid])
+    return t
+
+
+def _times(t):
+    return np.r_[0.0, np.cumsum(t.dts)] * 3600.0
+
+
+def _dist(a, b):
+    return haversine_m(a[:, 0], a[:, 1], b[:, 0], b[:, 1])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_detour_moves_only_its_stretch_by_at_most_its_amplitude(track, seed):
+    got = inject("detour", track.positions, _times(track), np.random.default_rng(seed))
+    i, j = got.stretch
+    d = _dist(got.positions, track.positions)
+    assert np.all(d[:i] == 0) and np.all(d[j:] == 0)
+    lo, hi = DEFAULTS["detour"]["span"]
+    assert lo * len(d) - 1 <= j - i <= hi * len(d) + 1
+    assert 0.9 * 2000 * np.sin(np.pi * 0.45) ** 2 < d[i:j].max() <= 5000 * 1.01
+    np.testing.assert_array_equal(got.times_s, _times(track))
+
+
+def test_jump_displaces_a_stretch_by_one_vector(track):
+    got = inject("jump", track.positions, _times(track), np.random.default_rng(3))
+    i, j = got.stretch
+    d = _dist(got.positions, track.positions)
+    assert np.all(d[:i] == 0) and np.all(d[j:] == 0)
+    assert np.all((d[i:j] > 2990) & (d[i:j] < 6010))
+    assert d[i:j].max() - d[i:j].min() < 50  # one displacement for the whole stretch
+
+
+def test_loiter_inserts_circles_and_shifts_later_times(track):
+    t = _times(track)
+    got = inject("loiter", track.positions, t, np.random.default_rng(4))
+    i, j = got.stretch
+    m = j - i
+    np.testing.assert_array_equal(got.positions[:i], track.positions[:i])
+    np.testing.assert_array_equal(got.positions[j:], track.positions[i:])
+    assert np.all(np.diff(got.times_s) > 0)
+    shift = got.times_s[j:] - t[i:]
+    assert np.allclose(shift, shift[0]) and shift[0] > 0
+    ring = got.positions[i:j]
+    centre = ring.mean(axis=0)
+    radius = _dist(ring, np.repeat(centre[None], m, 0))
+    assert 400 < np.median(radius) < 1600 and m >= 8
+
+
+def test_speed_keeps_positions_and_scales_the_stretch_times(track):
+    t = _times(track)
+    got = inject("speed", track.positions, t, np.random.default_rng(5))
+    i, j = got.stretch
+    np.testing.assert_array_equal(got.positions, track.positions)
+    ratio = np.diff(got.times_s)[i - 1 : j - 1] / np.diff(t)[i - 1 : j - 1]
+    assert np.allclose(ratio, ratio[0])
+    assert ratio[0] == pytest.approx(1 / 0.3) or 1 / 3 <= ratio[0] <= 1 / 2
+    np.testing.assert_allclose(np.diff(got.times_s)[: i - 1], np.diff(t)[: i - 1])
+
+
+def test_gap_removes_a_stretch(track):
+    got = inject("gap", track.positions, _times(track), np.random.default_rng(6))
+    removed = len(track.positions) - len(got.positions)
+    lo, hi = DEFAULTS["gap"]["span"]
+    assert lo * len(track.positions) - 1 <= removed <= hi * len(track.positions) + 1
+    i = got.stretch[0] + 1
+    np.testing.assert_array_equal(got.positions[:i], track.positions[:i])
+    np.testing.assert_array_equal(got.positions[i:], track.positions[i + removed :])
+
+
+def test_noise_moves_a_share_of_points(track):
+    got = inject("noise", track.positions, _times(track), np.random.default_rng(7))
+    d = _dist(got.positions, track.positions)
+    moved = d > 0
+    assert moved.sum() == round(0.2 * (len(d) - 2))
+    assert np.all((d[moved] > 490) & (d[moved] < 1010))
+    assert not moved[0] and not moved[-1]
+
+
+def test_params_parse_and_check_their_range():
+    from aisdati.errors import UserError
+
+    p = parse_params(["detour.km=1-3", "jump.km=4"])
+    assert p["detour"]["km"] == (1.0, 3.0) and p["jump"]["km"] == (4.0, 4.0)
+    for bad in ("detour.km=5-1", "detour.span=0.95", "nope.km=1", "detour.km=x", "jump.km=nan"):
+        with pytest.raises(UserError):
+            parse_params([bad])
+
+
+def _evaluate(cli, data, out, *extra):
+    return cli(
+        "evaluate", "--data", data, "--cluster", "other", "--detectors", "nearest", "--out", out,
+        "--quiet", *extra,
+    )
+
+
+def test_evaluate_nearest_is_deterministic_and_writes_everything(cli, kitimat, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert _evaluate(cli, kitimat, a, "--seed", "3").exit_code == 0
+    r = _evaluate(cli, kitimat, b, "--seed", "3")
+    assert r.exit_code == 0, r.output
+    la, lb = pd.read_csv(a / "data" / "labels.csv"), pd.read_csv(b / "data" / "labels.csv")
+    pd.testing.assert_frame_equal(la, lb)
+    assert set(la["kind"].dropna()) == {"detour", "jump", "loiter", "speed", "gap", "noise"}
+    sa, sb = pd.read_parquet(a / "scores.parquet"), pd.read_parquet(b / "scores.parquet")
+    pd.testing.assert_frame_equal(sa, sb)
+    doc = json.loads((a / "evaluation.json").read_text())
+    train = set(doc["split"]["training_track_ids"])
+    table = read_track_table(kitimat).set_index("track_id")
+    held = set(la["source_track_id"])
+    assert not set(table.loc[list(train), "mmsi"]) & set(table.loc[list(held), "mmsi"])
+    alld = next(r for r in doc["results"] if r["kind"] == "detour+jump+loiter")
+    assert alld["roc_auc"] > 0.5
+    for name in ("roc_pr.png", "examples.png"):
+        assert (a / name).stat().st_size > 10_000
+    # the injected set is an ingest output: detect reads it
+    det = cli(
+        "detect", "--data", a / "data", "--models", a / "models", "--method", "nearest",
+        "--cluster", "other", "--labels", a / "data" / "labels.csv", "--out", tmp_path / "r",
+        "--contamination", "0.05",
+    )
+    assert det.exit_code == 0, det.output
+    assert "ROC AUC" in det.output
+
+
+def test_evaluate_other_seed_changes_the_injected_set(cli, kitimat, tmp_path):
+    assert _evaluate(cli, kitimat, tmp_path / "a", "--seed", "1").exit_code == 0
+    assert _evaluate(cli, kitimat, tmp_path / "b", "--seed", "2").exit_code == 0
+    la = pd.read_csv(tmp_path / "a" / "data" / "labels.csv")
+    lb = pd.read_csv(tmp_path / "b" / "data" / "labels.csv")
+    assert not la.equals(lb)
+
+
+def test_evaluate_bad_input_is_one_line_and_writes_nothing(cli, kitimat, tmp_path):
+    cases = [
+        (("--cluster", "down"), "evaluate needs at least"),
+        (("--kinds", "detour,teleport"), "unknown anomaly kind"),
+        (("--detectors", "nearest,magic"), "unknown detector"),
+        (("--param", "jump.km=9-3"), "--param"),
+        (("--train-fraction", "0.99"), "--train-fraction"),
+        (("--lane", "region=land"), "region must be one of"),
+    ]
+    for i, (extra, needle) in enumerate(cases):
+        out = tmp_path / f"o{i}"
+        args = ["evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest"]
+        r = cli(*args, "--out", out, "--quiet", *extra)
+        assert r.exit_code == 2, r.output
+        assert needle in r.output, r.output
+        assert len(r.output.strip().splitlines()) == 1, r.output
+        assert not (out / "evaluation.json").exists()
