@@ -205,3 +205,98 @@ def html_detection_map(
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
     fmap.save(str(tmp))
     tmp.replace(path)
+
+
+ROUTE_LEGEND_MAX = 20
+"""Routes named in the legend of routes.png (the largest); the rest are drawn all the same."""
+
+ROUTE_OFFSET = 0.004
+"""routes.png draws each medoid this fraction of the map's span to the right of its direction of
+travel, so that the two directions of a lane show side by side."""
+
+
+def _route_colours(n: int) -> list:
+    cmaps = [plt.get_cmap(name) for name in ("tab10", "Dark2", "Set1")]
+    palette = [c for cmap in cmaps for c in cmap.colors]
+    return [palette[i % len(palette)] for i in range(n)]
+
+
+def _keep_right(xy: np.ndarray, shift: float, coslat: float) -> np.ndarray:
+    """A lon/lat line moved `shift` (degrees of latitude) to the right of its direction."""
+    if len(xy) < 2:
+        return xy
+    scaled = np.column_stack([xy[:, 0] * coslat, xy[:, 1]])
+    tangent = np.gradient(scaled, axis=0)
+    norm = np.hypot(tangent[:, 0], tangent[:, 1])
+    norm[norm == 0] = 1.0
+    right = np.column_stack([tangent[:, 1], -tangent[:, 0]]) / norm[:, None]
+    moved = scaled + shift * right
+    return np.column_stack([moved[:, 0] / coslat, moved[:, 1]])
+
+
+def plot_routes(
+    lines: Sequence[np.ndarray],
+    labels: Sequence[str | None],
+    routes,
+    medoids: Sequence[np.ndarray],
+    path: Path,
+    title: str = "",
+) -> None:
+    """routes.png (`routes`: the routes table, a pandas DataFrame with `route` and `n_tracks`,
+    largest first; `medoids`: each route's medoid track): tracks without a route thin and grey,
+    each route's tracks thin in its colour and its medoid track thick, drawn a little to the right
+    of its direction of travel, with a dot at the entry and arrows along it, the legend naming the
+    largest routes with their size (lon/lat, longitude stretched by 1/cos(latitude) so that
+    shapes are true)."""
+    fig, ax = plt.subplots(figsize=(10, 8.5))
+    names = list(routes["route"]) if len(routes) else []
+    colour = dict(zip(names, _route_colours(len(names)), strict=True))
+    allpts = np.concatenate(list(lines)) if len(lines) else np.zeros((1, 2))
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    coslat = float(np.cos(np.radians((lo[1] + hi[1]) / 2)))
+    shift = ROUTE_OFFSET * max((hi[0] - lo[0]) * coslat, hi[1] - lo[1], 1e-3)
+    for xy, label in zip(lines, labels, strict=True):
+        if label is None:
+            ax.plot(xy[:, 0], xy[:, 1], color="0.72", lw=0.4, alpha=0.6, zorder=1)
+    for xy, label in zip(lines, labels, strict=True):
+        if label is not None:
+            ax.plot(xy[:, 0], xy[:, 1], color=colour[label], lw=0.5, alpha=0.3, zorder=2)
+    handles = []
+    for i, (name, xy) in enumerate(zip(names, medoids, strict=True)):
+        c = colour[name]
+        z = 3 + (len(names) - i) / (len(names) + 1)  # the largest routes on top
+        med = _keep_right(xy, shift, coslat)
+        ax.plot(med[:, 0], med[:, 1], color="k", lw=3.0, zorder=z)
+        ax.plot(med[:, 0], med[:, 1], color=c, lw=2.0, zorder=z)
+        ax.plot(*med[0], "o", color=c, mec="k", ms=5, zorder=z)
+        for at in (len(med) // 2, len(med) - 1):
+            if at >= 1:
+                ax.annotate(
+                    "",
+                    xy=med[at],
+                    xytext=med[at - 1],
+                    arrowprops={"arrowstyle": "-|>", "color": c, "lw": 1.5, "mutation_scale": 14},
+                    zorder=z,
+                )
+        if i < ROUTE_LEGEND_MAX:
+            n = int(routes["n_tracks"].iloc[i])
+            handles.append(plt.Line2D([], [], color=c, lw=2.2, label=f"{name} ({n} tracks)"))
+    if len(names) > ROUTE_LEGEND_MAX:
+        handles.append(
+            plt.Line2D([], [], color="none", label=f"... {len(names) - ROUTE_LEGEND_MAX} more")
+        )
+    n_unrouted = sum(label is None for label in labels)
+    handles.append(plt.Line2D([], [], color="0.72", lw=1, label=f"no route ({n_unrouted} tracks)"))
+    pad = np.maximum((hi - lo) * 0.03, 0.005)
+    ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
+    ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
+    ax.set_aspect(1.0 / coslat)
+    ax.set_facecolor("#eef4f8")
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("latitude (deg)")
+    ax.legend(handles=handles, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax.set_title(
+        title
+        or f"{len(names)} routes: medoid track thick (dot: entry, arrows: direction), tracks thin"
+    )
+    _save(fig, path)
