@@ -134,7 +134,8 @@ def ingest(
             if rejects:
                 rejects.close()
             routed_at = time.perf_counter()
-            table, route_files, routes = _route_stage(tracks, out_dir, settings, progress)
+            what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
+            table, route_files, routes = _route_stage(tracks, out_dir, settings, what, progress)
             stage_seconds["routes"] = time.perf_counter() - routed_at
             staged.extend(route_files)
             staged.append(write_tracks(out_dir / "tracks.parquet", [table]))
@@ -176,7 +177,11 @@ def _output_key(path: Path) -> str:
 
 
 def _route_stage(
-    tracks: list[pa.Table], out_dir: Path, settings: IngestSettings, progress: Progress | None
+    tracks: list[pa.Table],
+    out_dir: Path,
+    settings: IngestSettings,
+    what: str,
+    progress: Progress | None,
 ) -> tuple[pa.Table, list[StagedFile], dict[str, Any] | None]:
     """All tracks as one table, with route clusters when `settings.clusters` is 'routes' (and
     their staged files and summary)."""
@@ -185,7 +190,7 @@ def _route_stage(
         return table, [], None
     task = progress.add_task("route clusters", total=None) if progress else None
     table, routes, lines = route_tracks(table, route_settings(settings))
-    files = write_routes(out_dir, routes, lines, "")
+    files = write_routes(out_dir, routes, lines, what)
     if task is not None:
         progress.update(task, total=1, completed=1)
     return table, files, route_summary(routes)
