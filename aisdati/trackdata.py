@@ -75,9 +75,13 @@ def _route_number(name: str) -> int:
     return int(name[len(ROUTE_PREFIX) :])
 
 
+ROUTES_LISTED = 12
+"""Routes named in an error message (the largest: their numbers come first)."""
+
+
 def cluster_counts(table: pd.DataFrame) -> str:
     """What a track table holds, by name: 'up: 9, down: 5, other: 144; route-1: 47, ...,
-    unrouted: 58' (routes in number order)."""
+    unrouted: 58' (routes in number order, the first `ROUTES_LISTED`)."""
     clusters = table["cluster"].value_counts()
     parts = [f"{c}: {int(clusters[c])}" for c in CLUSTERS if c in clusters]
     text = ", ".join(parts) or "no tracks at all"
@@ -85,7 +89,9 @@ def cluster_counts(table: pd.DataFrame) -> str:
     if len(routes):
         names = sorted(routes.index, key=_route_number)
         unrouted = int(table["route"].isna().sum())
-        text += "; " + ", ".join(f"{r}: {int(routes[r])}" for r in names)
+        text += "; " + ", ".join(f"{r}: {int(routes[r])}" for r in names[:ROUTES_LISTED])
+        if len(names) > ROUTES_LISTED:
+            text += f", ... ({len(names)} routes)"
         text += f", {UNROUTED}: {unrouted}"
     return text
 
