@@ -15,12 +15,24 @@ the vessel *dwells*:
   `--min-sog`, the slowest a kept report can be). A vessel that sailed on through a reporting gap
   covers the distance in about the gap's time (estimate near zero, or negative); one that lay at a
   pier covers only its approach and departure. A stop is an estimated dwell of at least
-  `min_dwell_s`. (MovingPandas' SpeedSplitter is the same idea with the slow reports in hand:
-  drop them, then split at gaps longer than the duration.)
+  `min_dwell_s` with the two reports at most a diameter (2 x `radius_m`) apart, both inside the
+  stop's circle: that keeps slow steaming (2-4 km in half an hour below the SOG threshold) from
+  counting as a stop. (MovingPandas' SpeedSplitter is the same idea with the slow reports in
+  hand: drop them, then split at gaps longer than the duration.)
 - `StopSplitter` (MovingPandas' StopSplitter): a run of kept reports that all stay within
-  `radius_m` of the run's first report for at least `min_duration_s`. This is what catches a
-  dwell when slow reports are kept (`--min-sog 0`), or a vessel holding station under way. The
+  `radius_m` of the run's first report for at least `min_duration_s`, reports less than
+  `min_duration_s` apart (a longer gap is the rule above's). This is what catches a dwell when
+  slow reports are kept (`--min-sog 0`: a moored vessel's reports), or a vessel holding station
+  or loitering under way (at most `radius_m` in `min_duration_s`: 3.2 kn with the defaults). The
   run's reports are removed from the tracks (rejected as `dwell`), and the track splits there.
+
+The defaults of ingest are 500 m and 5 minutes. MovingPandas' examples use 100 m across and one
+minute for people on foot (and speak of stops of 5 minutes); for ships they were chosen on the
+New York Harbor ferries (`tests/test_stops.py`). At 1-3 minutes between reports the last report
+before a pier and the first after it lie 0.1-1 km apart (the Staten Island Ferry: about 0.5 km
+in the median), hence a 500 m radius (1 km across); the ferries' pier stops last 5-15 minutes,
+while reporting gaps of 3-10 minutes under way are common (Kitimat), hence 5 minutes, with the
+dwell estimate telling the two apart.
 
 Every splitter maps reports sorted by (MMSI, time) to `Splits`: where a new track starts and
 which reports to drop. `split_reports` applies a list of them in order; `segment` then numbers the
