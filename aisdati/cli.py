@@ -161,6 +161,25 @@ def ingest(
     ),
     stop_gap: str = typer.Option("1h", help="Split a vessel's reports at gaps longer than this."),
     min_points: int = typer.Option(900, help="Keep tracks with at least this many reports."),
+    dwell_radius: float = typer.Option(
+        500.0, help="Stop by dwell: the vessel stays within this many metres (see --dwell-time)."
+    ),
+    dwell_time: str = typer.Option(
+        "5min",
+        help="Split a track where the vessel dwells (within --dwell-radius) this long; 0: only "
+        "at --stop-gap gaps (the paper).",
+    ),
+    clusters: str = typer.Option(
+        "routes",
+        help="routes: the paper's up/down/other plus route clusters (route-1, ...: lanes by "
+        "entry, exit and shape); direction: the paper's rule only.",
+    ),
+    route_min_tracks: int = typer.Option(5, help="Fewest tracks of a route."),
+    route_eps_km: str = typer.Option(
+        "auto",
+        help="Route endpoint radius and shape tolerance in km; auto: HDBSCAN, no fixed scale.",
+    ),
+    route_seed: int = typer.Option(0, help="Seed of the route clustering's samples."),
     keep_rejects: bool = typer.Option(
         False, "--keep-rejects", help="Write every rejected row with its reason to rejects.parquet."
     ),
@@ -168,7 +187,8 @@ def ingest(
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Read MarineCadastre AIS files (downloaded or local), then filter, clean, segment and
-    cluster them into points.parquet, tracks.parquet and ingest_report.json."""
+    cluster them into points.parquet, tracks.parquet and ingest_report.json (with route
+    clusters: routes.parquet, routes.geojson and routes.png)."""
     import json
 
     from rich.progress import (
@@ -194,6 +214,12 @@ def ingest(
         stop_gap_s=parse_duration(stop_gap),
         min_points=min_points,
         keep_rejects=keep_rejects,
+        dwell_radius_m=dwell_radius,
+        dwell_time_s=parse_duration(dwell_time, "--dwell-time", allow_zero=True),
+        clusters=clusters.strip().lower(),
+        route_min_tracks=route_min_tracks,
+        route_eps_km=_route_eps(route_eps_km),
+        route_seed=route_seed,
     )
     area = load_roi(roi)
     remote = marinecadastre_files(year, months, days, zone) if year is not None else []
@@ -215,7 +241,40 @@ def ingest(
         print(json.dumps(result.as_dict(), default=str))
     elif not quiet:
         console.print(summary_table(result.counts))
+        if result.routes is not None:
+            console.print(routes_table(result.routes))
         console.print(f"wrote {', '.join(result.outputs.values())}", highlight=False)
+
+
+def _route_eps(text: str) -> float | None:
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise UserError(f"--route-eps-km {text!r}: expected a number of km or auto") from None
+
+
+def routes_table(summary: dict[str, Any], limit: int = 25) -> Table:
+    """The routes found by ingest: size, entry, exit and median length, largest first."""
+    rows = summary["routes"]
+    table = Table(
+        title=f"{len(rows)} routes ({summary['routed_tracks']:,} tracks; "
+        f"{summary['unrouted_tracks']:,} fit no route)"
+    )
+    for col in ("route", "tracks", "entry (lat, lon)", "exit (lat, lon)", "median length"):
+        table.add_column(col, justify="right" if col in ("tracks", "median length") else "left")
+    for r in rows[:limit]:
+        table.add_row(
+            r["route"],
+            f"{r['n_tracks']:,}",
+            f"{r['entry_lat']:.4f}, {r['entry_lon']:.4f}",
+            f"{r['exit_lat']:.4f}, {r['exit_lon']:.4f}",
+            f"{r['median_length_km']:,.1f} km",
+        )
+    if len(rows) > limit:
+        table.caption = f"... and {len(rows) - limit} more in routes.parquet"
+    return table
 
 
 @app.command()

@@ -40,6 +40,7 @@ TRACKS_SCHEMA = pa.schema(
         ("cluster", pa.string()),
         ("lon0", pa.float64()),
         ("lat0", pa.float64()),
+        ("route", pa.string()),
         ("stage", pa.string()),
         ("geometry", pa.binary()),
     ]
@@ -105,6 +106,7 @@ def build_tracks(
             pa.array(cluster_tracks(track, cog, n_tracks), pa.string()),
             lon[first],
             lat[first],
+            pa.nulls(n_tracks, pa.string()),  # route: set once all tracks are known
             pa.array(["cluster"] * n_tracks, pa.string()),
             pa.array(shapely.to_wkb(lines), pa.binary()),
         ],

@@ -33,6 +33,7 @@ REASONS: dict[int, tuple[str, str, str]] = {
     14: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
     15: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
     16: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
+    17: ("segment", "dwell", "inside a stop: within --dwell-radius for at least --dwell-time"),
 }
 CODE = {reason: code for code, (_, reason, _) in REASONS.items()}
 N_CODES = max(REASONS) + 1
