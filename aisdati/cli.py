@@ -398,7 +398,11 @@ def selftest(
 @user_errors
 def train(
     cluster: str = typer.Option(
-        ..., "--cluster", "-c", help="Cluster to learn: up, down or other."
+        ...,
+        "--cluster",
+        "-c",
+        help="Tracks to learn: a cluster (up, down, other), a route (route-<n>, unrouted), or "
+        "routes: every route with enough tracks (DATI trains them as one batched ensemble).",
     ),
     method: str = typer.Option(
         "dati",
@@ -447,6 +451,10 @@ def train(
 
     (method,) = parse_detectors(method)[:1]
 
+    if cluster.strip().lower() == "routes":
+        return _train_routes(
+            method, data, out, preset, lane, episodes, seed, patience, max_tracks, quiet
+        )
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
     ensure_writable_dir(out)
     settings = TrainSettings(
@@ -659,6 +667,69 @@ def evaluate(
     )
 
 
+def _train_routes(
+    method: str,
+    data: Path,
+    out: Path,
+    preset: str,
+    lane: list[str] | None,
+    episodes: int,
+    seed: int,
+    patience: int,
+    max_tracks: int,
+    quiet: bool,
+) -> None:
+    """`train --cluster routes`: every route with enough tracks, DATI as one batched ensemble."""
+    from aisdati.detectors.train import train_routes
+    from aisdati.model.ais import TrainSettings
+    from aisdati.model.ais_space import lane_config
+    from aisdati.progress import EpisodeProgress
+    from aisdati.trackdata import MIN_ROUTE_TRACKS, read_track_table
+
+    table = read_track_table(data)
+    counts = table["route"].dropna().value_counts() if "route" in table else None
+    routes = sorted(
+        (r for r, n in (counts.items() if counts is not None else []) if n >= MIN_ROUTE_TRACKS),
+        key=lambda r: int(r.split("-")[1]),
+    )
+    if not routes:
+        raise UserError(
+            f"no route in {data} has {MIN_ROUTE_TRACKS} tracks or more: ingest with "
+            "--clusters routes (the default), or train one cluster"
+        )
+    ensure_writable_dir(out)
+    settings = [
+        TrainSettings(
+            data_dir=data,
+            cluster=route,
+            out_dir=out,
+            preset=preset if not lane else f"{preset} + {', '.join(lane)}",
+            lane=lane_config(preset, lane or ()),
+            episodes=episodes,
+            seed=seed,
+            patience=patience,
+            max_tracks=max_tracks or None,
+        )
+        for route in routes
+    ]
+    with EpisodeProgress(len(routes), episodes, f"training {method}", disable=quiet) as bar:
+
+        def on_step(trainer: Any, logs: list[Any]) -> None:
+            for log in logs:
+                bar.update(log.member, log.episode, log.stopped)
+
+        trained = train_routes(method, settings, on_step=on_step)
+    if quiet:
+        return
+    table_out = Table(title=f"{method} models of {len(routes)} routes")
+    for col in ("route", "tracks", "episodes", "model"):
+        table_out.add_column(col, justify="left" if col in ("route", "model") else "right")
+    for route, t in zip(routes, trained, strict=True):
+        runs = t.card.get("training", {}).get("episodes_run", "-")
+        table_out.add_row(route, str(t.card["data"]["tracks_used"]), str(runs), str(t.model))
+    console.print(table_out)
+
+
 # ----------------------------------------------------------------------------------- detect
 def detection_table(scores: Any, limit: int = 15) -> Table:
     """The flagged tracks (or, if none, the top of the ranking) with where they deviate most."""
@@ -717,7 +788,9 @@ def detect(
     ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(
-        "other", "--cluster", help="Test tracks' cluster: up, down, other or all."
+        "other",
+        "--cluster",
+        help="Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all.",
     ),
     track: list[int] = typer.Option(
         None, "--track", help="Judge these track ids instead (repeatable)."
@@ -796,7 +869,9 @@ def detect(
     t = result.timings
     console.print(
         f"scoring {t['score_s']:.1f} s; "
-        f"wrote {', '.join(f.name for f in files)} to [bold]{settings.out_dir}[/]",
+        f"wrote {', '.join(f.name for f in files if f.parent == settings.out_dir)}"
+        f"{' and evidence/' if any(f.parent != settings.out_dir for f in files) else ''} "
+        f"to [bold]{settings.out_dir}[/]",
         highlight=False,
     )
 
