@@ -17,7 +17,6 @@ from rich.table import Table
 from aisdati.errors import UserError
 from aisdati.options import (
     Terminated,
-    check_option,
     check_options,
     handle_termination,
     prepare_output_dir,
@@ -183,6 +182,25 @@ def ingest(
     ),
     stop_gap: str = typer.Option("1h", help="Split a vessel's reports at gaps longer than this."),
     min_points: int = typer.Option(900, help="Keep tracks with at least this many reports."),
+    dwell_radius: float = typer.Option(
+        500.0, help="Stop by dwell: the vessel stays within this many metres (see --dwell-time)."
+    ),
+    dwell_time: str = typer.Option(
+        "5min",
+        help="Split a track where the vessel dwells (within --dwell-radius) this long; 0: only "
+        "at --stop-gap gaps (the paper).",
+    ),
+    clusters: str = typer.Option(
+        "routes",
+        help="routes: the paper's up/down/other plus route clusters (route-1, ...: lanes by "
+        "entry, exit and shape); direction: the paper's rule only.",
+    ),
+    route_min_tracks: int = typer.Option(5, help="Fewest tracks of a route."),
+    route_eps_km: str = typer.Option(
+        "auto",
+        help="Route endpoint radius and shape tolerance in km; auto: HDBSCAN, no fixed scale.",
+    ),
+    route_seed: int = typer.Option(0, help="Seed of the route clustering's samples."),
     keep_rejects: bool = typer.Option(
         False, "--keep-rejects", help="Write every rejected row with its reason to rejects.parquet."
     ),
@@ -190,7 +208,8 @@ def ingest(
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Read MarineCadastre AIS files (downloaded or local), then filter, clean, segment and
-    cluster them into points.parquet, tracks.parquet and ingest_report.json."""
+    cluster them into points.parquet, tracks.parquet and ingest_report.json (with route
+    clusters: routes.parquet, routes.geojson and routes.png)."""
     import json
 
     from rich.progress import (
@@ -218,8 +237,21 @@ def ingest(
         stop_gap_s=parse_duration(stop_gap),
         min_points=min_points,
         keep_rejects=keep_rejects,
+        dwell_radius_m=dwell_radius,
+        dwell_time_s=parse_duration(dwell_time, "--dwell-time", allow_zero=True),
+        clusters=clusters.strip().lower(),
+        route_min_tracks=route_min_tracks,
+        route_eps_km=_route_eps(route_eps_km),
+        route_seed=route_seed,
     )
-    check_option("--stop-gap", settings.stop_gap_s)
+    check_options(
+        {
+            "--stop-gap": settings.stop_gap_s,
+            "--dwell-time": settings.dwell_time_s,
+            "--dwell-radius": settings.dwell_radius_m,
+            "--route-eps-km": settings.route_eps_km,
+        }
+    )
     area = load_roi(roi, warn=warn)
     remote = marinecadastre_files(year, months, days, zone) if year is not None else []
     local = expand_inputs(inputs) if inputs else []
@@ -243,7 +275,40 @@ def ingest(
         print(json.dumps(result.as_dict(), default=str))
     elif not quiet:
         console.print(summary_table(result.counts))
+        if result.routes is not None:
+            console.print(routes_table(result.routes))
         console.print(f"wrote {', '.join(result.outputs.values())}", highlight=False)
+
+
+def _route_eps(text: str) -> float | None:
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise UserError(f"--route-eps-km {text!r}: expected a number of km or auto") from None
+
+
+def routes_table(summary: dict[str, Any], limit: int = 25) -> Table:
+    """The routes found by ingest: size, entry, exit and median length, largest first."""
+    rows = summary["routes"]
+    table = Table(
+        title=f"{len(rows)} routes ({summary['routed_tracks']:,} tracks; "
+        f"{summary['unrouted_tracks']:,} fit no route)"
+    )
+    for col in ("route", "tracks", "entry (lat, lon)", "exit (lat, lon)", "median length"):
+        table.add_column(col, justify="right" if col in ("tracks", "median length") else "left")
+    for r in rows[:limit]:
+        table.add_row(
+            r["route"],
+            f"{r['n_tracks']:,}",
+            f"{r['entry_lat']:.4f}, {r['entry_lon']:.4f}",
+            f"{r['exit_lat']:.4f}, {r['exit_lon']:.4f}",
+            f"{r['median_length_km']:,.1f} km",
+        )
+    if len(rows) > limit:
+        table.caption = f"... and {len(rows) - limit} more in routes.parquet"
+    return table
 
 
 @app.command()
@@ -367,7 +432,11 @@ def selftest(
 @user_errors
 def train(
     cluster: str = typer.Option(
-        ..., "--cluster", "-c", help="Cluster to learn: up, down or other."
+        ...,
+        "--cluster",
+        "-c",
+        help="Tracks to learn: a cluster (up, down, other), a route (route-<n>, unrouted), or "
+        "routes: every route with enough tracks (DATI trains them as one batched ensemble).",
     ),
     method: str = typer.Option(
         "dati",
@@ -417,6 +486,10 @@ def train(
     check_options({"--seed": seed})
     (method,) = parse_detectors(method)[:1]
 
+    if cluster.strip().lower() == "routes":
+        return _train_routes(
+            method, data, out, preset, lane, episodes, seed, patience, max_tracks, quiet
+        )
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
     stem = model_name(cluster.strip().lower(), method)
     suffixes = (".pt", ".json", ".npz", ".corridor.npz", ".log.jsonl", ".ckpt")
@@ -651,6 +724,69 @@ def evaluate(
     )
 
 
+def _train_routes(
+    method: str,
+    data: Path,
+    out: Path,
+    preset: str,
+    lane: list[str] | None,
+    episodes: int,
+    seed: int,
+    patience: int,
+    max_tracks: int,
+    quiet: bool,
+) -> None:
+    """`train --cluster routes`: every route with enough tracks, DATI as one batched ensemble."""
+    from aisdati.detectors.train import train_routes
+    from aisdati.model.ais import TrainSettings
+    from aisdati.model.ais_space import lane_config
+    from aisdati.progress import EpisodeProgress
+    from aisdati.trackdata import MIN_ROUTE_TRACKS, read_track_table
+
+    table = read_track_table(data)
+    counts = table["route"].dropna().value_counts() if "route" in table else None
+    routes = sorted(
+        (r for r, n in (counts.items() if counts is not None else []) if n >= MIN_ROUTE_TRACKS),
+        key=lambda r: int(r.split("-")[1]),
+    )
+    if not routes:
+        raise UserError(
+            f"no route in {data} has {MIN_ROUTE_TRACKS} tracks or more: ingest with "
+            "--clusters routes (the default), or train one cluster"
+        )
+    prepare_output_dir(out, "--out")
+    settings = [
+        TrainSettings(
+            data_dir=data,
+            cluster=route,
+            out_dir=out,
+            preset=preset if not lane else f"{preset} + {', '.join(lane)}",
+            lane=lane_config(preset, lane or ()),
+            episodes=episodes,
+            seed=seed,
+            patience=patience,
+            max_tracks=max_tracks or None,
+        )
+        for route in routes
+    ]
+    with EpisodeProgress(len(routes), episodes, f"training {method}", disable=quiet) as bar:
+
+        def on_step(trainer: Any, logs: list[Any]) -> None:
+            for log in logs:
+                bar.update(log.member, log.episode, log.stopped)
+
+        trained = train_routes(method, settings, on_step=on_step)
+    if quiet:
+        return
+    table_out = Table(title=f"{method} models of {len(routes)} routes")
+    for col in ("route", "tracks", "episodes", "model"):
+        table_out.add_column(col, justify="left" if col in ("route", "model") else "right")
+    for route, t in zip(routes, trained, strict=True):
+        runs = t.card.get("training", {}).get("episodes_run", "-")
+        table_out.add_row(route, str(t.card["data"]["tracks_used"]), str(runs), str(t.model))
+    console.print(table_out)
+
+
 # ----------------------------------------------------------------------------------- detect
 def detection_table(scores: Any, limit: int = 15) -> Table:
     """The flagged tracks (or, if none, the top of the ranking) with where they deviate most."""
@@ -709,7 +845,9 @@ def detect(
     ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(
-        "other", "--cluster", help="Test tracks' cluster: up, down, other or all."
+        "other",
+        "--cluster",
+        help="Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all.",
     ),
     track: list[int] = typer.Option(
         None, "--track", help="Judge these track ids instead (repeatable)."
@@ -799,7 +937,9 @@ def detect(
     t = result.timings
     console.print(
         f"scoring {t['score_s']:.1f} s; "
-        f"wrote {', '.join(f.name for f in files)} to [bold]{settings.out_dir}[/]",
+        f"wrote {', '.join(f.name for f in files if f.parent == settings.out_dir)}"
+        f"{' and evidence/' if any(f.parent != settings.out_dir for f in files) else ''} "
+        f"to [bold]{settings.out_dir}[/]",
         highlight=False,
     )
 

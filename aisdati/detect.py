@@ -35,7 +35,7 @@ from aisdati.errors import UserError
 from aisdati.geo import haversine_m
 from aisdati.model.card import card_warnings, training_mask
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.trackdata import CLUSTERS, Track, load_tracks, read_track_table
+from aisdati.trackdata import Track, load_tracks, read_track_table, select_cluster
 
 SCORES_SCHEMA = pa.schema(
     [
@@ -67,7 +67,7 @@ class DetectSettings:
     """Model names (<models_dir>/<name>.json); empty: every model of `method` in the folder."""
     method: str = "dati"
     cluster: str = "other"
-    """Cluster of the test tracks: up, down, other or all."""
+    """Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all."""
     track_ids: tuple[int, ...] = ()
     """Explicit test tracks (overrides the cluster and the start rule)."""
     score: str = "step"
@@ -142,13 +142,7 @@ def select_test_tracks(
             raise UserError(f"tracks not in {settings.data_dir}: {sorted(missing)[:5]}")
         table = table[table["track_id"].isin(settings.track_ids)]
     elif settings.cluster != "all":
-        if settings.cluster not in CLUSTERS:
-            raise UserError(
-                f"unknown cluster {settings.cluster!r}; choose from {', '.join(CLUSTERS)} or all"
-            )
-        table = table[table["cluster"] == settings.cluster]
-        if table.empty:
-            raise UserError(f"no tracks in cluster {settings.cluster!r} in {settings.data_dir}")
+        table = select_cluster(table, settings.cluster, settings.data_dir, needed=1)
     ids = table["track_id"].to_numpy()
     starts = table[["lon0", "lat0"]].to_numpy(np.float64) if "lon0" in table else None
     if starts is None:
@@ -351,6 +345,7 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
     files.append(path)
     path = out / "map.png"
     flagged = result.scores["flagged"].to_numpy()
+    stretches = [deviation_stretch(p) for p in result.profiles]
     plot_detection_map(
         [t.positions for t in result.tracks],
         result.rollouts,
@@ -369,8 +364,15 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
         flagged,
         [m.bounds for m in result.models],
         path,
+        stretches=[
+            (f"track {t.track_id}", t.positions[a:b])
+            for t, (a, b), f in zip(result.tracks, stretches, flagged, strict=True)
+            if f
+        ],
+        title=_map_title(result),
     )
     files.append(path)
+    files += evidence_figures(result, out / "evidence", stretches)
     if result.metrics is not None:
         path = out / "metrics.json"
         atomic_write_bytes(path, json.dumps(result.metrics, indent=2).encode())
@@ -378,6 +380,60 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
     path = out / "report.json"
     atomic_write_bytes(path, json.dumps(report_dict(result), indent=2, default=str).encode())
     files.append(path)
+    return files
+
+
+EVIDENCE_FIGURES = 20
+"""At most this many flagged tracks (the highest ranked) get an evidence figure."""
+
+
+def deviation_stretch(profile: np.ndarray) -> tuple[int, int]:
+    """The contiguous stretch around a profile's peak where it stays above half the peak: where
+    the track strays most, as an index range [start, end)."""
+    k = int(np.argmax(profile))
+    above = profile >= profile[k] / 2
+    a = k
+    while a > 0 and above[a - 1]:
+        a -= 1
+    b = k + 1
+    while b < len(profile) and above[b]:
+        b += 1
+    return a, b
+
+
+def evidence_figures(
+    result: Detection, folder: Path, stretches: list[tuple[int, int]]
+) -> list[Path]:
+    """evidence/track-<id>.png for the highest-ranked flagged tracks: the track, what it was
+    compared with, the stretch of largest deviation and the deviation profile along it."""
+    from aisdati.plots import plot_track_evidence
+
+    s = result.settings
+    label = "one-step prediction error (m)" if s and s.score == "step" else "deviation (m)"
+    if s and s.method == "nearest":
+        label = "distance to the nearest training track (m)"
+    rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
+    index = {t.track_id: i for i, t in enumerate(result.tracks)}
+    files = []
+    if len(rows):
+        folder.mkdir(parents=True, exist_ok=True)
+    for row in rows.itertuples():
+        i = index[int(row.track_id)]
+        track = result.tracks[i]
+        hours = np.r_[0.0, np.cumsum(track.dts)]
+        path = folder / f"track-{int(row.track_id)}.png"
+        plot_track_evidence(
+            track.positions,
+            result.rollouts[i],
+            result.profiles[i],
+            stretches[i],
+            f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
+            f"score {row.score_m / 1000:.2f} km, model {row.model}",
+            path,
+            hours=hours,
+            profile_label=label,
+        )
+        files.append(path)
     return files
 
 

@@ -87,6 +87,9 @@ OPTION_RANGES: dict[str, Range] = {
     "--min-sog": Range(high=102.2, high_open=True),  # negative: keep every SOG, even 0
     "--max-speed": Range(low=0.0, low_open=True),
     "--stop-gap": Range(low=0.0, low_open=True, high=365 * 86400.0),  # seconds
+    "--dwell-time": Range(low=0.0, high=365 * 86400.0),  # seconds; 0: no dwell stops
+    "--dwell-radius": Range(low=0.0, low_open=True, high=100_000.0),  # metres
+    "--route-eps-km": Range(low=0.0, low_open=True, high=20_037.5),
     # detect
     "--threshold": Range(low=0.0, low_open=True, high=1.0),
     "--top-percent": Range(low=0.0, low_open=True, high=100.0),

@@ -2,6 +2,11 @@
 
 A `Track` holds one track's positions (lon, lat degrees) and the real time steps between its
 reports in hours, which is what the AIS environment and the detector work with.
+
+Tracks are selected by name (`select_cluster`): the paper's direction clusters `up`, `down` and
+`other` (the `cluster` column), a route cluster `route-<n>` (the `route` column, see
+`aisdati.preprocess.routes`), or `unrouted` (the tracks that fit no route). tracks.parquet files
+written before route clusters existed have no `route` column: every track is then unrouted.
 """
 
 from __future__ import annotations
@@ -17,7 +22,12 @@ import pyarrow.parquet as pq
 from aisdati.errors import UserError
 
 CLUSTERS = ("up", "down", "other")
-TRACK_COLUMNS = ["track_id", "mmsi", "start", "end", "n_points", "length_km", "cluster"]
+UNROUTED = "unrouted"
+ROUTE_PREFIX = "route-"
+TRACK_COLUMNS = ["track_id", "mmsi", "start", "end", "n_points", "length_km", "cluster", "route"]
+MIN_ROUTE_TRACKS = 5
+"""Fewest tracks a route needs to be trained on (ingest's default --route-min-tracks, so every
+route of a default ingest qualifies)."""
 
 
 @dataclass(frozen=True)
@@ -30,6 +40,8 @@ class Track:
     dts: np.ndarray
     """[n - 1] hours between consecutive reports."""
     cluster: str
+    route: str | None = None
+    """`route-<n>`, or None when the track fits no route."""
 
     @property
     def steps(self) -> int:
@@ -45,24 +57,96 @@ def _paths(data_dir: Path) -> tuple[Path, Path]:
 
 
 def read_track_table(data_dir: Path) -> pd.DataFrame:
-    """tracks.parquet without its geometry column."""
+    """tracks.parquet without its geometry column (`route` all None in files that predate it)."""
     _, tracks = _paths(data_dir)
     try:
-        table = pq.read_table(tracks, columns=TRACK_COLUMNS).to_pandas()
+        names = set(pq.read_schema(tracks).names)
+        columns = [c for c in TRACK_COLUMNS if c in names or c != "route"]
+        table = pq.read_table(tracks, columns=columns).to_pandas()
     except Exception as exc:  # pyarrow raises several types for damaged or foreign files
         raise UserError(f"cannot read {tracks}: {str(exc).splitlines()[0]}") from None
+    if "route" not in table.columns:
+        table["route"] = None
+    table["route"] = table["route"].astype(object).where(table["route"].notna(), None)
     return table
 
 
-def select_cluster(table: pd.DataFrame, cluster: str, data_dir: Path) -> pd.DataFrame:
-    if cluster not in CLUSTERS:
-        raise UserError(f"unknown cluster {cluster!r}; choose from {', '.join(CLUSTERS)}")
-    chosen = table[table["cluster"] == cluster]
+def _route_number(name: str) -> int:
+    return int(name[len(ROUTE_PREFIX) :])
+
+
+ROUTES_LISTED = 12
+"""Routes named in an error message (the largest: their numbers come first)."""
+
+
+def cluster_counts(table: pd.DataFrame) -> str:
+    """What a track table holds, by name: 'up: 9, down: 5, other: 144; route-1: 47, ...,
+    unrouted: 58' (routes in number order, the first `ROUTES_LISTED`)."""
+    clusters = table["cluster"].value_counts()
+    parts = [f"{c}: {int(clusters[c])}" for c in CLUSTERS if c in clusters]
+    text = ", ".join(parts) or "no tracks at all"
+    routes = table["route"].value_counts() if "route" in table else pd.Series(dtype=int)
+    if len(routes):
+        names = sorted(routes.index, key=_route_number)
+        unrouted = int(table["route"].isna().sum())
+        text += "; " + ", ".join(f"{r}: {int(routes[r])}" for r in names[:ROUTES_LISTED])
+        if len(names) > ROUTES_LISTED:
+            text += f", ... ({len(names)} routes)"
+        text += f", {UNROUTED}: {unrouted}"
+    return text
+
+
+def is_track_set(name: str) -> bool:
+    """Whether `name` has the form of a cluster, route or `unrouted` (not whether it exists)."""
+    if name in CLUSTERS or name == UNROUTED:
+        return True
+    rest = name[len(ROUTE_PREFIX) :]
+    return name.startswith(ROUTE_PREFIX) and rest.isdigit() and not rest.startswith("0")
+
+
+def select_cluster(
+    table: pd.DataFrame, cluster: str, data_dir: Path, needed: int | None = None
+) -> pd.DataFrame:
+    """The tracks of a cluster (`up`, `down`, `other`), a route (`route-<n>`) or `unrouted`.
+    Unknown names, empty selections and routes with fewer than `needed` tracks (default:
+    `MIN_ROUTE_TRACKS` for a route, 1 otherwise) raise a one-line `UserError` that lists what
+    the table holds."""
+    if "route" not in table.columns:
+        table = table.assign(route=None)
+    if not is_track_set(cluster):
+        raise UserError(
+            f"unknown cluster {cluster!r}; choose from {', '.join(CLUSTERS)}, route-<n> or "
+            f"{UNROUTED} ({data_dir} has {cluster_counts(table)})"
+        )
+    if cluster in CLUSTERS:
+        chosen = table[table["cluster"] == cluster]
+    elif cluster == UNROUTED:
+        chosen = table[table["route"].isna()]
+    else:
+        chosen = table[table["route"] == cluster]
     if chosen.empty:
-        counts = table["cluster"].value_counts().to_dict()
-        have = ", ".join(f"{k}: {v}" for k, v in counts.items()) or "no tracks at all"
-        raise UserError(f"no tracks in cluster {cluster!r} in {data_dir} ({have})")
+        kind = "route" if cluster.startswith(ROUTE_PREFIX) else "cluster"
+        if kind == "route" and not table["route"].notna().any():
+            hint = " (no route clusters: ingest again with --clusters routes, the default)"
+        else:
+            hint = ""
+        raise UserError(
+            f"no tracks in {kind} {cluster!r} in {data_dir} ({cluster_counts(table)}){hint}"
+        )
+    if needed is None:
+        needed = MIN_ROUTE_TRACKS if cluster.startswith(ROUTE_PREFIX) else 1
+    require_tracks(chosen, cluster, needed)
     return chosen
+
+
+def require_tracks(table: pd.DataFrame, name: str, needed: int) -> None:
+    """One-line `UserError` unless `table` (the tracks selected as `name`) holds at least
+    `needed` tracks."""
+    if len(table) < needed:
+        raise UserError(
+            f"{name} has {len(table)} track{'s' if len(table) != 1 else ''}; at least {needed} "
+            f"are needed to train on it (pick a larger route or cluster, or ingest more data)"
+        )
 
 
 def load_tracks(data_dir: Path, track_ids: Sequence[int]) -> list[Track]:
@@ -95,6 +179,7 @@ def load_tracks(data_dir: Path, track_ids: Sequence[int]) -> list[Track]:
                 g[["lon", "lat"]].to_numpy(np.float64),
                 np.diff(seconds) / 3600.0,
                 str(row["cluster"]),
+                None if row["route"] is None else str(row["route"]),
             )
         )
     return out

@@ -1,22 +1,22 @@
 #!/usr/bin/env bash
-# The one-command AIS demo: ingest -> train -> detect on a real week of New York Harbor traffic that
-# ships with the project (tests/data, see tests/data/PROVENANCE.md), in a few minutes on 2 CPU cores.
+# The one-command AIS demo, on two months of real traffic around Kitimat, BC, that ship with the
+# project (tests/data, see tests/data/PROVENANCE.md), in about 5 minutes on 2 CPU cores:
 #
-#   scripts/demo.sh            # outputs under runs/demo (OUT=dir to change)
+#   1. ingest: clean, segment and cluster the reports into routes (lanes, one per direction);
+#   2. evaluate: split the north-west -> south-east lane's tracks by vessel, write detours,
+#      position jumps and loitering circles into half of the held-out tracks, train DATI (and the
+#      nearest-track baseline) on the rest and measure how well each ranks the altered tracks;
+#   3. detect: judge the held-out tracks with the trained DATI model, flag the anomalies, check
+#      the flags against the injected labels and draw the map.
 #
-# The sample holds positions only (no reported SOG/COG): ingest derives them, and in a harbour
-# they wiggle, so every track lands in the `other` cluster; the demo therefore learns `other`
-# traffic from a random 20 of its 275 tracks (20 short episodes instead of the paper's 170) and
-# judges the remaining tracks that start within 10 km of a training start. With so short a
-# training budget the model is crude: the scores rank tracks by how far they go from what it has
-# learnt, which shows the whole pipeline working, not the paper's detection quality.
+#   scripts/demo.sh            # outputs under runs/demo (OUT=dir, EPISODES=n to change)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 OUT=${OUT:-runs/demo}
-EPISODES=${EPISODES:-20}
-TRACKS=${TRACKS:-20}
-SAMPLE=tests/data/NYHarbor_2020_12_first_week_points.csv.gz
+EPISODES=${EPISODES:-40}
+ROUTE=${ROUTE:-route-2}
+SAMPLE=tests/data/AIS_2018_07-08_Kitimat.csv.gz
 
 if [ -x .venv/bin/aisdati ]; then
   AISDATI=.venv/bin/aisdati
@@ -32,12 +32,16 @@ start=$(date +%s)
 echo "== 1/3 ingest: $SAMPLE"
 "$AISDATI" ingest --input "$SAMPLE" --roi none --min-points 100 --out "$OUT/processed"
 
-echo "== 2/3 train: cluster other, $TRACKS tracks, $EPISODES episodes"
-"$AISDATI" train --cluster other --data "$OUT/processed" --out "$OUT/models" \
-  --max-tracks "$TRACKS" --episodes "$EPISODES" --patience 0 --seed 0
+echo "== 2/3 evaluate: $ROUTE, DATI ($EPISODES episodes) against the nearest-track baseline"
+"$AISDATI" evaluate --data "$OUT/processed" --cluster "$ROUTE" --detectors dati,nearest \
+  --kinds detour,jump,loiter --episodes "$EPISODES" --out "$OUT/evaluate"
 
-echo "== 3/3 detect: K = 10 rollouts per test track, threshold 0.75"
-"$AISDATI" detect --data "$OUT/processed" --models "$OUT/models" --out "$OUT/report" \
-  --rollouts 10 --threshold 0.75
+echo "== 3/3 detect: the held-out tracks of $ROUTE, judged by DATI"
+"$AISDATI" detect --data "$OUT/evaluate/data" --models "$OUT/evaluate/models" \
+  --cluster "$ROUTE" --labels "$OUT/evaluate/data/labels.csv" --top-percent 50 \
+  --out "$OUT/report"
 
-echo "== done in $(( $(date +%s) - start )) s: map $OUT/report/map.png (zoomable: $OUT/report/map.html)"
+echo "== done in $(( $(date +%s) - start )) s"
+echo "   routes:     $OUT/processed/routes.png"
+echo "   evaluation: $OUT/evaluate/evaluation.json, roc_pr.png, examples.png"
+echo "   detection:  $OUT/report/map.png (zoomable: map.html), evidence/, scores.parquet"

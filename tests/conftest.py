@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 import typer
 from typer.testing import CliRunner
 
@@ -30,3 +31,13 @@ def cli():
         return CliRunner().invoke(app, args_list)
 
     return run
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Two cores, possibly shared with a training job: keep torch to one thread (its OpenMP
+    threads spin-wait, and on a busy machine a second thread makes small matmuls 10x slower)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

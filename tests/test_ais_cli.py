@@ -26,7 +26,9 @@ def run(tmp_path_factory):
     def cli(*args):
         return CliRunner().invoke(app, [str(a) for a in args])
 
-    r = cli("ingest", "--input", data, "--roi", "none", "--min-points", "30", "--out", proc, "-q")
+    # the paper's segmentation (--dwell-time 0): the cluster sizes below are pinned to it
+    args = ["--roi", "none", "--min-points", "30", "--dwell-time", "0", "--out", proc, "-q"]
+    r = cli("ingest", "--input", data, *args)
     assert r.exit_code == 0, r.output
     r = cli(
         "train",

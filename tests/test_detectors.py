@@ -172,6 +172,7 @@ def test_enlarged_state_shape_scaling_and_env_checker(tracks):
 def test_validation_selects_the_actor_with_the_best_validation_score():
     from aisdati.model.dati import DATIConfig, DATITrainer
     from aisdati.model.env import make_family_env
+    from aisdati.model.families import get_family
 
     scores = iter([5.0, 3.0, 4.0, 6.0, 7.0])
     snapshots = []
@@ -180,11 +181,9 @@ def test_validation_selects_the_actor_with_the_best_validation_score():
         snapshots.append(trainer.nets.forward_actor.out.weight.detach().clone())
         return next(scores)
 
-    env = make_family_env("circles")
-    env.source.max_steps = env.source.family.steps
-    cfg = DATIConfig(episodes=5, patience=0)
+    env = make_family_env(replace(get_family("circles"), steps=12))
+    cfg = DATIConfig(episodes=5, batch_size=16, patience=0)
     trainer = DATITrainer([env], [0], cfg, validate)
-    # short episodes: pin a short reference each time
     trainer.train()
     assert trainer.best_episode[0] == 2
     kept = trainer.final.forward_actor.out.weight
@@ -238,3 +237,26 @@ def test_gym_space_of_the_paper_state_is_unchanged(tracks):
     env = make_env(build_source(tracks[:4], LaneConfig()))
     assert env.observation_space.shape == (3,)
     assert isinstance(env.action_space, gym.spaces.Box)
+
+
+def test_train_every_route_as_one_ensemble(cli, tmp_path):
+    data, models = tmp_path / "kit", tmp_path / "models"
+    r = cli("ingest", "--input", KITIMAT, "--roi", "none", "--min-points", "100", "--out", data,
+            "-q")
+    assert r.exit_code == 0, r.output
+    r = cli("train", "--cluster", "routes", "--data", data, "--out", models, "--episodes", "1",
+            "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
+            "validation_rollouts=1", "-q")
+    assert r.exit_code == 0, r.output
+    routes = read_track_table(data)["route"].dropna().value_counts()
+    trained = sorted(p.stem for p in models.glob("route-*.pt"))
+    assert trained == sorted(n for n, c in routes.items() if c >= 5)
+    seeds = set()
+    for name in trained:
+        card = json.loads((models / f"{name}.json").read_text())
+        assert card["cluster"] == name and card["training"]["ensemble_members"] == len(trained)
+        assert card["data"]["tracks_used"] == 4 and card["calibration"]["rollout"]
+        seeds.add(card["seed"])
+    assert len(seeds) == len(trained)  # each route its own member
+    det = load_detector(models / trained[0])
+    assert det.policy().space.corridor is not None

@@ -26,10 +26,41 @@ from aisdati.model.ais import (
     make_env,
     model_stem,
     train_ais,
+    train_ais_ensemble,
 )
 from aisdati.model.baselines import BCConfig, BCTrainer
 from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.trackdata import load_tracks
+
+
+def _calibrate_dati(stem: Path, how: ScoreSettings) -> dict[str, Any]:
+    """Score a saved DATI model's own training tracks and write the scores into its card."""
+    det = DATIDetector.load(stem, {})
+    det.card["training"]["finished"] = True
+    tracks = load_tracks(Path(det.card["data"]["dir"]), det.card["data"]["track_ids"])
+    det.calibrate(tracks, how)
+    atomic_write_bytes(stem.with_suffix(".json"), json.dumps(det.card, indent=2).encode())
+    return det.card
+
+
+def train_routes(
+    method: str,
+    settings: list[TrainSettings],
+    how: ScoreSettings | None = None,
+    on_step: StepCallback | None = None,
+) -> list[Trained]:
+    """One model per route: DATI trains all routes as one batched ensemble, the others one
+    after the other."""
+    how = how or ScoreSettings()
+    settings = [replace(s, stem=s.stem or model_name(s.cluster, method)) for s in settings]
+    if method != "dati":
+        return [train_detector(method, s, how) for s in settings]
+    t0 = time.perf_counter()
+    results = train_ais_ensemble(settings, on_step)
+    return [
+        Trained(r.model, _calibrate_dati(model_stem(s), how), time.perf_counter() - t0)
+        for r, s in zip(results, settings, strict=True)
+    ]
 
 
 @dataclass
@@ -53,13 +84,8 @@ def train_detector(
     t0 = time.perf_counter()
     if method == "dati":
         result = train_ais(settings, on_step)
-        stem = model_stem(settings)
-        det = DATIDetector.load(stem, {})
-        det.card["training"]["finished"] = True
-        tracks = load_tracks(settings.data_dir, det.card["data"]["track_ids"])
-        det.calibrate(tracks, how)
-        atomic_write_bytes(stem.with_suffix(".json"), json.dumps(det.card, indent=2).encode())
-        return Trained(result.model, det.card, time.perf_counter() - t0, result.resumed_from)
+        card = _calibrate_dati(model_stem(settings), how)
+        return Trained(result.model, card, time.perf_counter() - t0, result.resumed_from)
     if settings.episodes < 1:
         raise UserError(f"--episodes must be at least 1, got {settings.episodes}")
     ids, total = choose_training_tracks(settings)

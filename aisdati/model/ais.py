@@ -38,6 +38,7 @@ from aisdati.model.card import track_keys
 from aisdati.model.checkpoint import atomic_write_bytes, save_networks
 from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
 from aisdati.model.env import Reference, ReferenceSource, TrajectoryImitationEnv
+from aisdati.model.networks import DATINetworks
 from aisdati.model.resume import (
     at_episode_boundary,
     load_trainer_state,
@@ -402,3 +403,85 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     return TrainResult(
         stem.with_suffix(".pt"), card, list(trainer.history), wall, steps, resumed_from
     )
+
+
+class _MemberValidators:
+    """One `Validator` per ensemble member (each route validates on its own tracks)."""
+
+    def __init__(self, validators: Sequence[Validator]):
+        self.validators = list(validators)
+
+    def __call__(self, trainer: DATITrainer, k: int) -> float:
+        member = trainer.active[k]
+        policy = AISPolicy(
+            self.validators[member].space, dati_act(trainer.nets, trainer.cfg, member=k)
+        )
+        v = self.validators[member]
+        scores, _ = policy.rollout_scores(v.tracks, v.rollouts, v.seed)
+        return float(np.median(scores))
+
+
+def member_networks(nets: DATINetworks, k: int) -> DATINetworks:
+    """Member k of an ensemble as a single-member network (every parameter has the members
+    first)."""
+    single = DATINetworks(
+        nets.forward_actor.input_features.weight.shape[1],
+        nets.forward_actor.out.weight.shape[2],
+        nets.cfg,
+        [nets.seeds[k]],
+    )
+    single.load_state_dict({n: p[k : k + 1].clone() for n, p in nets.state_dict().items()})
+    return single
+
+
+def train_ais_ensemble(
+    settings: Sequence[TrainSettings],
+    on_step: StepCallback | None = None,
+) -> list[TrainResult]:
+    """Train one DATI model per settings (one per route) as ONE batched ensemble: each route is a
+    member with its own tracks, region, rule, validation and early stopping; every layer runs
+    all members in one batched matmul, so ten routes cost far less than ten runs. Each member is
+    saved as its own model (<out>/<route>.pt/.json). No checkpoints: --resume is per model."""
+    if not settings:
+        raise UserError("no route to train")
+    torch.set_num_threads(1)
+    sources, datas, configs, validators, envs = [], [], [], [], []
+    for s in settings:
+        ids, total = choose_training_tracks(s)
+        tracks = load_tracks(s.data_dir, ids)
+        source = build_source(tracks, s.lane)
+        sources.append(source)
+        datas.append(data_card(s, tracks, total))
+        configs.append(dati_config(s, tracks))
+        validators.append(Validator(source.space, configs[-1], tracks, s.lane, s.seed))
+        envs.append(make_env(source, s.epsilon_m))
+    if len({json.dumps(c.to_dict(), sort_keys=True) for c in configs}) > 1:
+        raise UserError("routes trained as one ensemble need one configuration (same --lane)")
+    validate = _MemberValidators(validators) if settings[0].lane.validation else None
+    seeds = [s.seed + 1000 * i for i, s in enumerate(settings)]
+    trainer = DATITrainer(envs, seeds, configs[0], validate)
+    t0 = time.perf_counter()
+    steps = 0
+    while not trainer.done:
+        logs = trainer.step()
+        steps += 1
+        if on_step is not None:
+            on_step(trainer, logs)
+    wall = time.perf_counter() - t0
+    results = []
+    for k, s in enumerate(settings):
+        history = [h for h in trainer.history if h.member == k]
+        stem = model_stem(s)
+        card = model_card(s, sources[k], datas[k], history, wall, steps)
+        card["seed"] = seeds[k]
+        card["training"]["finished"] = True
+        card["training"]["ensemble_members"] = len(settings)
+        save_networks(stem, member_networks(trainer.final, k), configs[k], card)
+        if sources[k].space.corridor is not None:
+            atomic_write_bytes(
+                stem.with_suffix(".corridor.npz"), sources[k].space.corridor.to_bytes()
+            )
+        log = "".join(json.dumps(h.__dict__) + "\n" for h in history)
+        atomic_write_bytes(stem.with_suffix(".log.jsonl"), log.encode())
+        results.append(TrainResult(stem.with_suffix(".pt"), card, history, wall, steps))
+    return results

@@ -161,21 +161,22 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int = 0) -> MakeAct
     draws its own latent noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
     latent = config.network.latent_dim
     state_dim = nets.forward_actor.input_features.weight.shape[1]
+    members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
 
     def make(n: int, seed: int, temporal: bool) -> Act:
         gen = torch.Generator().manual_seed(int(seed))
-        eta = torch.zeros(nets.members, n, latent)
+        eta = torch.zeros(members, n, latent)
         ou = config.noise == "ou" and temporal
 
         def act(obs: np.ndarray) -> np.ndarray:
             nonlocal eta
-            draw = torch.randn((1, n, latent), generator=gen).expand(nets.members, n, latent)
+            draw = torch.randn((1, n, latent), generator=gen).expand(members, n, latent)
             draw = draw * config.noise_sigma
             if ou:
                 eta = eta - config.ou_theta * eta * config.ou_dt + draw * math.sqrt(config.ou_dt)
             else:
                 eta = draw
-            x = torch.as_tensor(obs)[None].expand(nets.members, *obs.shape)
+            x = torch.as_tensor(obs)[None].expand(members, *obs.shape)
             with torch.no_grad():
                 time = nets.time_features(x[..., state_dim:].contiguous())
                 out = nets.forward_actor(x[..., :state_dim].contiguous(), eta, time)

@@ -41,6 +41,7 @@ TRACKS_SCHEMA = pa.schema(
         ("cluster", pa.string()),
         ("lon0", pa.float64()),
         ("lat0", pa.float64()),
+        ("route", pa.string()),
         ("stage", pa.string()),
         ("geometry", pa.binary()),
     ]
@@ -106,6 +107,7 @@ def build_tracks(
             pa.array(cluster_tracks(track, cog, n_tracks), pa.string()),
             lon[first],
             lat[first],
+            pa.nulls(n_tracks, pa.string()),  # route: set once all tracks are known
             pa.array(["cluster"] * n_tracks, pa.string()),
             pa.array(shapely.to_wkb(lines), pa.binary()),
         ],
@@ -121,7 +123,15 @@ def _cog32(cog: np.ndarray) -> np.ndarray:
     return out
 
 
-OUTPUT_NAMES = ("points.parquet", "tracks.parquet", "ingest_report.json", "rejects.parquet")
+OUTPUT_NAMES = (
+    "points.parquet",
+    "tracks.parquet",
+    "ingest_report.json",
+    "rejects.parquet",
+    "routes.parquet",
+    "routes.geojson",
+    "routes.png",
+)
 """Every file ingest may write into its output folder."""
 
 

@@ -29,6 +29,7 @@ from aisdati.preprocess.output import (
     OUTPUT_NAMES,
     POINTS_SCHEMA,
     REJECTS_SCHEMA,
+    TRACKS_SCHEMA,
     StagedFile,
     StagedParquet,
     build_tracks,
@@ -47,8 +48,16 @@ from aisdati.preprocess.read import (
     to_canonical,
 )
 from aisdati.preprocess.report import REASONS, IngestCounts, no_tracks_message
+from aisdati.preprocess.routes import (
+    ROUTE_FILES,
+    route_summary,
+    route_tracks,
+    write_routes,
+)
+from aisdati.preprocess.routes import settings_of as route_settings
 from aisdati.preprocess.segment import segment
 from aisdati.preprocess.settings import IngestSettings
+from aisdati.preprocess.stops import dwell_rules
 
 MAX_PARTITIONS = 256
 
@@ -63,10 +72,13 @@ class IngestResult:
     outputs: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
+    routes: dict[str, Any] | None = None
+    """Route clusters (`route_summary`), None with `--clusters direction`."""
 
     def as_dict(self) -> dict[str, Any]:
         return {
             **self.counts.as_dict(),
+            "route_clusters": self.routes,
             "settings": self.settings.as_dict(),
             "roi": self.roi,
             "outputs": self.outputs,
@@ -89,6 +101,7 @@ def ingest(
     started = time.perf_counter()
     if settings.min_points < 2:
         raise UserError("--min-points must be at least 2 (a track is a line)")
+    _check_route_settings(settings)
     sources = [s for path in inputs for s in sources_of(path)]
     readers = [SourceReader(s) for s in sources]  # every header checked before any work
     counts = IngestCounts()
@@ -129,10 +142,16 @@ def ingest(
             )
             if rejects:
                 rejects.close()
-            staged.append(write_tracks(out_dir / "tracks.parquet", tracks))
+            routed_at = time.perf_counter()
+            what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
+            table, route_files, routes = _route_stage(tracks, out_dir, settings, what, progress)
+            stage_seconds["routes"] = time.perf_counter() - routed_at
+            staged.extend(route_files)
+            staged.append(write_tracks(out_dir / "tracks.parquet", [table]))
         result = IngestResult(counts, settings, roi_name, seconds=time.perf_counter() - started)
         result.stage_seconds = {k: round(v, 3) for k, v in stage_seconds.items()}
-        result.outputs = {f.final.stem: str(f.final) for f in staged}
+        result.routes = routes
+        result.outputs = {_output_key(f.final): str(f.final) for f in staged}
         result.outputs["ingest_report"] = str(out_dir / "ingest_report.json")
         if not counts.balanced():
             raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
@@ -144,7 +163,47 @@ def ingest(
     commit_all(staged)
     if not settings.keep_rejects:  # an earlier --keep-rejects run's file would now mislead
         (out_dir / "rejects.parquet").unlink(missing_ok=True)
+    if settings.clusters != "routes":  # no stale routes of an earlier run beside new tracks
+        for name in ROUTE_FILES:
+            (out_dir / name).unlink(missing_ok=True)
     return result
+
+
+def _check_route_settings(settings: IngestSettings) -> None:
+    if settings.clusters not in ("routes", "direction"):
+        raise UserError(f"--clusters {settings.clusters!r}: choose routes or direction")
+    if settings.route_min_tracks < 2:
+        raise UserError(f"--route-min-tracks must be at least 2, got {settings.route_min_tracks}")
+    if settings.route_eps_km is not None and not settings.route_eps_km > 0:
+        raise UserError(f"--route-eps-km must be positive (or auto), got {settings.route_eps_km}")
+    if settings.dwell_time_s < 0 or not settings.dwell_radius_m > 0:
+        raise UserError("--dwell-radius must be positive and --dwell-time positive or 0")
+
+
+def _output_key(path: Path) -> str:
+    """Key of an output in the report: its stem, with the suffix for the non-tabular files
+    that share a stem (routes.geojson, routes.png)."""
+    return path.stem if path.suffix in (".parquet", ".json") else f"{path.stem}_{path.suffix[1:]}"
+
+
+def _route_stage(
+    tracks: list[pa.Table],
+    out_dir: Path,
+    settings: IngestSettings,
+    what: str,
+    progress: Progress | None,
+) -> tuple[pa.Table, list[StagedFile], dict[str, Any] | None]:
+    """All tracks as one table, with route clusters when `settings.clusters` is 'routes' (and
+    their staged files and summary)."""
+    table = pa.concat_tables(tracks) if tracks else TRACKS_SCHEMA.empty_table()
+    if settings.clusters == "direction":
+        return table, [], None
+    task = progress.add_task("route clusters", total=None) if progress else None
+    table, routes, lines = route_tracks(table, route_settings(settings))
+    files = write_routes(out_dir, routes, lines, what)
+    if task is not None:
+        progress.update(task, total=1, completed=1)
+    return table, files, route_summary(routes)
 
 
 def _partition_count(sources: list[Source], settings: IngestSettings) -> int:
@@ -211,14 +270,17 @@ def _vessel_stages(
     task = progress.add_task("clean, segment, cluster", total=len(parts)) if progress else None
     tracks: list[pa.Table] = []
     next_track_id = 0
+    stops = dwell_rules(settings.dwell_radius_m, settings.dwell_time_s, settings.min_sog_kn)
     for table in parts:
         table, codes = clean_vessels(table, settings)
         kept = np.flatnonzero(codes == 0)
         time_us = table.column("time").to_numpy().view(np.int64)
         mmsi = table.column("mmsi").to_numpy()
+        lon, lat, sog = (table.column(c).to_numpy()[kept] for c in ("lon", "lat", "sog"))
         track, seg_codes, n_short = segment(
-            mmsi[kept], time_us[kept], settings.stop_gap_s, settings.min_points
-        )
+            mmsi[kept], time_us[kept], settings.stop_gap_s, settings.min_points, stops,
+            lon, lat, sog,
+        )  # fmt: skip
         codes[kept] = seg_codes
         counts.add_codes(codes)
         counts.short_segments += n_short

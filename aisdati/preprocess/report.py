@@ -33,6 +33,7 @@ REASONS: dict[int, tuple[str, str, str]] = {
     14: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
     15: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
     16: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
+    17: ("segment", "dwell", "inside a stop: within --dwell-radius for at least --dwell-time"),
 }
 CODE = {reason: code for code, (_, reason, _) in REASONS.items()}
 N_CODES = max(REASONS) + 1
@@ -89,7 +90,7 @@ def no_tracks_message(counts: IngestCounts) -> str:
     where = ", ".join(f"{reason} {n:,}" for n, reason in reasons) or "none"
     return (
         f"no track kept: {counts.rows_read:,} rows read, rejected: {where}; nothing written "
-        "(loosen --min-points, --min-sog, --stop-gap or --roi, or check the input)"
+        "(loosen --min-points, --min-sog, --stop-gap, --dwell-time or --roi, or check the input)"
     )
 
 

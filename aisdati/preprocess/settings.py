@@ -23,6 +23,18 @@ class IngestSettings:
     stop_gap_s: float = 3600.0
     min_points: int = 900
     keep_rejects: bool = False
+    dwell_radius_m: float = 500.0
+    """Stops by dwell (`aisdati.preprocess.stops`): a vessel that stays within this radius for
+    `dwell_time_s` (seen in its reports, or across a gap in them) ends a track there."""
+    dwell_time_s: float = 300.0
+    """0 turns dwell splitting off (the paper's gap rule alone)."""
+    clusters: str = "routes"
+    """'routes': the paper's direction clusters and route clusters; 'direction': the paper's
+    clusters only (no route column values, no routes files)."""
+    route_min_tracks: int = 5
+    route_eps_km: float | None = None
+    """None: HDBSCAN (no distance scale); a number: DBSCAN radius and shape tolerance, km."""
+    route_seed: int = 0
     rows_per_bucket: int = 2_000_000
     """Upper bound on the rows of one on-disk vessel partition; keeps memory bounded."""
 
@@ -33,11 +45,14 @@ class IngestSettings:
 _UNITS_S = {"s": 1.0, "sec": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
 
 
-def parse_duration(text: str) -> float:
-    """'1h', '90min', '3600s', '1.5h' -> seconds (for --stop-gap)."""
+def parse_duration(text: str, option: str = "--stop-gap", allow_zero: bool = False) -> float:
+    """'1h', '90min', '3600s', '1.5h' -> seconds (for --stop-gap; `allow_zero`: also '0')."""
+    if allow_zero and text.strip() in ("0", "off"):
+        return 0.0
     match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*(s|sec|m|min|h|d)\s*", text.lower())
     if not match or float(match[1]) <= 0:
+        zero = " (0 or off: none)" if allow_zero else ""
         raise UserError(
-            f"--stop-gap {text!r}: expected a positive duration such as 1h, 90min, 600s"
+            f"{option} {text!r}: expected a positive duration such as 1h, 90min, 600s{zero}"
         )
     return float(match[1]) * _UNITS_S[match[2]]

@@ -1,0 +1,490 @@
+"""Route clusters: group tracks into lanes by where they enter and leave, then by their shape.
+
+The paper's `up`/`down`/`other` rule (`cluster.py`) fits the Florida Straits; where channels
+wind or a harbour is crossed in every direction it puts nearly every track into `other`, and one
+model trained on `other` mixes lanes that run in opposite directions. A route is a set of tracks
+that start in one place, end in another and follow one path between them:
+
+1. **Endpoints.** Each track is the point (entry, exit) in six dimensions: both ends as
+   Earth-centred coordinates in km, so the euclidean distance is sqrt(d_entry² + d_exit²) with
+   d the chord (the great-circle distance to 0.001% below 100 km), for any region, no projection.
+   Density clustering finds the busy (entry, exit) pairs: by default HDBSCAN
+   (`min_cluster_size` = `min_tracks`), which needs no distance scale, so the same defaults
+   find the lanes of a fjord 200 km long and the ferry crossings of a harbour 2 km wide; with
+   `eps_km` set, DBSCAN at that fixed radius. Entry and exit are ordered, so the two directions
+   of a lane are far apart here: opposite directions are always separate routes.
+2. **Split by shape.** Each candidate group may hold several paths between the same ends (either
+   side of an island). Every track is resampled to `samples` points equally spaced along its
+   length; the exact great-circle DTW of `aisdati.dtw`, read as the mean distance along the
+   warping path (the project's reading of ε), compares them. Average-linkage clustering of (up
+   to `max_sample` of) the group's tracks, cut at the shape tolerance τ, gives the paths; every
+   track goes to the path whose medoid it is nearest.
+3. **Merge.** Paths of different groups whose medoids start within τ of each other, end within
+   τ, and are within τ in mean DTW in the same direction (closer than to the other's reverse)
+   are one route: density clustering can cut a lane whose entries are spread out.
+4. Paths with fewer than `min_tracks` tracks are not routes; their tracks, and those density
+   clustering left as noise, have no route (`unrouted`). Routes are numbered `route-1`,
+   `route-2`, ... by size, largest first, ties by their smallest track id.
+
+τ is `eps_km` when given, otherwise `shape_fraction` of the group's median track length, at
+least `shape_min_km`: 5% of a 175 km passage is 8.8 km (the channels that split it are tens of
+km apart, a lane's own tracks a kilometre or two), and a harbour crossing of a few km gets the
+floor of 0.5 km, the paper's ε. Resampling to 32 points makes each comparison 32 x 32 cells
+whatever the report rate (10,000 tracks take seconds, `benchmarks/routes_speed.py`).
+
+Each route is described by its size, its entry and exit (the medians of its tracks' first and
+last points), its median length, its medoid track (the member with the smallest summed distance
+to the others: the route's most typical track, drawn in routes.png and written as its geometry)
+and its spread (the median mean-DTW of its tracks to the medoid, km).
+
+Deterministic: tracks are processed in the order of their ids (so the input order does not
+matter), samples are drawn with `seed`, and ties go to the lower index.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import shapely
+from numba import njit, prange
+
+from aisdati.dtw import _cost_and_length, _prepare
+from aisdati.geo import EARTH_RADIUS_M, haversine_m
+
+HAVERSINE = 1
+"""`aisdati.dtw`'s code of the great-circle metric."""
+
+ROUTE_PREFIX = "route-"
+ROUTE_COLUMNS = [
+    "route",
+    "n_tracks",
+    "entry_lon",
+    "entry_lat",
+    "exit_lon",
+    "exit_lat",
+    "median_length_km",
+    "medoid_track_id",
+    "spread_km",
+]
+
+
+@dataclass(frozen=True)
+class RouteSettings:
+    """How tracks are grouped into routes (see the module docstring)."""
+
+    min_tracks: int = 5
+    """Fewest tracks of a route; also HDBSCAN's min_cluster_size and DBSCAN's min_samples."""
+    eps_km: float | None = None
+    """None: HDBSCAN on the endpoints and a shape tolerance relative to the track length;
+    a number: DBSCAN at this radius and this shape tolerance (mean DTW, km)."""
+    seed: int = 0
+    samples: int = 32
+    """Points per resampled track for the shape DTW (32 x 32 cells per pair)."""
+    max_sample: int = 128
+    """Tracks of a group compared pairwise when splitting it by shape (a seeded sample)."""
+    shape_fraction: float = 0.05
+    shape_min_km: float = 0.5
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class Routes:
+    """`labels[i]`: the route of track i (None: no route); `table`: one row per route, largest
+    first (`ROUTE_COLUMNS`); `medoids[r]`: route r's medoid track, [n, 2] lon/lat."""
+
+    labels: np.ndarray
+    table: pd.DataFrame
+    medoids: list[np.ndarray]
+    seconds: dict[str, float] = field(default_factory=dict)
+    """Wall time of each step: resample, endpoints, split, merge, describe."""
+
+
+# ------------------------------------------------------------------------------ geometry
+def earth_xyz_km(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+    """Earth-centred coordinates in km of points in degrees, [..., 3]."""
+    lon, lat = np.radians(lon), np.radians(lat)
+    r = EARTH_RADIUS_M / 1000.0
+    return r * np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], -1)
+
+
+def resample(lines: list[np.ndarray], k: int) -> np.ndarray:
+    """Each [n, 2] lon/lat line as k points equally spaced along its great-circle length
+    (linear in lon/lat between reports, which are close): [len(lines), k, 2]."""
+    out = np.empty((len(lines), k, 2))
+    frac = np.linspace(0.0, 1.0, k)
+    for i, xy in enumerate(lines):
+        steps = haversine_m(xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1])
+        along = np.r_[0.0, np.cumsum(steps)]
+        if along[-1] <= 0:
+            out[i] = xy[0]
+            continue
+        target = frac * along[-1]
+        out[i, :, 0] = np.interp(target, along, xy[:, 0])
+        out[i, :, 1] = np.interp(target, along, xy[:, 1])
+    return out
+
+
+def _prepared(paths: np.ndarray) -> np.ndarray:
+    """[n, k, 3]: each path in `aisdati.dtw`'s prepared form (radians, cos lat)."""
+    out = np.empty((paths.shape[0], paths.shape[1], 3))
+    for i in range(paths.shape[0]):
+        out[i] = _prepare(np.ascontiguousarray(paths[i]), HAVERSINE)
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _pair_mean_dtw(a, b, pairs):  # pragma: no cover - compiled
+    """Mean great-circle DTW (m) of a[pairs[p, 0]] against b[pairs[p, 1]], in parallel."""
+    out = np.empty(pairs.shape[0])
+    for p in prange(pairs.shape[0]):
+        cost, length = _cost_and_length(a[pairs[p, 0]], b[pairs[p, 1]], 1)
+        out[p] = cost / length
+    return out
+
+
+class ShapeDistance:
+    """Mean great-circle DTW (km) between resampled tracks, both ways round."""
+
+    def __init__(self, paths: np.ndarray) -> None:
+        self.fwd = _prepared(paths)
+        self.rev = np.ascontiguousarray(self.fwd[:, ::-1])
+
+    def pairs(self, i: np.ndarray, j: np.ndarray, reverse: bool = False) -> np.ndarray:
+        if len(i) == 0:
+            return np.zeros(0)
+        pairs = np.ascontiguousarray(np.stack([i, j], axis=1).astype(np.int64))
+        return _pair_mean_dtw(self.fwd, self.rev if reverse else self.fwd, pairs) / 1000.0
+
+    def matrix(self, idx: np.ndarray) -> np.ndarray:
+        """Symmetric matrix of the distances among tracks `idx`."""
+        n = len(idx)
+        iu, ju = np.triu_indices(n, 1)
+        d = np.zeros((n, n))
+        d[iu, ju] = d[ju, iu] = self.pairs(idx[iu], idx[ju])
+        return d
+
+    def cross(self, rows: np.ndarray, cols: np.ndarray, reverse: bool = False) -> np.ndarray:
+        """[len(rows), len(cols)] distances of tracks `rows` to tracks `cols`."""
+        ii, jj = np.meshgrid(rows, cols, indexing="ij")
+        return self.pairs(ii.ravel(), jj.ravel(), reverse).reshape(len(rows), len(cols))
+
+
+# ---------------------------------------------------------------------------- clustering
+def endpoint_groups(first: np.ndarray, last: np.ndarray, settings: RouteSettings) -> np.ndarray:
+    """Candidate group of each track from its entry and exit (-1: noise)."""
+    n = len(first)
+    if n < max(settings.min_tracks, 2):
+        return np.full(n, -1)
+    x = np.hstack([earth_xyz_km(first[:, 0], first[:, 1]), earth_xyz_km(last[:, 0], last[:, 1])])
+    if settings.eps_km is None:
+        from sklearn.cluster import HDBSCAN
+
+        model = HDBSCAN(min_cluster_size=max(settings.min_tracks, 2), copy=True)
+    else:
+        from sklearn.cluster import DBSCAN
+
+        model = DBSCAN(eps=settings.eps_km, min_samples=settings.min_tracks)
+    return model.fit_predict(x)
+
+
+def _medoid(dist: np.ndarray) -> int:
+    """Index of the row with the smallest sum of distances (ties: the lowest index)."""
+    return int(np.argmin(dist.sum(axis=1)))
+
+
+def _sample(idx: np.ndarray, size: int, rng: np.random.Generator) -> np.ndarray:
+    if len(idx) <= size:
+        return idx
+    return np.sort(rng.choice(idx, size, replace=False))
+
+
+def split_by_shape(
+    idx: np.ndarray,
+    shapes: ShapeDistance,
+    tau: float,
+    settings: RouteSettings,
+    rng: np.random.Generator,
+) -> list[tuple[np.ndarray, int]]:
+    """The paths within one candidate group: (member track indices, medoid track index) each,
+    every member assigned to its nearest path medoid."""
+    sample = _sample(idx, settings.max_sample, rng)
+    if len(sample) == 1:
+        return [(idx, int(sample[0]))]
+    dist = shapes.matrix(sample)
+    from scipy.cluster.hierarchy import fcluster, linkage
+    from scipy.spatial.distance import squareform
+
+    tree = linkage(squareform(dist, checks=False), method="average")
+    sub = fcluster(tree, t=tau, criterion="distance")
+    medoids = []
+    for c in np.unique(sub):
+        members = np.flatnonzero(sub == c)
+        medoids.append(int(sample[members[_medoid(dist[np.ix_(members, members)])]]))
+    medoids_arr = np.array(medoids)
+    if len(medoids) == 1:
+        return [(idx, medoids[0])]
+    nearest = np.argmin(shapes.cross(idx, medoids_arr), axis=1)
+    return [(idx[nearest == c], medoids[c]) for c in range(len(medoids)) if (nearest == c).any()]
+
+
+def _find(parent: list[int], i: int) -> int:
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+def merge_paths(
+    paths: list[tuple[np.ndarray, int, float]],
+    shapes: ShapeDistance,
+    first: np.ndarray,
+    last: np.ndarray,
+) -> list[list[int]]:
+    """Groups of paths (by position in `paths`) that are one lane: their medoids start within
+    the smaller of the two tolerances of each other, end within it, and are within it in mean
+    DTW, in the same direction (closer than to the other's reverse)."""
+    n = len(paths)
+    parent = list(range(n))
+    if n > 1:
+        med = np.array([m for _, m, _ in paths])
+        tau = np.array([t for _, _, t in paths])
+        iu, ju = np.triu_indices(n, 1)
+        limit = np.minimum(tau[iu], tau[ju])
+        a, b = med[iu], med[ju]
+        near = (
+            haversine_m(first[a, 0], first[a, 1], first[b, 0], first[b, 1]) / 1000.0 <= limit
+        ) & (haversine_m(last[a, 0], last[a, 1], last[b, 0], last[b, 1]) / 1000.0 <= limit)
+        iu, ju, limit = iu[near], ju[near], limit[near]
+        same = shapes.pairs(med[iu], med[ju])
+        opposite = shapes.pairs(med[iu], med[ju], reverse=True)
+        one_lane = (same <= limit) & (same < opposite)
+        for i, j in zip(iu[one_lane], ju[one_lane], strict=True):
+            ri, rj = _find(parent, int(i)), _find(parent, int(j))
+            if ri != rj:
+                parent[max(ri, rj)] = min(ri, rj)
+    groups: dict[int, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(_find(parent, i), []).append(i)
+    return list(groups.values())
+
+
+def cluster_routes(
+    lines: list[np.ndarray],
+    track_ids: np.ndarray,
+    length_km: np.ndarray,
+    settings: RouteSettings | None = None,
+) -> Routes:
+    """Routes of tracks given as [n, 2] lon/lat lines (with their distinct ids and lengths).
+    The result depends on the tracks and the seed, not on the order they come in (they are
+    processed in the order of their ids)."""
+    settings = settings or RouteSettings()
+    if settings.min_tracks < 2:
+        raise ValueError("a route needs at least 2 tracks")
+    track_ids = np.asarray(track_ids, dtype=np.int64)
+    order = np.argsort(track_ids, kind="stable")
+    if (order != np.arange(len(order))).any():
+        routes = cluster_routes(
+            [lines[i] for i in order], track_ids[order], np.asarray(length_km)[order], settings
+        )
+        routes.labels[order] = routes.labels.copy()
+        return routes
+    n = len(lines)
+    length_km = np.asarray(length_km, dtype=np.float64)
+    labels = np.full(n, None, dtype=object)
+    if n == 0:
+        return Routes(labels, _empty_table(), [])
+    clock = time.perf_counter()
+    seconds: dict[str, float] = {}
+
+    def lap(step: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        seconds[step] = round(now - clock, 3)
+        clock = now
+
+    first = np.array([xy[0] for xy in lines])
+    last = np.array([xy[-1] for xy in lines])
+    shapes = ShapeDistance(resample(lines, settings.samples))
+    lap("resample")
+    groups = endpoint_groups(first, last, settings)
+    lap("endpoints")
+    rng = np.random.default_rng(settings.seed)
+
+    paths: list[tuple[np.ndarray, int, float]] = []
+    for g in np.unique(groups[groups >= 0]):
+        idx = np.flatnonzero(groups == g)
+        tau = _tolerance(length_km[idx], settings)
+        for members, medoid in split_by_shape(idx, shapes, tau, settings, rng):
+            paths.append((members, medoid, tau))
+    lap("split")
+
+    routes: list[tuple[np.ndarray, int]] = []
+    for merged in merge_paths(paths, shapes, first, last):
+        members = np.sort(np.concatenate([paths[p][0] for p in merged]))
+        if len(members) < settings.min_tracks:
+            continue
+        medoid = paths[merged[0]][1]
+        if len(merged) > 1:  # the merged paths' medoid nearest to (a sample of) all members
+            candidates = np.array([paths[p][1] for p in merged])
+            sample = _sample(members, settings.max_sample, rng)
+            medoid = int(candidates[_medoid(shapes.cross(candidates, sample))])
+        routes.append((members, medoid))
+    routes.sort(key=lambda r: (-len(r[0]), int(track_ids[r[0]].min())))
+    lap("merge")
+
+    rows = []
+    medoids = []
+    for number, (members, medoid) in enumerate(routes, start=1):
+        name = f"{ROUTE_PREFIX}{number}"
+        labels[members] = name
+        spread = shapes.pairs(members, np.full(len(members), medoid))
+        rows.append(
+            {
+                "route": name,
+                "n_tracks": len(members),
+                "entry_lon": float(np.median(first[members, 0])),
+                "entry_lat": float(np.median(first[members, 1])),
+                "exit_lon": float(np.median(last[members, 0])),
+                "exit_lat": float(np.median(last[members, 1])),
+                "median_length_km": float(np.median(length_km[members])),
+                "medoid_track_id": int(track_ids[medoid]),
+                "spread_km": float(np.median(spread)),
+            }
+        )
+        medoids.append(lines[medoid])
+    table = pd.DataFrame(rows, columns=ROUTE_COLUMNS) if rows else _empty_table()
+    lap("describe")
+    return Routes(labels, table, medoids, seconds)
+
+
+def _tolerance(length_km: np.ndarray, settings: RouteSettings) -> float:
+    if settings.eps_km is not None:
+        return float(settings.eps_km)
+    return max(settings.shape_min_km, settings.shape_fraction * float(np.median(length_km)))
+
+
+def _empty_table() -> pd.DataFrame:
+    return pd.DataFrame({c: pd.Series(dtype="object") for c in ROUTE_COLUMNS})
+
+
+def lines_from_wkb(wkb: list[bytes]) -> list[np.ndarray]:
+    """[n, 2] lon/lat arrays of WKB LineStrings (tracks.parquet's geometry)."""
+    geoms = shapely.from_wkb(np.asarray(wkb, dtype=object))
+    coords, owner = shapely.get_coordinates(geoms, return_index=True)
+    cuts = np.flatnonzero(np.diff(owner)) + 1
+    return np.split(coords, cuts) if len(coords) else []
+
+
+def route_distance_km(a: np.ndarray, b: np.ndarray, samples: int = 32) -> float:
+    """Mean great-circle DTW (km) between two lon/lat lines resampled as the routes compare
+    them (for tests and reports)."""
+    shapes = ShapeDistance(resample([a, b], samples))
+    return float(shapes.pairs(np.array([0]), np.array([1]))[0])
+
+
+# ------------------------------------------------------------------------- ingest outputs
+ROUTES_SCHEMA = pa.schema(
+    [
+        ("route", pa.string()),
+        ("n_tracks", pa.int64()),
+        ("entry_lon", pa.float64()),
+        ("entry_lat", pa.float64()),
+        ("exit_lon", pa.float64()),
+        ("exit_lat", pa.float64()),
+        ("median_length_km", pa.float64()),
+        ("medoid_track_id", pa.int64()),
+        ("spread_km", pa.float64()),
+        ("geometry", pa.binary()),
+    ]
+)
+ROUTE_FILES = ("routes.parquet", "routes.geojson", "routes.png")
+
+
+def settings_of(ingest_settings: Any) -> RouteSettings:
+    """The route settings of an `IngestSettings`."""
+    return RouteSettings(
+        min_tracks=ingest_settings.route_min_tracks,
+        eps_km=ingest_settings.route_eps_km,
+        seed=ingest_settings.route_seed,
+    )
+
+
+def route_tracks(tracks: pa.Table, settings: RouteSettings) -> tuple[pa.Table, Routes, list]:
+    """tracks.parquet's table with its `route` column filled in, the routes, and each track's
+    [n, 2] lon/lat line."""
+    lines = lines_from_wkb(tracks.column("geometry").to_pylist())
+    routes = cluster_routes(
+        lines,
+        tracks.column("track_id").to_numpy(),
+        tracks.column("length_km").to_numpy(),
+        settings,
+    )
+    col = tracks.schema.get_field_index("route")
+    tracks = tracks.set_column(col, "route", pa.array(list(routes.labels), pa.string()))
+    return tracks, routes, lines
+
+
+def routes_arrow(routes: Routes) -> pa.Table:
+    """routes.parquet: one row per route, the medoid track as a WKB LineString."""
+    table = routes.table
+    columns = [pa.array(table[c].tolist(), ROUTES_SCHEMA.field(c).type) for c in ROUTE_COLUMNS]
+    wkb = [shapely.to_wkb(shapely.linestrings(xy)) for xy in routes.medoids]
+    columns.append(pa.array(wkb, pa.binary()))
+    return pa.Table.from_arrays(columns, schema=ROUTES_SCHEMA)
+
+
+def routes_geojson(routes: Routes) -> dict[str, Any]:
+    """routes.geojson: a FeatureCollection of the medoid LineStrings with the route's facts."""
+    features = []
+    for row, xy in zip(routes.table.to_dict("records"), routes.medoids, strict=True):
+        props = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()}
+        props = {k: (int(v) if isinstance(v, np.integer) else v) for k, v in props.items()}
+        coords = np.round(xy, 6).tolist()
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "LineString", "coordinates": coords},
+                "properties": props,
+            }
+        )
+    return {"type": "FeatureCollection", "features": features}
+
+
+def write_routes(out_dir: Path, routes: Routes, lines: list[np.ndarray], title: str) -> list:
+    """routes.parquet, routes.geojson and routes.png, staged (renamed when the run commits)."""
+    from aisdati.plots import plot_routes
+    from aisdati.preprocess.output import GEO_METADATA, StagedFile
+
+    parquet = StagedFile(out_dir / "routes.parquet")
+    table = routes_arrow(routes).replace_schema_metadata({"geo": json.dumps(GEO_METADATA)})
+    pq.write_table(table, parquet.tmp, compression="zstd")
+    geojson = StagedFile(out_dir / "routes.geojson")
+    geojson.tmp.write_text(json.dumps(routes_geojson(routes)) + "\n", encoding="utf-8")
+    png = StagedFile(out_dir / "routes.png")
+    png.tmp = png.tmp.with_name(png.tmp.name + ".png")  # matplotlib picks the format by suffix
+    plot_routes(lines, routes.labels, routes.table, routes.medoids, png.tmp, title)
+    return [parquet, geojson, png]
+
+
+def route_summary(routes: Routes) -> dict[str, Any]:
+    """For ingest_report.json and `--json`: the routes table and how many tracks have none."""
+    rows = [
+        {k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()}
+        for r in routes.table.to_dict("records")
+    ]
+    rows = [{k: (int(v) if isinstance(v, np.integer) else v) for k, v in r.items()} for r in rows]
+    return {
+        "routes": rows,
+        "routed_tracks": int(sum(r["n_tracks"] for r in rows)),
+        "unrouted_tracks": int(sum(label is None for label in routes.labels)),
+    }

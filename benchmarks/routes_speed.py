@@ -1,0 +1,106 @@
+"""Speed of route clustering on 10,000 tracks (not a test). Target: at most 60 s on 2 cores.
+
+The tracks are synthesised from the real ones of tests/data: both samples are ingested with the
+defaults (Kitimat: tracks of at least 100 reports; NY Harbor: at least 10, so that ferry crossings
+count), then each synthetic track copies a real track picked at random, keeps a random 70-100% of
+its reports (so lengths and report counts vary), moves the whole track by a random offset
+(σ = 150 m) and every report by noise (σ = 50 m). So the busy lanes and crossings of the real data
+are there, thickened, at the scale of a month or more of a busy area.
+
+The first call compiles the DTW kernel (numba caches it on disk); the table reports a warm-up on
+a small set first, then the timed runs.
+
+Usage: python benchmarks/routes_speed.py [--tracks 10000] [--repeats 2] [--seed 0]
+Prints a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from aisdati.preprocess.pipeline import ingest
+from aisdati.preprocess.routes import RouteSettings, cluster_routes, lines_from_wkb
+from aisdati.preprocess.settings import IngestSettings
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = {
+    "AIS_2018_07-08_Kitimat.csv.gz": 100,
+    "NYHarbor_2020_12_first_week_points.csv.gz": 10,
+}
+M_PER_DEG = 111_195.0
+
+
+def real_tracks(work: Path) -> tuple[list[np.ndarray], list[float]]:
+    lines: list[np.ndarray] = []
+    lengths: list[float] = []
+    for name, min_points in SAMPLES.items():
+        out = work / name.split(".")[0]
+        settings = IngestSettings(min_points=min_points, clusters="direction")
+        ingest([ROOT / "tests" / "data" / name], out, settings, None, "none")
+        table = pq.read_table(out / "tracks.parquet", columns=["geometry", "length_km"])
+        lines += lines_from_wkb(table.column("geometry").to_pylist())
+        lengths += table.column("length_km").to_pylist()
+    return lines, lengths
+
+
+def synthesise(
+    lines: list[np.ndarray], lengths: list[float], n: int, rng: np.random.Generator
+) -> tuple[list[np.ndarray], np.ndarray]:
+    out, out_len = [], []
+    for i in rng.integers(0, len(lines), n):
+        xy = lines[i]
+        keep = np.sort(rng.choice(len(xy), max(2, int(len(xy) * rng.uniform(0.7, 1.0))), False))
+        keep[0], keep[-1] = 0, len(xy) - 1
+        xy = xy[np.unique(keep)]
+        scale = np.array([1.0 / np.cos(np.radians(xy[:, 1].mean())), 1.0]) / M_PER_DEG
+        moved = xy + rng.normal(0, 150.0, 2) * scale + rng.normal(0, 50.0, xy.shape) * scale
+        out.append(moved)
+        out_len.append(lengths[i])
+    return out, np.array(out_len)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tracks", type=int, default=10_000)
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    rng = np.random.default_rng(args.seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        lines, lengths = real_tracks(Path(tmp))
+    tracks, length_km = synthesise(lines, lengths, args.tracks, rng)
+    ids = np.arange(len(tracks))
+    settings = RouteSettings(seed=args.seed)
+    warm = time.perf_counter()
+    cluster_routes(tracks[:200], ids[:200], length_km[:200], settings)
+    warm = time.perf_counter() - warm
+    points = sum(len(t) for t in tracks)
+    print(
+        f"route clustering of {len(tracks):,} tracks ({points:,} points) synthesised from "
+        f"{len(lines)} real tracks; {os.cpu_count()} CPUs; warm-up (200 tracks, compiles "
+        f"on first use) {warm:.1f} s\n"
+    )
+    cols = ["run", "resample", "endpoints", "split", "merge", "describe", "total", "routes",
+            "routed tracks", "target"]  # fmt: skip
+    print("| " + " | ".join(cols) + " |")
+    print("|" + "---|" * len(cols))
+    for run in range(1, args.repeats + 1):
+        start = time.perf_counter()
+        routes = cluster_routes(tracks, ids, length_km, settings)
+        total = time.perf_counter() - start
+        s = routes.seconds
+        routed = int(sum(label is not None for label in routes.labels))
+        row = [str(run)] + [f"{s[k]:.1f} s" for k in cols[1:6]]
+        row += [f"**{total:.1f} s**", str(len(routes.table)), f"{routed:,}", "<= 60 s"]
+        print("| " + " | ".join(row) + " |")
+
+
+if __name__ == "__main__":
+    main()
