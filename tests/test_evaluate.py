@@ -183,3 +183,38 @@ def test_evaluate_bad_input_is_one_line_and_writes_nothing(cli, kitimat, tmp_pat
         assert needle in r.output, r.output
         assert len(r.output.strip().splitlines()) == 1, r.output
         assert not (out / "evaluation.json").exists()
+
+
+def test_a_3_km_detour_scores_above_its_source_for_nearest_and_dati(kitimat, tmp_path):
+    from aisdati.detectors import ScoreSettings
+    from aisdati.detectors.nearest import NearestDetector
+    from aisdati.detectors.train import train_detector
+    from aisdati.model.ais import TrainSettings
+    from aisdati.trackdata import Track
+
+    table = read_track_table(kitimat)
+    lane = table[table["route"] == "route-2"].sort_values("track_id")
+    train_ids = [int(i) for i in lane["track_id"][:8]]
+    (held,) = load_tracks(kitimat, [int(lane["track_id"].iloc[-1])])
+    got = inject("detour", held.positions, _times(held), np.random.default_rng(0),
+                 parse_params(["detour.km=3"]))
+    detoured = Track(-1, held.mmsi, held.start, got.positions, np.diff(got.times_s) / 3600,
+                     held.cluster)
+    how = ScoreSettings("rollout", rollouts=4)
+    near = NearestDetector.fit("n", load_tracks(kitimat, train_ids), {})
+    s = near.score([held, detoured], how).score_m
+    assert s[1] > 1.3 * s[0]
+    trained = train_detector(
+        "dati",
+        TrainSettings(kitimat, "route-2", tmp_path, episodes=2, track_ids=tuple(train_ids)),
+        how,
+    )
+    det = load_detector_from(trained.model)
+    s = det.score([held, detoured], how).score_m
+    assert s[1] > s[0]
+
+
+def load_detector_from(path):
+    from aisdati.detectors import load_detector
+
+    return load_detector(path.with_suffix(""))

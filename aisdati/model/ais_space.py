@@ -84,7 +84,7 @@ class LaneConfig:
 
 PRESETS: dict[str, LaneConfig] = {
     "paper": LaneConfig(),
-    "lanes": LaneConfig(validation=True, region="corridor", ranges="quantile"),
+    "lanes": LaneConfig(validation=True, region="corridor", ranges="quantile", noise="ou"),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
 combination that measured best with `aisdati evaluate` (README, "Lane learning")."""
