@@ -463,6 +463,7 @@ def plot_track_evidence(
     if stretch is not None:
         axp.legend(fontsize=8, loc="best")
     fig.suptitle(title)
+    _save(fig, path)
 
 
 ROUTE_LEGEND_MAX = 15
