@@ -713,7 +713,7 @@ def evaluate(
         return
     if quiet:
         return
-    console.print(results_table(result))
+    console.print(results_table(result, console.width))
     for method, t in result.timings.items():
         line = f"{method}: training {t['train_s']:.1f} s, scoring {t['score_s']:.1f} s"
         console.print(line, highlight=False)

@@ -272,13 +272,17 @@ def _line(coords: np.ndarray) -> dict[str, Any]:
     return {"type": "LineString", "coordinates": np.round(coords, 6).tolist()}
 
 
+def _evidence_kind(result: Detection) -> str:
+    s = result.settings
+    return EVIDENCE.get(s.method if s and s.method == "nearest" else s.score if s else "", "")
+
+
 def anomalies_geojson(result: Detection) -> dict[str, Any]:
     """Flagged tracks (kind=track), what each was compared with (kind=evidence: its best
     rollout, the nearest training track or its one-step predictions) and the points of largest
     deviation (kind=max_deviation), as one FeatureCollection in lon/lat (WGS84)."""
     features = []
-    s = result.settings
-    what = EVIDENCE.get(s.method if s and s.method == "nearest" else s.score if s else "", "")
+    what = _evidence_kind(result)
     by_id = {t.track_id: (t, r) for t, r in zip(result.tracks, result.rollouts, strict=True)}
     for row in result.scores[result.scores["flagged"]].sort_values("rank").itertuples():
         track, roll = by_id[row.track_id]
@@ -354,6 +358,7 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
         [m.bounds for m in result.models],
         path,
         title=_map_title(result),
+        evidence_label=_evidence_kind(result),
     )
     files.append(path)
     path = out / "map.html"
@@ -432,6 +437,7 @@ def evidence_figures(
             path,
             hours=hours,
             profile_label=label,
+            evidence_label=_evidence_kind(result),
         )
         files.append(path)
     return files

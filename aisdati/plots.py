@@ -180,6 +180,7 @@ def plot_detection_map(
     regions: Sequence[tuple[np.ndarray, np.ndarray]],
     path: Path,
     title: str = "",
+    evidence_label: str = "nearest rollout",
 ) -> None:
     """Test tracks grey, flagged tracks red with their nearest rollout blue and a cross where they
     deviate most, the models' regions dashed, over the offline coastline (aisdati.coastline, cut
@@ -212,7 +213,7 @@ def plot_detection_map(
     handles = [
         plt.Line2D([], [], color="0.55", lw=1, label="test track"),
         plt.Line2D([], [], color="tab:red", lw=1.4, label="flagged track"),
-        plt.Line2D([], [], color="tab:blue", lw=1, label="nearest rollout"),
+        plt.Line2D([], [], color="tab:blue", lw=1, label=evidence_label),
         plt.Line2D([], [], color="k", marker="x", ls="", label="largest deviation"),
         plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
     ]
@@ -384,6 +385,7 @@ def plot_track_evidence(
     pad_frac: float = 0.15,
     pad_deg: float = 0.01,
     context: Sequence[np.ndarray] = (),
+    evidence_label: str = "rollout",
 ) -> None:
     """Why one track stands out, in two panels.
 
@@ -422,7 +424,8 @@ def plot_track_evidence(
         ax.plot(xy[:, 0], xy[:, 1], color="0.7", lw=0.6, alpha=0.8, zorder=1)
     if rollout is not None:
         ax.plot(
-            rollout[:, 0], rollout[:, 1], "--", color="tab:blue", lw=1.3, zorder=2, label="rollout"
+            rollout[:, 0], rollout[:, 1], "--", color="tab:blue", lw=1.3, zorder=2,
+            label=evidence_label,
         )
     ax.plot(track[:, 0], track[:, 1], color="black", lw=1.4, zorder=3, label="track")
     ax.plot(*track[0], "o", color="tab:green", ms=7, mec="black", zorder=5, label="start")

@@ -14,7 +14,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 OUT=${OUT:-runs/demo}
-EPISODES=${EPISODES:-40}
+EPISODES=${EPISODES:-30}
 ROUTE=${ROUTE:-route-2}
 SAMPLE=tests/data/AIS_2018_07-08_Kitimat.csv.gz
 

@@ -104,7 +104,9 @@ def distance(value: float | None, score: str) -> str:
     return f"{value:.2f}" if score == "both" else f"{value / 1000:.2f}"
 
 
-def results_table(ev: Evaluation) -> Table:
+def results_table(ev: Evaluation, width: int = 120) -> Table:
+    """The table; on a terminal narrower than 100 columns, without AP, P and R (they stay in
+    evaluation.json)."""
     t = Table(
         title=f"Detection of injected anomalies: cluster {ev.settings.cluster!r}, "
         f"{len(ev.split.train_ids)} training / {len(ev.split.heldout_ids)} held-out tracks "
@@ -112,6 +114,9 @@ def results_table(ev: Evaluation) -> Table:
         box=box.SIMPLE_HEAD,
     )
     cols = ["detector", "score", "kind", "n", "AUC", "AP", "P", "R", "F1", "normal", "altered"]
+    narrow = width < 100
+    if narrow:
+        cols = [c for c in cols if c not in ("AP", "P", "R")]
     for c in cols:
         left = c in ("detector", "score", "kind")
         t.add_column(c, justify="left" if left else "right", no_wrap=True)
@@ -128,19 +133,20 @@ def results_table(ev: Evaluation) -> Table:
         if r.roc_auc is not None and r.roc_auc == r.roc_auc:
             style = "green" if r.roc_auc >= 0.9 else "yellow" if r.roc_auc >= 0.7 else "red"
             auc = f"[{style}]{auc}[/]"
-        t.add_row(
-            r.detector,
-            "-" if r.score == "nearest" else r.score,
-            r.kind,
-            str(r.anomalies),
-            auc,
-            fmt(r.average_precision),
-            fmt(r.precision, 2),
-            fmt(r.recall, 2),
-            fmt(r.f1, 2),
-            distance(r.median_normal_m, r.score),
-            distance(r.median_anomalous_m, r.score),
-        )
+        cells = {
+            "detector": r.detector,
+            "score": "-" if r.score == "nearest" else r.score,
+            "kind": "d+j+l" if narrow and "+" in r.kind else r.kind,
+            "n": str(r.anomalies),
+            "AUC": auc,
+            "AP": fmt(r.average_precision),
+            "P": fmt(r.precision, 2),
+            "R": fmt(r.recall, 2),
+            "F1": fmt(r.f1, 2),
+            "normal": distance(r.median_normal_m, r.score),
+            "altered": distance(r.median_anomalous_m, r.score),
+        }
+        t.add_row(*(cells[c] for c in cols))
     t.caption = (
         "AUC (ROC) and AP (average precision) rank altered against normal held-out tracks; "
         "P/R/F1 at each detector's calibrated threshold; normal/altered: median scores in km "
