@@ -959,3 +959,7 @@ def _null() -> Any:
     import contextlib
 
     return contextlib.nullcontext()
+
+
+if __name__ == "__main__":
+    app()

@@ -218,3 +218,20 @@ def load_detector_from(path):
     from aisdati.detectors import load_detector
 
     return load_detector(path.with_suffix(""))
+
+
+def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
+    models = tmp_path / "models"
+    r = cli("train", "--cluster", "other", "--method", "nearest", "--data", kitimat, "--out",
+            models, "-q")
+    assert r.exit_code == 0, r.output
+    card_path = models / "other-nearest.json"
+    card = json.loads(card_path.read_text())
+    card["region"]["lon"] = [x + 30 for x in card["region"]["lon"]]
+    card_path.write_text(json.dumps(card))
+    out = tmp_path / "ev"
+    r = cli("evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest",
+            "--models", models, "--out", out, "-q")
+    assert r.exit_code == 2, r.output
+    assert "another region" in r.output and len(r.output.strip().splitlines()) == 1
+    assert not (out / "evaluation.json").exists()

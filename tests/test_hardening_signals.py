@@ -33,7 +33,14 @@ def aisdati(*args) -> subprocess.Popen:
         stderr=subprocess.PIPE,
         text=True,
         env=env,
+        # a test run started in the background inherits an ignored SIGINT (as nohup does);
+        # give the command the default disposition an analyst's terminal gives it
+        preexec_fn=_default_sigint,
     )
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def wait_for(condition, proc: subprocess.Popen, timeout: float = 120.0) -> None:

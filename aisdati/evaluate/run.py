@@ -31,7 +31,7 @@ from aisdati.evaluate import dataset
 from aisdati.evaluate.metrics import flagging, ranking
 from aisdati.model.ais import TrainSettings
 from aisdati.model.ais_space import PRESETS, LaneConfig
-from aisdati.trackdata import load_tracks
+from aisdati.trackdata import load_tracks, read_track_table, select_cluster
 
 POSITION_KINDS = ("detour", "jump", "loiter")
 """The summary row the README's targets use: anomalies a position-only score can see."""
@@ -99,6 +99,21 @@ def _existing(settings: EvaluateSettings) -> dict[str, Detector]:
     return found
 
 
+def _same_region(settings: EvaluateSettings, models: dict[str, Detector]) -> None:
+    """Models given with --models must come from the area of the data they are evaluated on."""
+    table = select_cluster(read_track_table(settings.data_dir), settings.cluster, settings.data_dir)
+    ids = [int(i) for i in table["track_id"]]
+    starts = np.array([t.positions[0] for t in load_tracks(settings.data_dir, ids)])
+    for method, det in models.items():
+        if not det.contains(starts).any():
+            lo, hi = det.bounds
+            raise UserError(
+                f"the {method} model in {settings.models_dir} was trained on another region "
+                f"(lon {lo[0]:.2f}..{hi[0]:.2f}, lat {lo[1]:.2f}..{hi[1]:.2f}): no track of "
+                f"{settings.cluster!r} starts there"
+            )
+
+
 def evaluate(
     settings: EvaluateSettings,
     on_stage: Callable[[str], None] | None = None,
@@ -115,6 +130,7 @@ def evaluate(
     train_ids = None
     if existing:
         train_ids = [int(i) for i in next(iter(existing.values())).card["data"]["track_ids"]]
+        _same_region(settings, existing)
     say("splitting and injecting")
     data = settings.out_dir / "data"
     split = dataset.build(

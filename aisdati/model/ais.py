@@ -445,18 +445,23 @@ def train_ais_ensemble(
     if not settings:
         raise UserError("no route to train")
     torch.set_num_threads(1)
-    sources, datas, configs, validators, envs = [], [], [], [], []
+    if len({s.lane for s in settings}) > 1:
+        raise UserError("routes trained as one ensemble need one configuration (same --lane)")
+    sources, datas, groups, envs = [], [], [], []
     for s in settings:
         ids, total = choose_training_tracks(s)
         tracks = load_tracks(s.data_dir, ids)
-        source = build_source(tracks, s.lane)
-        sources.append(source)
+        groups.append(tracks)
+        sources.append(build_source(tracks, s.lane))
         datas.append(data_card(s, tracks, total))
-        configs.append(dati_config(s, tracks))
-        validators.append(Validator(source.space, configs[-1], tracks, s.lane, s.seed))
-        envs.append(make_env(source, s.epsilon_m))
-    if len({json.dumps(c.to_dict(), sort_keys=True) for c in configs}) > 1:
-        raise UserError("routes trained as one ensemble need one configuration (same --lane)")
+        envs.append(make_env(sources[-1], s.epsilon_m))
+    # one configuration for all members (OU noise at the median dt of all routes' tracks)
+    config = dati_config(settings[0], [t for g in groups for t in g])
+    configs = [config] * len(settings)
+    validators = [
+        Validator(src.space, config, g, s.lane, s.seed)
+        for src, g, s in zip(sources, groups, settings, strict=True)
+    ]
     validate = _MemberValidators(validators) if settings[0].lane.validation else None
     seeds = [s.seed + 1000 * i for i, s in enumerate(settings)]
     trainer = DATITrainer(envs, seeds, configs[0], validate)
