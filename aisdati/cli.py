@@ -36,6 +36,31 @@ err_console = Console(stderr=True)
 PATH_ERRNOS = (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR, errno.ENOENT)
 
 
+PRESET_OPTION = typer.Option(
+    "lanes",
+    "--preset",
+    help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
+    "paper's own configuration).",
+)
+LANE_OPTION = typer.Option(
+    None,
+    "--lane",
+    help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
+    "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
+    "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
+)
+
+
+def lane_settings(preset: str, lane: list[str] | None) -> dict[str, Any]:
+    """The `preset` (its name and overrides, for the model card) and `lane` (the resolved
+    LaneConfig) of the train and evaluate settings, from --preset and --lane."""
+    from aisdati.model.ais_space import lane_config
+
+
+    name = preset if not lane else f"{preset} + {', '.join(lane)}"
+    return {"preset": name, "lane": lane_config(preset, lane or ())}
+
+
 def user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
     """Turn `UserError` (and Ctrl-C, SIGTERM, a file system refusing a path) into a one-line
     message and a non-zero exit code: 2 for user mistakes, 130 / 143 for SIGINT / SIGTERM."""
@@ -445,19 +470,8 @@ def train(
     ),
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
     out: Path = typer.Option(Path("models"), "--out", help="Model folder."),
-    preset: str = typer.Option(
-        "lanes",
-        "--preset",
-        help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
-        "paper's own configuration).",
-    ),
-    lane: list[str] = typer.Option(
-        None,
-        "--lane",
-        help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
-        "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
-        "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
-    ),
+    preset: str = PRESET_OPTION,
+    lane: list[str] = LANE_OPTION,
     episodes: int = typer.Option(170, help="Maximum training episodes, one track each (paper)."),
     seed: int = typer.Option(0, help="Random seed (networks, noise, track order, downsampling)."),
     max_tracks: int = typer.Option(
@@ -479,7 +493,6 @@ def train(
     from aisdati.detectors import model_name, parse_detectors
     from aisdati.detectors.train import train_detector
     from aisdati.model.ais import TrainSettings
-    from aisdati.model.ais_space import lane_config
     from aisdati.progress import TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
@@ -498,8 +511,7 @@ def train(
         data_dir=data,
         cluster=cluster.strip().lower(),
         out_dir=out,
-        preset=preset if not lane else f"{preset} + {', '.join(lane)}",
-        lane=lane_config(preset, lane or ()),
+        **lane_settings(preset, lane),
         episodes=episodes,
         seed=seed,
         max_tracks=max_tracks or None,
@@ -616,19 +628,8 @@ def evaluate(
         help="Use the models trained on this cluster in this folder (and their training "
         "tracks) instead of training new ones.",
     ),
-    preset: str = typer.Option(
-        "lanes",
-        "--preset",
-        help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
-        "paper's own configuration).",
-    ),
-    lane: list[str] = typer.Option(
-        None,
-        "--lane",
-        help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
-        "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
-        "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
-    ),
+    preset: str = PRESET_OPTION,
+    lane: list[str] = LANE_OPTION,
     episodes: int = typer.Option(170, help="Training episodes of dati and bc."),
     patience: int = typer.Option(10, help="DATI early stopping patience; 0 disables."),
     rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts / draws per track."),
@@ -655,7 +656,6 @@ def evaluate(
     from aisdati.evaluate.outputs import report, results_table, write
     from aisdati.evaluate.run import EvaluateSettings, check
     from aisdati.evaluate.run import evaluate as run_evaluate
-    from aisdati.model.ais_space import lane_config
     from aisdati.progress import TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
@@ -682,8 +682,7 @@ def evaluate(
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
-        preset=preset if not lane else f"{preset} + {', '.join(lane)}",
-        lane=lane_config(preset, lane or ()),
+        **lane_settings(preset, lane),
     )
     check(settings)
     select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work
@@ -739,7 +738,6 @@ def _train_routes(
     """`train --cluster routes`: every route with enough tracks, DATI as one batched ensemble."""
     from aisdati.detectors.train import train_routes
     from aisdati.model.ais import TrainSettings
-    from aisdati.model.ais_space import lane_config
     from aisdati.progress import EpisodeProgress
     from aisdati.trackdata import MIN_ROUTE_TRACKS, read_track_table
 
@@ -760,8 +758,7 @@ def _train_routes(
             data_dir=data,
             cluster=route,
             out_dir=out,
-            preset=preset if not lane else f"{preset} + {', '.join(lane)}",
-            lane=lane_config(preset, lane or ()),
+            **lane_settings(preset, lane),
             episodes=episodes,
             seed=seed,
             patience=patience,

@@ -43,6 +43,24 @@ STARTED = time.time()
 """When this process imported aisdati (close enough to its start for the sweep's age test)."""
 
 
+# ------------------------------------------------------------------------------ lists of names
+def parse_names(text: str | Iterable[str], known: Iterable[str], what: str) -> tuple[str, ...]:
+    """'a,b' (or several such strings) -> ('a', 'b'), lower-cased, without repeats; none, or a
+    name not in `known`, is a one-line `UserError` that lists the choices (`what`: "method",
+    "detector", ...)."""
+    known = list(known)
+    items = [text] if isinstance(text, str) else list(text)
+    names = tuple(
+        dict.fromkeys(n.strip().lower() for t in items for n in t.split(",") if n.strip())
+    )
+    if not names:
+        raise UserError(f"no {what} given; choose from {', '.join(known)}")
+    for name in names:
+        if name not in known:
+            raise UserError(f"unknown {what} {name!r}; choose from {', '.join(known)}")
+    return names
+
+
 # ------------------------------------------------------------------------------ numeric options
 @dataclass(frozen=True)
 class Range:

@@ -10,6 +10,7 @@ import typer
 from typer.testing import CliRunner
 
 DATA = Path(__file__).parent / "data"
+KITIMAT = DATA / "AIS_2018_07-08_Kitimat.csv.gz"
 
 
 @pytest.fixture
@@ -41,3 +42,16 @@ def one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def kitimat(tmp_path_factory) -> Path:
+    """The Kitimat two months ingested once (`--roi none --min-points 100`, the defaults
+    otherwise): 158 tracks, the busiest lane as route-1 and route-2."""
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("kitimat")
+    args = ["ingest", "--input", str(KITIMAT), "--roi", "none", "--min-points", "100"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    return out

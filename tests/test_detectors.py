@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -22,21 +21,6 @@ from aisdati.model.ais_policy import AISPolicy
 from aisdati.model.ais_space import PRESETS, LaneConfig, lane_config
 from aisdati.model.corridor import Corridor
 from aisdati.trackdata import load_tracks, read_track_table
-
-KITIMAT = Path(__file__).parent / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
-
-
-@pytest.fixture(scope="module")
-def kitimat(tmp_path_factory):
-    from typer.testing import CliRunner
-
-    from aisdati.cli import app
-
-    out = tmp_path_factory.mktemp("kitimat")
-    args = ["ingest", "--input", str(KITIMAT), "--roi", "none", "--min-points", "100"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
-    assert result.exit_code == 0, result.output
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -239,11 +223,8 @@ def test_gym_space_of_the_paper_state_is_unchanged(tracks):
     assert isinstance(env.action_space, gym.spaces.Box)
 
 
-def test_train_every_route_as_one_ensemble(cli, tmp_path):
-    data, models = tmp_path / "kit", tmp_path / "models"
-    r = cli("ingest", "--input", KITIMAT, "--roi", "none", "--min-points", "100", "--out", data,
-            "-q")
-    assert r.exit_code == 0, r.output
+def test_train_every_route_as_one_ensemble(cli, kitimat, tmp_path):
+    data, models = kitimat, tmp_path / "models"
     r = cli("train", "--cluster", "routes", "--data", data, "--out", models, "--episodes", "1",
             "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
             "validation_rollouts=1", "-q")

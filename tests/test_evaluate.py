@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -12,21 +11,6 @@ import pytest
 from aisdati.evaluate.inject import DEFAULTS, inject, parse_params
 from aisdati.geo import haversine_m
 from aisdati.trackdata import load_tracks, read_track_table
-
-KITIMAT = Path(__file__).parent / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
-
-
-@pytest.fixture(scope="module")
-def kitimat(tmp_path_factory):
-    from typer.testing import CliRunner
-
-    from aisdati.cli import app
-
-    out = tmp_path_factory.mktemp("kitimat")
-    args = ["ingest", "--input", str(KITIMAT), "--roi", "none", "--min-points", "100"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
-    assert result.exit_code == 0, result.output
-    return out
 
 
 @pytest.fixture(scope="module")

@@ -13,6 +13,7 @@ from aisdati.detectors.learnt import BCDetector, DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.errors import UserError
 from aisdati.model.card import validate_ais_card
+from aisdati.options import parse_names
 
 DETECTORS: dict[str, type[Detector]] = {
     "dati": DATIDetector,
@@ -26,13 +27,7 @@ __all__ = ["DETECTORS", "SCORES", "Detector", "ScoreSettings", "Scores", "load_d
 
 def parse_detectors(text: str) -> tuple[str, ...]:
     """'dati,nearest' -> ('dati', 'nearest'); an unknown name is a one-line `UserError`."""
-    names = tuple(dict.fromkeys(n.strip().lower() for n in text.split(",") if n.strip()))
-    if not names:
-        raise UserError(f"no detector given; choose from {', '.join(DETECTORS)}")
-    for name in names:
-        if name not in DETECTORS:
-            raise UserError(f"unknown detector {name!r}; choose from {', '.join(DETECTORS)}")
-    return names
+    return parse_names(text, DETECTORS, "detector")
 
 
 def model_name(cluster: str, method: str) -> str:

@@ -32,6 +32,7 @@ import numpy as np
 
 from aisdati.errors import UserError
 from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg
+from aisdati.options import parse_names
 
 Range = tuple[float, float]
 DEFAULTS: dict[str, dict[str, Range]] = {
@@ -160,13 +161,7 @@ KINDS: dict[str, Callable[..., Injected]] = {
 
 
 def parse_kinds(text: str) -> tuple[str, ...]:
-    names = tuple(dict.fromkeys(k.strip().lower() for k in text.split(",") if k.strip()))
-    if not names:
-        raise UserError(f"no anomaly kind given; choose from {', '.join(KINDS)}")
-    for k in names:
-        if k not in KINDS:
-            raise UserError(f"unknown anomaly kind {k!r}; choose from {', '.join(KINDS)}")
-    return names
+    return parse_names(text, KINDS, "anomaly kind")
 
 
 def parse_params(items: list[str] | None) -> dict[str, dict[str, Range]]:

@@ -27,7 +27,6 @@ import pandas as pd
 import torch
 
 from aisdati import __version__
-from aisdati.errors import UserError
 from aisdati.model.baselines import (
     BCConfig,
     BCTrainer,
@@ -41,6 +40,7 @@ from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import FamilySource, Reference, TrajectoryImitationEnv
 from aisdati.model.evaluate import Summary, rollout, rollout_policy, summarize
 from aisdati.model.families import PAPER_DATI, Family, get_family
+from aisdati.options import parse_names
 from aisdati.plots import plot_best_rollouts, plot_families
 
 PAPER_FAMILIES = ("fixedstart", "ushaped", "circles", "ribbons")
@@ -74,14 +74,7 @@ PAPER_ABLATION = {
 
 def parse_methods(text: str | Sequence[str]) -> tuple[str, ...]:
     """'dati,bc' -> ('dati', 'bc'); an unknown name is a one-line `UserError`."""
-    items = text.split(",") if isinstance(text, str) else [n for t in text for n in t.split(",")]
-    names = tuple(dict.fromkeys(n.strip().lower() for n in items if n.strip()))
-    if not names:
-        raise UserError(f"no method given; choose from {', '.join(METHODS)}")
-    for name in names:
-        if name not in METHODS:
-            raise UserError(f"unknown method {name!r}; choose from {', '.join(METHODS)}")
-    return names
+    return parse_names(text, METHODS, "method")
 
 
 def paper_numbers(method: str, family: str) -> tuple[float | None, float | None]:
