@@ -5,9 +5,15 @@ from __future__ import annotations
 
 import errno
 import functools
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+# Before torch loads: DATI's networks are small and batched, so OpenMP/MKL worker threads only
+# spin; on 2 busy cores one such thread made AIS training ~10x slower. Users may still set these.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import typer
 from rich.console import Console
@@ -597,7 +603,11 @@ def train(
 @user_errors
 def evaluate(
     cluster: str = typer.Option(
-        ..., "--cluster", "-c", help="Cluster (or route) whose tracks are split and altered."
+        ...,
+        "--cluster",
+        "-c",
+        help="Cluster (or route) whose tracks are split and altered; 'routes': every route "
+        "with enough tracks, each judged by its own model, pooled into one table.",
     ),
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
     out: Path | None = typer.Option(
@@ -651,12 +661,19 @@ def evaluate(
     from datetime import datetime
 
     from aisdati.detectors import parse_detectors
-    from aisdati.detectors.train import train_detector
+    from aisdati.detectors.train import train_detector, train_routes
     from aisdati.evaluate.inject import parse_kinds, parse_params
-    from aisdati.evaluate.outputs import report, results_table, write
-    from aisdati.evaluate.run import EvaluateSettings, check
+    from aisdati.evaluate.outputs import (
+        pooled_table,
+        report,
+        results_table,
+        routes_report,
+        write,
+        write_routes,
+    )
+    from aisdati.evaluate.run import ALL_ROUTES, EvaluateSettings, check, evaluate_routes
     from aisdati.evaluate.run import evaluate as run_evaluate
-    from aisdati.progress import TrainingProgress
+    from aisdati.progress import EpisodeProgress, TrainingProgress
     from aisdati.trackdata import read_track_table, select_cluster
 
     check_options(
@@ -685,7 +702,9 @@ def evaluate(
         **lane_settings(preset, lane),
     )
     check(settings)
-    select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work
+    every_route = settings.cluster == ALL_ROUTES
+    if not every_route:
+        select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work
     prepare_output_dir(settings.out_dir, "--out", ("evaluation.json", "scores.parquet"))
     show = not (quiet or as_json)
 
@@ -705,6 +724,36 @@ def evaluate(
         if show:
             err_console.print(f"[dim]{text}[/]", highlight=False)
 
+    def train_routes_with_bars(method: str, group: list[Any], how: Any) -> Any:
+        members = len(group) * settings.lane.members
+        label = f"training {method} on {len(group)} routes"
+        with EpisodeProgress(members, settings.episodes, label, disable=not show) as bars:
+            return train_routes(method, group, how, on_step=bars.on_step)
+
+    if every_route:
+        routes = evaluate_routes(settings, stage, train_with_bars, train_routes_with_bars)
+        files = write_routes(routes, settings.out_dir)
+        if as_json:
+            print(json.dumps(routes_report(routes), default=str))
+            return
+        if quiet:
+            return
+        console.print(pooled_table(routes, console.width))
+        for ev in routes.routes:
+            times = ", ".join(
+                f"{m} {t['train_s']:.0f} + {t['score_s']:.0f} s" for m, t in ev.timings.items()
+            )
+            console.print(
+                f"{ev.settings.cluster}: {len(ev.split.train_ids)} training / "
+                f"{len(ev.split.heldout_ids)} held-out tracks; training + scoring: {times}",
+                highlight=False,
+            )
+        console.print(
+            f"wrote {', '.join(f.name for f in files)} and one folder per route to "
+            f"[bold]{settings.out_dir}[/]",
+            highlight=False,
+        )
+        return
     result = run_evaluate(settings, stage, train_with_bars)
     files = write(result, settings.out_dir)
     if as_json:
@@ -739,14 +788,9 @@ def _train_routes(
     from aisdati.detectors.train import train_routes
     from aisdati.model.ais import TrainSettings
     from aisdati.progress import EpisodeProgress
-    from aisdati.trackdata import MIN_ROUTE_TRACKS, read_track_table
+    from aisdati.trackdata import MIN_ROUTE_TRACKS, read_track_table, routes_with
 
-    table = read_track_table(data)
-    counts = table["route"].dropna().value_counts() if "route" in table else None
-    routes = sorted(
-        (r for r, n in (counts.items() if counts is not None else []) if n >= MIN_ROUTE_TRACKS),
-        key=lambda r: int(r.split("-")[1]),
-    )
+    routes = routes_with(read_track_table(data))
     if not routes:
         raise UserError(
             f"no route in {data} has {MIN_ROUTE_TRACKS} tracks or more: ingest with "
@@ -766,13 +810,9 @@ def _train_routes(
         )
         for route in routes
     ]
-    with EpisodeProgress(len(routes), episodes, f"training {method}", disable=quiet) as bar:
-
-        def on_step(trainer: Any, logs: list[Any]) -> None:
-            for log in logs:
-                bar.update(log.member, log.episode, log.stopped)
-
-        trained = train_routes(method, settings, on_step=on_step)
+    members = len(routes) * (settings[0].lane.members if method == "dati" else 1)
+    with EpisodeProgress(members, episodes, f"training {method}", disable=quiet) as bar:
+        trained = train_routes(method, settings, on_step=bar.on_step)
     if quiet:
         return
     table_out = Table(title=f"{method} models of {len(routes)} routes")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from types import TracebackType
+from typing import Any
 
 from rich.progress import (
     BarColumn,
@@ -52,6 +54,11 @@ class EpisodeProgress(_Bars):
     def update(self, member: int, episode: int, stopped: bool) -> None:
         self.done[member] = self.episodes if stopped else episode
         self.progress.update(self.task, completed=sum(self.done.values()))
+
+    def on_step(self, trainer: Any, logs: Sequence[Any]) -> None:
+        """A trainer's step callback: count the episodes its members ended."""
+        for log in logs:
+            self.update(log.member, log.episode, log.stopped)
 
 
 class TrainingProgress(_Bars):

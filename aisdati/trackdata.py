@@ -139,6 +139,15 @@ def select_cluster(
     return chosen
 
 
+def routes_with(table: pd.DataFrame, needed: int = MIN_ROUTE_TRACKS) -> list[str]:
+    """The routes of a track table with at least `needed` tracks, in route order."""
+    if "route" not in table.columns:
+        return []
+    counts = table["route"].dropna().value_counts()
+    chosen = [str(r) for r, n in counts.items() if n >= needed]
+    return sorted(chosen, key=lambda r: int(r.split("-")[1]))
+
+
 def require_tracks(table: pd.DataFrame, name: str, needed: int) -> None:
     """One-line `UserError` unless `table` (the tracks selected as `name`) holds at least
     `needed` tracks."""

@@ -235,7 +235,7 @@ def test_train_every_route_as_one_ensemble(cli, kitimat, tmp_path):
     seeds = set()
     for name in trained:
         card = json.loads((models / f"{name}.json").read_text())
-        assert card["cluster"] == name and card["training"]["ensemble_members"] == len(trained)
+        assert card["cluster"] == name and card["training"]["routes_in_ensemble"] == len(trained)
         assert card["data"]["tracks_used"] == 4 and card["calibration"]["rollout"]
         seeds.add(card["seed"])
     assert len(seeds) == len(trained)  # each route its own member

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -219,3 +220,39 @@ def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
     assert r.exit_code == 2, r.output
     assert "another region" in r.output and len(r.output.strip().splitlines()) == 1
     assert not (out / "evaluation.json").exists()
+
+
+def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat, tmp_path):
+    out = tmp_path / "routes"
+    r = cli("evaluate", "--data", kitimat, "--cluster", "routes", "--detectors", "nearest",
+            "--kinds", "detour,jump,loiter", "--out", out)
+    assert r.exit_code == 0, r.output
+    assert "over 2 routes" in " ".join(r.output.split())
+    doc = json.loads((out / "evaluation.json").read_text())
+    routes = read_track_table(kitimat)["route"].dropna().value_counts()
+    small = sorted(n for n, c in routes.items() if c < 20)
+    assert sorted(doc["routes"]) == ["route-1", "route-2"] and sorted(doc["skipped"]) == small
+    assert all("evaluate needs at least" in why for why in doc["skipped"].values())
+    scores = pd.read_parquet(out / "scores.parquet")
+    assert set(scores["route"]) == {"route-1", "route-2"}
+    np.testing.assert_allclose(scores["ratio"], scores["value"] / scores["threshold"])
+    np.testing.assert_array_equal(scores["flagged"], scores["ratio"] > 1)
+    for route, info in doc["routes"].items():
+        per = json.loads((out / route / "evaluation.json").read_text())
+        assert per["split"]["heldout_tracks"] == info["heldout_tracks"]
+        assert (scores["route"] == route).sum() == info["heldout_tracks"]
+    pooled = next(r for r in doc["results"] if r["kind"] == "all")
+    assert pooled["anomalies"] == sum(i["injected"] for i in doc["routes"].values())
+    assert pooled["roc_auc"] > 0.5
+
+
+def test_evaluate_every_route_needs_routes(cli, kitimat, tmp_path):
+    data = tmp_path / "direction"  # as ingest --clusters direction writes it: no routes
+    data.mkdir()
+    shutil.copy(kitimat / "points.parquet", data / "points.parquet")
+    tracks = pd.read_parquet(kitimat / "tracks.parquet")
+    tracks.assign(route=None).to_parquet(data / "tracks.parquet")
+    r = cli("evaluate", "--data", data, "--cluster", "routes", "--detectors", "nearest",
+            "--out", tmp_path / "o", "--quiet")
+    assert r.exit_code == 2 and "no route in" in r.output, r.output
+    assert len(r.output.strip().splitlines()) == 1

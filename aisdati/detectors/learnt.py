@@ -91,14 +91,15 @@ class DATIDetector(PolicyDetector):
     @classmethod
     def load(cls, stem: Path, card: dict[str, Any]) -> DATIDetector:
         nets, config, meta = load_networks(stem)
-        if nets.members != 1 or meta.get("decision_dim", 3) != 3:
-            raise UserError(f"{stem}: expected a single-member model with 3 decisions")
+        members = (meta.get("lane_config") or {}).get("members", 1)
+        if nets.members != members or meta.get("decision_dim", 3) != 3:
+            raise UserError(f"{stem}: expected a model of {members} member(s) with 3 decisions")
         det = cls(stem.name, meta, nets, config)
         det.corridor = _corridor(stem, meta)
         return det
 
     def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        return dati_act(self.nets, self.config)(n, seed, temporal)
+        return dati_act(self.nets, self.config, None)(n, seed, temporal)
 
 
 # ------------------------------------------------------------------------------------- BC

@@ -31,7 +31,13 @@ from aisdati.evaluate import dataset
 from aisdati.evaluate.metrics import flagging, ranking
 from aisdati.model.ais import TrainSettings
 from aisdati.model.ais_space import PRESETS, LaneConfig
-from aisdati.trackdata import load_tracks, read_track_table, select_cluster
+from aisdati.trackdata import (
+    MIN_ROUTE_TRACKS,
+    load_tracks,
+    read_track_table,
+    routes_with,
+    select_cluster,
+)
 
 POSITION_KINDS = ("detour", "jump", "loiter")
 """The summary row the README's targets use: anomalies a position-only score can see."""
@@ -114,6 +120,57 @@ def _same_region(settings: EvaluateSettings, models: dict[str, Detector]) -> Non
             )
 
 
+@dataclass
+class _Prepared:
+    """One group's split, injected and written, with the models given for it."""
+
+    settings: EvaluateSettings
+    split: dataset.Split
+    existing: dict[str, Detector]
+
+    @property
+    def data(self) -> Path:
+        return self.settings.out_dir / "data"
+
+    def train_settings(self) -> TrainSettings:
+        s = self.settings
+        return TrainSettings(
+            data_dir=self.data,
+            cluster=s.cluster,
+            out_dir=s.out_dir / "models",
+            episodes=s.episodes,
+            seed=s.seed,
+            max_tracks=None,
+            patience=s.patience,
+            track_ids=tuple(self.split.train_ids),
+            preset=s.preset,
+            lane=s.lane,
+        )
+
+
+def _how(settings: EvaluateSettings) -> ScoreSettings:
+    return ScoreSettings("both", settings.rollouts, settings.near_km, settings.seed)
+
+
+def _prepare(settings: EvaluateSettings) -> _Prepared:
+    existing = _existing(settings)
+    train_ids = None
+    if existing:
+        train_ids = [int(i) for i in next(iter(existing.values())).card["data"]["track_ids"]]
+        _same_region(settings, existing)
+    split = dataset.build(
+        settings.data_dir,
+        settings.cluster,
+        settings.out_dir / "data",
+        settings.kinds,
+        settings.params,
+        settings.train_fraction,
+        settings.seed,
+        train_ids,
+    )
+    return _Prepared(settings, split, existing)
+
+
 def evaluate(
     settings: EvaluateSettings,
     on_stage: Callable[[str], None] | None = None,
@@ -126,60 +183,43 @@ def evaluate(
     check(settings)
     train = train_detector or plain_train
     say = on_stage or (lambda _: None)
-    existing = _existing(settings)
-    train_ids = None
-    if existing:
-        train_ids = [int(i) for i in next(iter(existing.values())).card["data"]["track_ids"]]
-        _same_region(settings, existing)
     say("splitting and injecting")
-    data = settings.out_dir / "data"
-    split = dataset.build(
-        settings.data_dir,
-        settings.cluster,
-        data,
-        settings.kinds,
-        settings.params,
-        settings.train_fraction,
-        settings.seed,
-        train_ids,
-    )
-    how = ScoreSettings("both", settings.rollouts, settings.near_km, settings.seed)
-    heldout = load_tracks(data, split.heldout_ids)
+    prepared = _prepare(settings)
+    detectors: dict[str, Detector] = {}
+    train_s: dict[str, float] = {}
+    for method in settings.detectors:
+        t0 = time.perf_counter()
+        if method in prepared.existing:
+            detectors[method] = prepared.existing[method]
+        else:
+            say(f"training {method}")
+            trained = train(method, prepared.train_settings(), _how(settings))
+            detectors[method] = load_detector(trained.model.with_suffix(""))
+        train_s[method] = time.perf_counter() - t0
+    return _score(prepared, detectors, train_s, say)
+
+
+def _score(
+    prepared: _Prepared,
+    detectors: dict[str, Detector],
+    train_s: dict[str, float],
+    say: Callable[[str], None],
+) -> Evaluation:
+    """Score the held-out tracks with every detector and tabulate (see the module docstring)."""
+    settings, split = prepared.settings, prepared.split
+    how = _how(settings)
+    heldout = load_tracks(prepared.data, split.heldout_ids)
     labels = split.labels.set_index("track_id").loc[split.heldout_ids]
     timings: dict[str, dict[str, float]] = {}
     rows, score_rows = [], []
-    detectors: dict[str, Detector] = {}
     result = Evaluation(settings, split, pd.DataFrame(), pd.DataFrame(), timings, detectors)
     for method in settings.detectors:
-        t0 = time.perf_counter()
-        if method in existing:
-            det = existing[method]
-        else:
-            say(f"training {method}")
-            trained = train(
-                method,
-                TrainSettings(
-                    data_dir=data,
-                    cluster=settings.cluster,
-                    out_dir=settings.out_dir / "models",
-                    episodes=settings.episodes,
-                    seed=settings.seed,
-                    max_tracks=None,
-                    patience=settings.patience,
-                    track_ids=tuple(split.train_ids),
-                    preset=settings.preset,
-                    lane=settings.lane,
-                ),
-                how,
-            )
-            det = load_detector(trained.model.with_suffix(""))
-        detectors[method] = det
+        det = detectors[method]
         t1 = time.perf_counter()
-        say(f"scoring with {method}")
+        say(f"scoring {settings.cluster} with {method}")
         kinds = ["nearest"] if method == "nearest" else ["rollout", "step", "both"]
         scored = det.score(heldout, how if method != "nearest" else replace(how, score="step"))
-        t2 = time.perf_counter()
-        timings[method] = {"train_s": t1 - t0, "score_s": t2 - t1}
+        timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
         for kind in kinds:
             values = scored.score_m if kind in ("nearest", "both") else scored.parts[kind]
             threshold = det.threshold(replace(how, score=kind), settings.contamination)
@@ -188,12 +228,103 @@ def evaluate(
             result.profiles[key] = scored.profiles
             result.evidence[key] = scored.evidence
             for tid, v, f in zip(split.heldout_ids, values, flagged, strict=True):
-                score_rows.append((method, kind, tid, float(v), bool(f)))
+                score_rows.append((method, kind, tid, float(v), float(threshold), bool(f)))
             rows += _rows(method, kind, labels, values, flagged, threshold, settings.kinds)
     result.table = pd.DataFrame(rows)
-    scores = pd.DataFrame(score_rows, columns=["detector", "score", "track_id", "value", "flagged"])
+    columns = ["detector", "score", "track_id", "value", "threshold", "flagged"]
+    scores = pd.DataFrame(score_rows, columns=columns)
     result.scores = scores.merge(split.labels, on="track_id", how="left")
     return result
+
+
+ALL_ROUTES = "routes"
+"""`--cluster routes`: evaluate every route that can be split, and pool the results."""
+
+
+@dataclass
+class RoutesEvaluation:
+    """`aisdati evaluate --cluster routes`: one `Evaluation` per route, and the pooled table."""
+
+    settings: EvaluateSettings
+    routes: list[Evaluation]
+    skipped: dict[str, str]
+    """Routes with too few tracks (or vessels) to split, and why."""
+    table: pd.DataFrame
+    """As `Evaluation.table`, over the held-out tracks of all routes, each score divided by
+    its route model's calibrated threshold (medians in multiples of the threshold)."""
+    scores: pd.DataFrame
+    """Every route's `Evaluation.scores`, with `route` and `ratio` (value / threshold)."""
+
+
+def evaluate_routes(
+    settings: EvaluateSettings,
+    on_stage: Callable[[str], None] | None = None,
+    train_detector: Callable[..., Any] | None = None,
+    train_routes: Callable[..., Any] | None = None,
+) -> RoutesEvaluation:
+    """Evaluate every route of the data with at least `MIN_ROUTE_TRACKS` tracks: split and
+    inject each on its own, train one model per route (DATI's routes as one batched ensemble,
+    `train_routes(method, [TrainSettings], ScoreSettings)`), score each route's held-out
+    tracks with its own route's model, and pool. Scores of different routes are put on one
+    scale by dividing each by its route model's calibrated threshold (the (1 - contamination)
+    quantile of that model's training scores): "how many times what this route's normal
+    traffic reaches", which is also what flags a track."""
+    from aisdati.detectors.train import train_detector as plain_train
+    from aisdati.detectors.train import train_routes as plain_routes
+
+    check(settings)
+    train = train_detector or plain_train
+    train_all = train_routes or plain_routes
+    say = on_stage or (lambda _: None)
+    routes = routes_with(read_track_table(settings.data_dir))
+    if not routes:
+        raise UserError(
+            f"no route in {settings.data_dir} has {MIN_ROUTE_TRACKS} tracks or more: ingest "
+            "with --clusters routes (the default), or evaluate one cluster"
+        )
+    prepared: list[_Prepared] = []
+    skipped: dict[str, str] = {}
+    say(f"splitting and injecting {len(routes)} routes")
+    for route in routes:
+        sub = replace(settings, cluster=route, out_dir=settings.out_dir / route)
+        try:
+            prepared.append(_prepare(sub))
+        except UserError as exc:
+            skipped[route] = str(exc)
+    if not prepared:
+        raise UserError(f"no route of {settings.data_dir} can be split: {skipped[routes[0]]}")
+    detectors: list[dict[str, Detector]] = [dict(p.existing) for p in prepared]
+    train_s: list[dict[str, float]] = [dict.fromkeys(p.existing, 0.0) for p in prepared]
+    for method in settings.detectors:
+        todo = [k for k, p in enumerate(prepared) if method not in p.existing]
+        if not todo:
+            continue
+        say(f"training {method} on {len(todo)} routes")
+        t0 = time.perf_counter()
+        if method == "dati":
+            group = [prepared[k].train_settings() for k in todo]
+            models = [t.model for t in train_all(method, group, _how(settings))]
+        else:
+            models = [
+                train(method, prepared[k].train_settings(), _how(settings)).model for k in todo
+            ]
+        share = (time.perf_counter() - t0) / len(todo)  # an ensemble's time, shared out
+        for k, model in zip(todo, models, strict=True):
+            detectors[k][method] = load_detector(model.with_suffix(""))
+            train_s[k][method] = share
+    evaluations = [
+        _score(p, d, t, say) for p, d, t in zip(prepared, detectors, train_s, strict=True)
+    ]
+    scores = pd.concat(
+        [ev.scores.assign(route=ev.settings.cluster) for ev in evaluations], ignore_index=True
+    )
+    scores["ratio"] = scores["value"] / scores["threshold"]
+    rows = []
+    for (method, kind), g in scores.groupby(["detector", "score"], sort=False):
+        labels = g.set_index("track_id")[["label", "kind"]]
+        values = g["ratio"].to_numpy()
+        rows += _rows(method, kind, labels, values, g["flagged"].to_numpy(), 1.0, settings.kinds)
+    return RoutesEvaluation(settings, evaluations, skipped, pd.DataFrame(rows), scores)
 
 
 def _rows(
@@ -232,4 +363,12 @@ def _rows(
     return out
 
 
-__all__ = ["DETECTORS", "EvaluateSettings", "Evaluation", "evaluate"]
+__all__ = [
+    "ALL_ROUTES",
+    "DETECTORS",
+    "EvaluateSettings",
+    "Evaluation",
+    "RoutesEvaluation",
+    "evaluate",
+    "evaluate_routes",
+]

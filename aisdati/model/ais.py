@@ -236,40 +236,59 @@ def model_card(
     wall: float,
     steps: int,
 ) -> dict[str, Any]:
-    logs = list(history)
-    key = (lambda g: g.validation) if source.space.config.validation else (lambda g: g.mean_loss)
-    best = min(logs, key=key) if logs else None
+    """The card of a trained lane model; with several members (`LaneConfig.members`) the
+    top-level curves are the first member's and `training.members` holds each member's."""
+    by_member: dict[int, list[EpisodeLog]] = {}
+    for g in history:
+        by_member.setdefault(g.member, []).append(g)
+    validation, cap = source.space.config.validation, settings.episodes
+    curves = [_curves(logs, validation, cap) for _, logs in sorted(by_member.items())]
+    first = curves[0] if curves else _curves([], validation, cap)
+    training = {
+        **first,
+        "episodes_max": settings.episodes,
+        "patience": settings.patience,
+        "selected_by": "validation rollouts" if source.space.config.validation else "loss",
+        "steps": steps,
+        "wall_seconds": round(wall, 2),
+        "steps_per_second": round(steps / wall, 2) if wall > 0 else None,
+    }
+    if len(curves) > 1:
+        training["members"] = curves
     return {
         **base_card(settings, source, data),
         "epsilon_m": settings.epsilon_m,
         "epsilon_interpretation": EPSILON_READING,
-        "training": {
-            "episodes_run": len(logs),
-            "episodes_max": settings.episodes,
-            "patience": settings.patience,
-            "best_episode": best.episode if best else None,
-            "stopped_early": bool(logs and logs[-1].stopped and len(logs) < settings.episodes),
-            "mean_reward": [round(g.mean_reward, 4) for g in logs],
-            "final_dtw_m": [round(g.final_dtw, 1) for g in logs],
-            "mean_loss": [round(g.mean_loss, 5) for g in logs],
-            "validation_dtw_m": [
-                None if g.validation is None else round(g.validation, 1) for g in logs
-            ],
-            "selected_by": "validation rollouts" if source.space.config.validation else "loss",
-            "steps": steps,
-            "wall_seconds": round(wall, 2),
-            "steps_per_second": round(steps / wall, 2) if wall > 0 else None,
-        },
+        "training": training,
+    }
+
+
+def _curves(logs: Sequence[EpisodeLog], validation: bool, episodes: int) -> dict[str, Any]:
+    """One member's training curves and the episode its kept actor comes from."""
+    key = (lambda g: g.validation) if validation else (lambda g: g.mean_loss)
+    best = min(logs, key=key) if logs else None
+    return {
+        "episodes_run": len(logs),
+        "best_episode": best.episode if best else None,
+        "stopped_early": bool(logs and logs[-1].stopped and len(logs) < episodes),
+        "mean_reward": [round(g.mean_reward, 4) for g in logs],
+        "final_dtw_m": [round(g.final_dtw, 1) for g in logs],
+        "mean_loss": [round(g.mean_loss, 5) for g in logs],
+        "validation_dtw_m": [
+            None if g.validation is None else round(g.validation, 1) for g in logs
+        ],
     }
 
 
 def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
     """The paper's hyperparameters, with OU latent noise at the data's median report interval
-    (hours) when the lane configuration asks for it."""
+    (hours) and a state-aware critic when the lane configuration asks for them."""
     config = DATIConfig(episodes=settings.episodes, patience=settings.patience)
     if settings.lane.noise == "ou":
         dt = float(np.median(np.concatenate([t.dts for t in tracks])))
         config = replace(config, noise="ou", ou_dt=dt)
+    if settings.lane.critic == "state":
+        config = config.with_network(conditional_critic=True)
     return config
 
 
@@ -319,11 +338,17 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     source = build_source(tracks, settings.lane)
     data = data_card(settings, tracks, total)
     config = dati_config(settings, tracks)
-    env = make_env(source, settings.epsilon_m)
+    members = settings.lane.members
+    # each member draws its own episode order from the same tracks
+    envs = [
+        make_env(AISTrackSource(source.references, source.space), settings.epsilon_m)
+        for _ in range(members)
+    ]
     validate = None
     if settings.lane.validation:
-        validate = Validator(source.space, config, tracks, settings.lane, settings.seed)
-    trainer = DATITrainer([env], [settings.seed], config, validate)
+        validator = Validator(source.space, config, tracks, settings.lane, settings.seed)
+        validate = _MemberValidators([validator] * members)
+    trainer = DATITrainer(envs, member_seeds(settings.seed, members), config, validate)
     stem = model_stem(settings)
     log_path = stem.with_suffix(".log.jsonl")
     ckpt_path = stem.with_suffix(".ckpt")
@@ -406,32 +431,32 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
 
 
 class _MemberValidators:
-    """One `Validator` per ensemble member (each route validates on its own tracks)."""
+    """One `Validator` per ensemble member (each route validates on its own tracks; the seeds
+    of one lane share theirs)."""
 
     def __init__(self, validators: Sequence[Validator]):
         self.validators = list(validators)
 
     def __call__(self, trainer: DATITrainer, k: int) -> float:
-        member = trainer.active[k]
-        policy = AISPolicy(
-            self.validators[member].space, dati_act(trainer.nets, trainer.cfg, member=k)
-        )
-        v = self.validators[member]
-        scores, _ = policy.rollout_scores(v.tracks, v.rollouts, v.seed)
-        return float(np.median(scores))
+        return self.validators[trainer.active[k]](trainer, k)
 
 
-def member_networks(nets: DATINetworks, k: int) -> DATINetworks:
-    """Member k of an ensemble as a single-member network (every parameter has the members
+def member_seeds(seed: int, members: int) -> list[int]:
+    """Seeds of a lane's members: the first is the run's own seed, so one member is a plain run."""
+    return [seed + 1000 * m for m in range(members)]
+
+
+def member_networks(nets: DATINetworks, ks: slice) -> DATINetworks:
+    """Members `ks` of an ensemble as a network of their own (every parameter has the members
     first)."""
-    single = DATINetworks(
+    part = DATINetworks(
         nets.forward_actor.input_features.weight.shape[1],
         nets.forward_actor.out.weight.shape[2],
         nets.cfg,
-        [nets.seeds[k]],
+        nets.seeds[ks],
     )
-    single.load_state_dict({n: p[k : k + 1].clone() for n, p in nets.state_dict().items()})
-    return single
+    part.load_state_dict({n: p[ks].clone() for n, p in nets.state_dict().items()})
+    return part
 
 
 def train_ais_ensemble(
@@ -447,6 +472,7 @@ def train_ais_ensemble(
     torch.set_num_threads(1)
     if len({s.lane for s in settings}) > 1:
         raise UserError("routes trained as one ensemble need one configuration (same --lane)")
+    members = settings[0].lane.members  # per route: route i holds members i*M .. i*M + M-1
     sources, datas, groups, envs = [], [], [], []
     for s in settings:
         ids, total = choose_training_tracks(s)
@@ -454,17 +480,20 @@ def train_ais_ensemble(
         groups.append(tracks)
         sources.append(build_source(tracks, s.lane))
         datas.append(data_card(s, tracks, total))
-        envs.append(make_env(sources[-1], s.epsilon_m))
+        envs += [
+            make_env(AISTrackSource(sources[-1].references, sources[-1].space), s.epsilon_m)
+            for _ in range(members)
+        ]
     # one configuration for all members (OU noise at the median dt of all routes' tracks)
     config = dati_config(settings[0], [t for g in groups for t in g])
-    configs = [config] * len(settings)
     validators = [
         Validator(src.space, config, g, s.lane, s.seed)
         for src, g, s in zip(sources, groups, settings, strict=True)
+        for _ in range(members)
     ]
     validate = _MemberValidators(validators) if settings[0].lane.validation else None
-    seeds = [s.seed + 1000 * i for i, s in enumerate(settings)]
-    trainer = DATITrainer(envs, seeds, configs[0], validate)
+    seeds = member_seeds(settings[0].seed, members * len(settings))
+    trainer = DATITrainer(envs, seeds, config, validate)
     t0 = time.perf_counter()
     steps = 0
     while not trainer.done:
@@ -475,13 +504,14 @@ def train_ais_ensemble(
     wall = time.perf_counter() - t0
     results = []
     for k, s in enumerate(settings):
-        history = [h for h in trainer.history if h.member == k]
+        mine = slice(k * members, (k + 1) * members)
+        history = [h for h in trainer.history if mine.start <= h.member < mine.stop]
         stem = model_stem(s)
         card = model_card(s, sources[k], datas[k], history, wall, steps)
-        card["seed"] = seeds[k]
+        card["seed"] = seeds[mine.start]
         card["training"]["finished"] = True
-        card["training"]["ensemble_members"] = len(settings)
-        save_networks(stem, member_networks(trainer.final, k), configs[k], card)
+        card["training"]["routes_in_ensemble"] = len(settings)
+        save_networks(stem, member_networks(trainer.final, mine), config, card)
         if sources[k].space.corridor is not None:
             atomic_write_bytes(
                 stem.with_suffix(".corridor.npz"), sources[k].space.corridor.to_bytes()

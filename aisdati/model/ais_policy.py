@@ -141,6 +141,7 @@ class AISPolicy:
         dt = np.concatenate(list(dts)).repeat(draws)
         err = np.empty(len(obs))
         pred = np.empty((len(obs), 2))
+        chunk = max(draws, chunk - chunk % draws)  # draw d of each report: same member
         with one_thread():
             for lo in range(0, len(obs), chunk):
                 sl = slice(lo, lo + chunk)
@@ -156,9 +157,11 @@ class AISPolicy:
         return np.split(err[rows], cuts), np.split(pred[rows], cuts)
 
 
-def dati_act(nets: DATINetworks, config: DATIConfig, member: int = 0) -> MakeAct:
-    """DATI's forward actor (member `member` of the ensemble) as a batched policy: each row
-    draws its own latent noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
+def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) -> MakeAct:
+    """DATI's forward actor as a batched policy: member `member` of the ensemble, or with None
+    every member in turn (row i acts with member i mod M: a seed ensemble's K draws spread
+    over its members). Each row draws its own latent noise, Gaussian or (with temporal noise)
+    Ornstein-Uhlenbeck."""
     latent = config.network.latent_dim
     state_dim = nets.forward_actor.input_features.weight.shape[1]
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
@@ -167,6 +170,8 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int = 0) -> MakeAct
         gen = torch.Generator().manual_seed(int(seed))
         eta = torch.zeros(members, n, latent)
         ou = config.noise == "ou" and temporal
+        rows = torch.arange(n)
+        pick = rows % members if member is None else torch.full((n,), member)
 
         def act(obs: np.ndarray) -> np.ndarray:
             nonlocal eta
@@ -180,7 +185,7 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int = 0) -> MakeAct
             with torch.no_grad():
                 time = nets.time_features(x[..., state_dim:].contiguous())
                 out = nets.forward_actor(x[..., :state_dim].contiguous(), eta, time)
-            return out[member].numpy()
+            return out[pick, rows].numpy()
 
         return act
 

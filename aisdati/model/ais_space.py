@@ -23,6 +23,12 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
   tanh axis, where an error of 0.02 is 40 s.
 - `noise="ou"`: Ornstein-Uhlenbeck latent noise at the data's median dt (hours), as the authors'
   code does for most of its families.
+- `members=M`: M seeds of the same lane trained as one batched ensemble (each with its own
+  validation and early stopping) and saved as one model; scoring draws its K rollouts (and K
+  one-step draws) across the members in turn, so one seed's blind spot is covered by another's.
+- `critic="state"`: the critics also see the state the decision is taken in (a conditional
+  WGAN, a departure from the paper, whose critics see only the decision, t and r): the
+  adversarial term then matches p(a | s, t, r) instead of p(a | t, r) averaged over states.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ MIN_MARGIN_DEG = 0.01
 DECISION_HEADROOM = 1.1
 RANGE_QUANTILE = 0.99
 PROGRESS_SCALE = 100.0
+MAX_MEMBERS = 16
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,8 @@ class LaneConfig:
     time: str = "step"
     ranges: str = "max"
     noise: str = "gaussian"
+    members: int = 1
+    critic: str = "decision"
 
     def __post_init__(self) -> None:
         choices = {
@@ -67,12 +76,15 @@ class LaneConfig:
             "time": ("step", "progress"),
             "ranges": ("max", "quantile"),
             "noise": ("gaussian", "ou"),
+            "critic": ("decision", "state"),
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise UserError(f"{name} must be one of {', '.join(allowed)}")
         if not (np.isfinite(self.corridor_km) and self.corridor_km > 0):
             raise UserError(f"corridor_km must be positive, got {self.corridor_km}")
+        if not 1 <= self.members <= MAX_MEMBERS:
+            raise UserError(f"members must be in [1, {MAX_MEMBERS}], got {self.members}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.errors import UserError
+from aisdati.model.ais_space import MAX_MEMBERS
 
 MAX_MMSI = 2**53
 _MISSING = object()
@@ -175,8 +176,11 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
 
     # the networks
     if fmt in ("aisdati-dati/1", "aisdati-bc/1"):
-        seeds = card.array("seeds", length=1)
-        card.integer("seeds[0]", value=seeds[0])
+        has = isinstance(lane, dict) and "members" in lane  # older cards: one member
+        members = card.integer("lane_config.members", 1, MAX_MEMBERS) if has else 1
+        seeds = card.array("seeds", length=members)
+        for i, seed in enumerate(seeds):
+            card.integer(f"seeds[{i}]", value=seed)
     if fmt == "aisdati-dati/1":
         card.choice("state_dim", (2, 5))
         card.integer("decision_dim", 3, 3)

@@ -281,10 +281,14 @@ class DATITrainer:
             u_f = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
             u_b = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
             cf, cb = nets.forward_critic, nets.backward_critic
-            loss_f = (cf(fake_a, r, t).mean(1) - cf(a_real, r, t).mean(1)).squeeze(-1)
-            loss_b = (cb(fake_s, r, t).mean(1) - cb(s, r, t).mean(1)).squeeze(-1)
-            loss_f = loss_f + c.gradient_penalty * _gradient_penalty(cf, a_real, fake_a, r, t, u_f)
-            loss_b = loss_b + c.gradient_penalty * _gradient_penalty(cb, s, fake_s, r, t, u_b)
+            real_f = nets.forward_critic_input(a_real, s)
+            fake_f = nets.forward_critic_input(fake_a, s)
+            real_b = nets.backward_critic_input(s, a_hat)
+            fake_b = nets.backward_critic_input(fake_s, a_hat)
+            loss_f = (cf(fake_f, r, t).mean(1) - cf(real_f, r, t).mean(1)).squeeze(-1)
+            loss_b = (cb(fake_b, r, t).mean(1) - cb(real_b, r, t).mean(1)).squeeze(-1)
+            loss_f = loss_f + c.gradient_penalty * _gradient_penalty(cf, real_f, fake_f, r, t, u_f)
+            loss_b = loss_b + c.gradient_penalty * _gradient_penalty(cb, real_b, fake_b, r, t, u_b)
             critic_loss = loss_f + loss_b
             self.opt_critic.zero_grad(set_to_none=True)
             critic_loss.sum().backward()
@@ -299,7 +303,8 @@ class DATITrainer:
         gen_a = nets.forward_actor(s, eta, t)
         gen_s = nets.backward_actor(a_hat, eta, t)
         adv = -(
-            nets.forward_critic(gen_a, r, t).mean(1) + nets.backward_critic(gen_s, r, t).mean(1)
+            nets.forward_critic(nets.forward_critic_input(gen_a, s), r, t).mean(1)
+            + nets.backward_critic(nets.backward_critic_input(gen_s, a_hat), r, t).mean(1)
         )
         adv = adv.squeeze(-1)
         self.opt_actor.zero_grad(set_to_none=True)

@@ -1,0 +1,113 @@
+"""Levers 6 and 8 of lane learning on real Kitimat tracks: a seed ensemble trained and saved as
+one lane model whose draws spread over its members, and the state-aware (conditional) critic."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors.train import train_detector
+from aisdati.errors import UserError
+from aisdati.model.ais import TrainSettings
+from aisdati.model.ais_policy import dati_act
+from aisdati.model.ais_space import PRESETS, lane_config
+from aisdati.model.dati import DATIConfig, DATITrainer
+from aisdati.model.env import make_family_env
+from aisdati.model.families import get_family
+from aisdati.model.networks import DATINetworks, NetworkConfig
+from aisdati.trackdata import load_tracks, read_track_table
+
+SMALL = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1)
+
+
+def _train(kitimat, tmp_path, lane, episodes=1):
+    ids = tuple(int(i) for i in read_track_table(kitimat)["track_id"][:5])
+    settings = TrainSettings(
+        data_dir=kitimat, cluster="other", out_dir=tmp_path, episodes=episodes, track_ids=ids,
+        lane=lane,
+    )
+    trained = train_detector("dati", settings, ScoreSettings(rollouts=4))
+    return ids, json.loads(trained.model.with_suffix(".json").read_text())
+
+
+def test_a_seed_ensemble_is_one_model_whose_draws_spread_over_its_members(kitimat, tmp_path):
+    ids, card = _train(kitimat, tmp_path, replace(SMALL, members=3))
+    assert card["seeds"] == [0, 1000, 2000] and card["lane_config"]["members"] == 3
+    assert len(card["training"]["members"]) == 3
+    assert all(m["episodes_run"] == 1 for m in card["training"]["members"])
+    det = load_detector(tmp_path / "other")
+    assert det.nets.members == 3
+    # row i acts with member i mod 3: the spread policy's rows equal each member's own rows
+    obs = np.tile(np.array([[0.1, -0.2, 3.0]], np.float32), (6, 1))
+    spread = dati_act(det.nets, det.config)(6, 5, False)(obs)
+    for m in range(3):
+        own = dati_act(det.nets, det.config, member=m)(6, 5, False)(obs)
+        np.testing.assert_allclose(spread[m::3], own[m::3])
+    assert not np.allclose(spread[0], spread[1])  # different members decide differently
+    tracks = load_tracks(kitimat, list(ids[:2]))
+    assert np.isfinite(det.score(tracks, ScoreSettings(rollouts=3)).score_m).all()
+
+
+def test_a_card_whose_seeds_do_not_match_its_members_is_refused(kitimat, tmp_path):
+    _train(kitimat, tmp_path, replace(SMALL, members=2))
+    card = json.loads((tmp_path / "other.json").read_text())
+    card["seeds"] = card["seeds"][:1]
+    (tmp_path / "other.json").write_text(json.dumps(card))
+    with pytest.raises(UserError, match="seeds must be a list of 2"):
+        load_detector(tmp_path / "other")
+
+
+def test_members_option_is_checked():
+    assert lane_config("lanes", ["members=4"]).members == 4
+    for bad in ("members=0", "members=99", "members=two", "critic=both"):
+        with pytest.raises(UserError):
+            lane_config("lanes", [bad])
+
+
+def test_routes_train_their_seed_ensembles_together(cli, kitimat, tmp_path):
+    models = tmp_path / "models"
+    r = cli("train", "--cluster", "routes", "--data", kitimat, "--out", models, "--episodes", "1",
+            "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
+            "validation_rollouts=1", "--lane", "members=2", "-q")
+    assert r.exit_code == 0, r.output
+    seeds = []
+    for path in sorted(models.glob("route-*.json")):
+        if path.name.endswith(".log.json"):
+            continue
+        card = json.loads(path.read_text())
+        assert len(card["seeds"]) == 2 and len(card["training"]["members"]) == 2
+        assert load_detector(path.with_suffix("")).nets.members == 2
+        seeds += card["seeds"]
+    assert len(seeds) >= 4 and len(set(seeds)) == len(seeds)  # every member its own seed
+
+
+def test_the_state_aware_critic_sees_the_state():
+    cfg = NetworkConfig(conditional_critic=True)
+    nets = DATINetworks(2, 3, cfg, [0])
+    assert nets.forward_critic.input_features.weight.shape[1] == 5
+    a = torch.zeros(1, 4, 3)
+    s1, s2 = torch.zeros(1, 4, 2), torch.ones(1, 4, 2)
+    r, t = torch.zeros(1, 4, 1), nets.time_features(torch.zeros(1, 4, 1))
+    v1 = nets.forward_critic(nets.forward_critic_input(a, s1), r, t)
+    v2 = nets.forward_critic(nets.forward_critic_input(a, s2), r, t)
+    assert not torch.allclose(v1, v2)
+    paper = DATINetworks(2, 3, NetworkConfig(), [0])
+    assert paper.forward_critic.input_features.weight.shape[1] == 3
+    assert torch.equal(paper.forward_critic_input(a, s1), a)
+
+
+def test_the_state_aware_critic_trains_and_round_trips_through_the_card(kitimat, tmp_path):
+    env = make_family_env(replace(get_family("circles"), steps=12))
+    cfg = DATIConfig(episodes=2, batch_size=16, patience=0).with_network(conditional_critic=True)
+    trainer = DATITrainer([env], [0], cfg)
+    trainer.train()
+    assert all(np.isfinite(h.mean_loss) for h in trainer.history)
+    _, card = _train(kitimat, tmp_path, replace(SMALL, critic="state"))
+    assert card["config"]["network"]["conditional_critic"] is True
+    det = load_detector(tmp_path / "other")
+    assert det.nets.forward_critic.input_features.weight.shape[1] == 5
