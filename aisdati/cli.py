@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import functools
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -110,7 +111,7 @@ def warn(message: str) -> None:
 def _ours(value: float, paper: float | None, sd: float = float("nan")) -> str:
     """Our number, green where it is at or below the paper's; `± sd` over repeats when known."""
     style = "green" if paper is not None and value <= paper else "yellow"
-    spread = "" if sd != sd else f" ± {sd:.3f}"  # NaN: a single repeat
+    spread = "" if math.isnan(sd) else f" ± {sd:.3f}"  # NaN: a single repeat
     return f"[{style}]{value:.3f}{spread}[/]"
 
 
