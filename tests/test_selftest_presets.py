@@ -159,6 +159,8 @@ def test_keep_final_ends_with_the_last_episodes_actor():
         if name.startswith(("forward_actor.", "time2vec.")):
             torch.testing.assert_close(p, live[name], rtol=0, atol=0, msg=name)
     assert trainer.episode == [3]
+    with pytest.raises(ValueError, match="keep"):
+        DATIConfig(keep="last")
 
 
 def test_each_seed_has_its_own_references_in_the_paper_preset():

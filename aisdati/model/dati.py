@@ -75,6 +75,10 @@ class DATIConfig:
     critics' time features). The paper's code freezes it there (critic.trainable = False when
     compiling the GAN); the critic and L1 losses update it either way."""
 
+    def __post_init__(self) -> None:
+        if self.keep not in ("best", "final"):
+            raise ValueError(f"keep must be 'best' or 'final', got {self.keep!r}")
+
     @property
     def noise_process(self) -> NoiseProcess:
         return NoiseProcess(self.noise, self.ou_dt)

@@ -168,7 +168,8 @@ class SelftestSettings:
     ddpg: DDPGTIConfig = field(default_factory=DDPGTIConfig)
     preset: str = "ours"
     noise: str = "gaussian"
-    """One of `NOISES`; DATI's latent noise per family (`config.noise` is not used here)."""
+    """One of `NOISES`: DATI's latent noise per family (`noise_process`); `config.noise` only
+    mirrors it."""
     exact_region: bool = False
     distinct_references: bool = False
     repeats: int = 1
