@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import functools
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -47,6 +48,14 @@ PRESET_OPTION = typer.Option(
     "--preset",
     help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
     "paper's own configuration).",
+)
+SELFTEST_PRESET_OPTION = typer.Option(
+    "ours",
+    "--preset",
+    help="The self-test's set-up: ours (the default: early stopping keeping the lowest-loss "
+    "actor, region and speeds with margins, shared references) or paper (the authors' code as "
+    "far as it reads: final actor, Time2Vec frozen under the adversarial loss, OU noise at the "
+    "family's dt but Gaussian for Ribbons, exact region and speeds, references per seed).",
 )
 LANE_OPTION = typer.Option(
     None,
@@ -105,9 +114,16 @@ def warn(message: str) -> None:
     err_console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
-def _ours(value: float, paper: float | None) -> str:
+def _ours(value: float, paper: float | None, sd: float = float("nan")) -> str:
+    """Our number, green where it is at or below the paper's; `± sd` over repeats when known."""
     style = "green" if paper is not None and value <= paper else "yellow"
-    return f"[{style}]{value:.3f}[/]"
+    spread = "" if math.isnan(sd) else f" ± {sd:.3f}"  # NaN: a single repeat
+    return f"[{style}]{value:.3f}{spread}[/]"
+
+
+def _best_label(rows: list[dict[str, Any]], what: str) -> str:
+    repeats = max((r.get("repeats", 1) for r in rows), default=1)
+    return what if repeats == 1 else f"{what}, mean ± sd of {repeats} repeats"
 
 
 def _paper(value: float | None) -> str:
@@ -126,7 +142,7 @@ def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
     cols = (
         "method",
         "family",
-        "best (paper's metric)",
+        _best_label(rows, "best (paper's metric)"),
         "paper",
         "median",
         "IQM [95% CI]",
@@ -139,7 +155,7 @@ def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
         table.add_row(
             METHODS.get(method, method),
             r["family"],
-            _ours(r["best"], r["paper_best"]),
+            _ours(r["best"], r["paper_best"], r.get("best_sd", float("nan"))),
             _paper(r["paper_best"]),
             f"{r['median']:.3f}",
             f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
@@ -158,9 +174,9 @@ def ablation_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
     cols = (
         "variant",
         "family",
-        "top-1",
+        _best_label(rows, "top-1"),
         "paper",
-        "top-2",
+        _best_label(rows, "top-2"),
         "paper",
         "median",
         "IQM [95% CI]",
@@ -172,9 +188,9 @@ def ablation_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
         table.add_row(
             METHODS.get(r["method"], r["method"]),
             r["family"],
-            _ours(r["best"], r["paper_best"]),
+            _ours(r["best"], r["paper_best"], r.get("best_sd", float("nan"))),
             _paper(r["paper_best"]),
-            _ours(r["second_best"], r["paper_second_best"]),
+            _ours(r["second_best"], r["paper_second_best"], r.get("second_best_sd", float("nan"))),
             _paper(r["paper_second_best"]),
             f"{r['median']:.3f}",
             f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
@@ -355,8 +371,8 @@ def selftest(
         "dati",
         "--methods",
         "-m",
-        help="Methods to compare, comma-separated: dati, bc, ddpg-ti (Table 1: all three), "
-        "dati-no-time-embedding, dati-no-reward-input.",
+        help="Methods to compare, comma-separated: dati, bc, bc-paper, ddpg-ti (Table 1: all "
+        "four), dati-no-time-embedding, dati-no-reward-input.",
     ),
     ablation: bool = typer.Option(
         False,
@@ -371,7 +387,15 @@ def selftest(
     ),
     references: int = typer.Option(10, help="Unseen test references per family (paper: 10)."),
     workers: int = typer.Option(2, help="Processes to share the members out over (one per core)."),
-    noise: str = typer.Option("gaussian", help="Latent noise process: gaussian or ou."),
+    preset: str = SELFTEST_PRESET_OPTION,
+    repeats: int = typer.Option(
+        1, help="Run the whole protocol this many times on further seed blocks (its spread)."
+    ),
+    noise: str | None = typer.Option(
+        None,
+        help="DATI's latent noise: gaussian, ou or family (OU at the family's dt, Gaussian for "
+        "Ribbons); default: the preset's.",
+    ),
     time_embedding: bool = typer.Option(True, help="Time2Vec input (off: Table 2 ablation)."),
     reward_input: bool = typer.Option(True, help="Reward input to the critics (off: ablation)."),
     quick: bool = typer.Option(
@@ -387,15 +411,13 @@ def selftest(
     from dataclasses import replace
     from datetime import datetime
 
-    from aisdati.model.baselines import BCConfig, DDPGTIConfig
-    from aisdati.model.dati import DATIConfig
     from aisdati.model.families import FAMILIES
     from aisdati.model.selftest import (
         ABLATION,
         PAPER_FAMILIES,
         QUICK,
-        SelftestSettings,
         parse_methods,
+        preset_settings,
         result_rows,
         run_selftest,
         write_outputs,
@@ -420,31 +442,29 @@ def selftest(
         ("--episodes", episodes),
         ("--references", references),
         ("--workers", workers),
+        ("--repeats", repeats),
     ):
         if value < 1:
             raise UserError(f"{label} must be at least 1, got {value}")
     if steps is not None and steps < 2:
         raise UserError(f"--steps must be at least 2, got {steps}")
-    if noise not in ("gaussian", "ou"):
-        raise UserError(f"--noise must be gaussian or ou, got {noise!r}")
+    settings = preset_settings(
+        preset,
+        episodes,
+        noise,
+        families=tuple(names),
+        seeds=seeds,
+        references=references,
+        steps=steps,
+        workers=workers,
+        methods=tuple(method_names),
+        repeats=repeats,
+    )
+    config = settings.config.with_network(time_embedding=time_embedding, reward_input=reward_input)
+    settings = replace(settings, config=config)
     out = out or Path("runs") / f"selftest-{datetime.now():%Y%m%d-%H%M%S}"
     prepare_output_dir(out, "--out")
-
-    config = DATIConfig(episodes=episodes, noise=noise).with_network(
-        time_embedding=time_embedding, reward_input=reward_input
-    )
-    settings = SelftestSettings(
-        tuple(names),
-        seeds,
-        references,
-        steps,
-        workers,
-        config=config,
-        methods=tuple(method_names),
-        bc=replace(BCConfig(), episodes=episodes),
-        ddpg=replace(DDPGTIConfig(), episodes=episodes),
-    )
-    total = len(method_names) * len(names) * seeds
+    total = len(method_names) * len(names) * seeds * repeats
     label = "training DATI" if list(method_names) == ["dati"] else "training"
     with EpisodeProgress(total, episodes, label, disable=quiet or as_json) as progress:
         result = run_selftest(settings, progress.update)

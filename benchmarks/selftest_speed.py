@@ -1,43 +1,61 @@
-"""Speed of the self-test. First the ensemble lever: ms per DATI training step (one batch and
-one action per member) for ensembles of E = 1, 10, 20, 40 members. Then the wall time of the
-paper's Tables 1 and 2 (`aisdati selftest --methods dati,bc,ddpg-ti` and
-`--ablation`): measured per-step costs of each method, and the projection to the full budget.
+"""Speed of the self-test: what the full Tables 1 and 2 cost, and where the time goes.
 
-The self-test shares members out round-robin over one worker per core; inside a worker the DATI
-members of a variant train as one ensemble, the BC members as one ensemble, and DDPG-TI (SB3)
-one model after another. So a worker of Table 1 runs DATI with E = 20, BC with E = 20 and 20
-DDPG-TI models (on 2 cores); a worker of Table 2 runs three DATI ensembles of E = 5.
-The projection assumes 100 episodes x 200 steps for every member (DATI's early stopping only
-shortens it) and leaves out evaluation (seconds).
+The self-test shares its members out round-robin over one worker per core; inside a worker the
+DATI members of a variant train as one ensemble (all repeats together), the BC members of a
+variant as one ensemble, and DDPG-TI (SB3) one model after another. This script measures, with
+one torch thread, the cost of one training step of each of those pieces *at the size it has in
+a worker* of the full protocol, and projects the wall time of
 
-    python benchmarks/selftest_speed.py [--steps 30] [--run]
+- Table 1: `aisdati selftest --methods dati,bc,bc-paper,ddpg-ti --repeats R` (4 families x 10
+  seeds x R repeats; default R = 3), and
+- Table 2: `aisdati selftest --ablation` (3 DATI variants x 10 seeds on Circles),
 
-`--run` also times a reduced end-to-end Table 1 (4 families x 2 seeds x 2 episodes x 40 steps,
-3 references) through `run_selftest`, the same code path as the CLI.
+on W workers (default 2, one per core), assuming every DATI and DDPG-TI member runs the full 100
+episodes x 200 steps (the paper preset does; the `ours` preset's early stopping only shortens it)
+and BC its full number of updates. It is a projection from measured step costs, not a run of the
+tables: rollouts and scoring (seconds) are left out, and two workers sharing a machine with other
+jobs run slower than the single measurement here. `--run` adds a reduced end-to-end Table 1
+through `run_selftest` (the CLI's code path) as a sanity check of the wiring, not of the scale.
+
+    python benchmarks/selftest_speed.py [--steps 20] [--repeats 3] [--workers 2] [--run]
 """
 
 from __future__ import annotations
 
 import argparse
-import os
+import math
 import time
+from dataclasses import replace
 
 import torch
 from rich.console import Console
 from rich.table import Table
 
-from aisdati.model.baselines import BCConfig, BCTrainer, DDPGTIConfig, make_ddpg_ti
-from aisdati.model.dati import DATIConfig, DATITrainer
-from aisdati.model.env import make_family_env
-from aisdati.model.selftest import PAPER_FAMILIES, TABLE1, SelftestSettings, run_selftest
+from aisdati.model.baselines import BC_PAPER, BCConfig, BCTrainer, DDPGTIConfig, make_ddpg_ti
+from aisdati.model.dati import DATITrainer
+from aisdati.model.env import FamilySource, TrajectoryImitationEnv
+from aisdati.model.selftest import (
+    PAPER_FAMILIES,
+    SelftestSettings,
+    preset_settings,
+    run_selftest,
+    settings_family,
+)
 
-STEPS = 100 * 200
-"""Environment steps (DATI, DDPG-TI) or gradient updates (BC) per member at the full budget."""
+EPISODES, STEPS = 100, 200
+"""The paper's budget per member: 100 episodes of τ = 200 steps."""
 
 
-def dati_ms(members: int, steps: int) -> float:
-    envs = [make_family_env(PAPER_FAMILIES[i % 4]) for i in range(members)]
-    trainer = DATITrainer(envs, list(range(members)), DATIConfig(patience=0))
+def _envs(settings: SelftestSettings, names: list[str]) -> list[TrajectoryImitationEnv]:
+    return [TrajectoryImitationEnv(FamilySource(settings_family(settings, n))) for n in names]
+
+
+def dati_ms(settings: SelftestSettings, method: str, names: list[str], steps: int) -> float:
+    """ms per training step (one batch and one action of every member) of one DATI ensemble."""
+    fams = [settings_family(settings, n) for n in names]
+    noise = [settings.noise_process(f) for f in fams]
+    config = replace(settings.dati_config(method), patience=0)
+    trainer = DATITrainer(_envs(settings, names), list(range(len(names))), config, noise=noise)
     for _ in range(3):
         trainer.step()
     start = time.perf_counter()
@@ -46,19 +64,21 @@ def dati_ms(members: int, steps: int) -> float:
     return (time.perf_counter() - start) / steps * 1e3
 
 
-def bc_ms(members: int, steps: int) -> float:
-    envs = [make_family_env(PAPER_FAMILIES[i % 4]) for i in range(members)]
-    trainer = BCTrainer(envs, list(range(members)), BCConfig(updates_per_episode=steps))
+def bc_ms(settings: SelftestSettings, cfg: BCConfig, names: list[str], updates: int) -> float:
+    """ms per gradient update of one BC ensemble."""
+    cfg = replace(cfg, episodes=2, epochs=None, updates_per_episode=updates)
+    trainer = BCTrainer(_envs(settings, names), list(range(len(names))), cfg)
     trainer.train_episode()  # warm-up, then time one episode's updates
     start = time.perf_counter()
     trainer.train_episode()
-    return (time.perf_counter() - start) / steps * 1e3
+    return (time.perf_counter() - start) / updates * 1e3
 
 
-def ddpg_ms(steps: int) -> float:
+def ddpg_ms(settings: SelftestSettings, steps: int) -> float:
+    """ms per environment step (with its gradient step) of one SB3 DDPG-TI model."""
     cfg = DDPGTIConfig()
-    model = make_ddpg_ti(make_family_env("circles"), 0, cfg)
-    model.learn(cfg.learning_starts + 10)  # past the random warm-up: every step now trains
+    model = make_ddpg_ti(_envs(settings, ["circles"])[0], 0, cfg)
+    model.learn(cfg.learning_starts + 200)  # past the random warm-up and the DTW's compilation
     start = time.perf_counter()
     model.learn(steps, reset_num_timesteps=False)
     return (time.perf_counter() - start) / steps * 1e3
@@ -66,64 +86,71 @@ def ddpg_ms(steps: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--steps", type=int, default=20, help="DATI steps timed per ensemble")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats of Table 1")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes (cores)")
+    parser.add_argument("--preset", default="paper", help="self-test preset (ours or paper)")
     parser.add_argument("--run", action="store_true", help="also time a reduced end-to-end run")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    cores = os.cpu_count() or 1
-    workers = max(1, min(cores, 2))
-    per_worker = 40 // workers  # members of one method in one worker (Table 1)
-    ablation_e = 10 // workers  # members of one DATI variant in one worker (Table 2)
+    w, reps = args.workers, args.repeats
+    settings = preset_settings(args.preset)
+    # what one worker holds: members are dealt round-robin, so each gets 1/W of every method
+    t1 = math.ceil(len(PAPER_FAMILIES) * 10 * reps / w)
+    t2 = math.ceil(10 / w)
+    names1 = [PAPER_FAMILIES[i % 4] for i in range(t1)]
+    names2 = ["circles"] * t2
+    bc_paper_updates = BC_PAPER.epochs * math.ceil(EPISODES * STEPS / BC_PAPER.batch_size)
+
+    pieces = []  # (table, what, ms per step, steps per worker, members)
+    for method in ("dati",):
+        ms = dati_ms(settings, method, names1, args.steps)
+        pieces.append(("Table 1", f"DATI, one ensemble of E={t1}", ms, EPISODES * STEPS, t1))
+    ms = bc_ms(settings, BCConfig(), names1, 5 * args.steps)
+    pieces.append(("Table 1", f"BC, one ensemble of E={t1}", ms, EPISODES * STEPS, t1))
+    ms = bc_ms(settings, BC_PAPER, names1, 5 * args.steps)
+    pieces.append(("Table 1", f"BC-paper, E={t1}", ms, bc_paper_updates, t1))
+    ms = ddpg_ms(settings, 100 * args.steps)  # SB3's per-learn() set-up amortised
+    pieces.append(("Table 1", f"DDPG-TI, {t1} SB3 models in turn", ms, EPISODES * STEPS * t1, 1))
+    for method in ("dati", "dati-no-time-embedding", "dati-no-reward-input"):
+        ms = dati_ms(settings, method, names2, args.steps)
+        pieces.append(("Table 2", f"{method}, E={t2}", ms, EPISODES * STEPS, t2))
 
     console = Console()
-    sweep = Table(title="DATI ensemble: one training step of E members (1 thread)")
-    for col in ("members E", "ms / step", "ms / member-step"):
-        sweep.add_column(col, justify="right")
-    for members in (1, 10, 20, 40):
-        ms = dati_ms(members, args.steps)
-        sweep.add_row(str(members), f"{ms:.1f}", f"{ms / members:.2f}")
-    console.print(sweep)
-
-    costs = {
-        f"DATI, ensemble E={per_worker}": (dati_ms(per_worker, args.steps), 1),
-        f"BC, ensemble E={per_worker} (per update)": (bc_ms(per_worker, 5 * args.steps), 1),
-        "DDPG-TI, one SB3 model": (ddpg_ms(5 * args.steps), per_worker),
-        f"DATI, ensemble E={ablation_e} (Table 2)": (dati_ms(ablation_e, args.steps), 3),
-    }
-    table = Table(title=f"Tables 1-2 step costs (1 thread per worker, {workers} workers)")
-    for col in ("what", "ms / step", "ms / member-step", "worker time, full budget"):
-        table.add_column(col, justify="left" if col == "what" else "right")
-    minutes = {}
-    for (what, (ms, runs)), members in zip(
-        costs.items(), (per_worker, per_worker, 1, ablation_e), strict=True
-    ):
-        minutes[what] = ms * STEPS * runs / 1e3 / 60
-        table.add_row(what, f"{ms:.2f}", f"{ms / members:.2f}", f"{minutes[what]:.0f} min")
+    table = Table(
+        title=f"Projected wall time of the full tables ({args.preset} preset, {w} workers, "
+        f"1 thread each; Table 1 x {reps} repeats), from measured step costs"
+    )
+    for col in ("table", "what (per worker)", "ms / step", "ms / member-step", "minutes"):
+        table.add_column(col, justify="left" if col in ("table", "what (per worker)") else "right")
+    minutes: dict[str, float] = {}
+    for tab, what, ms, steps, members in pieces:
+        m = ms * steps / 1e3 / 60
+        minutes[tab] = minutes.get(tab, 0.0) + m
+        table.add_row(tab, what, f"{ms:.1f}", f"{ms / members:.2f}", f"{m:.1f}")
+    for tab, m in minutes.items():
+        table.add_row(f"[bold]{tab}[/]", "total", "", "", f"[bold]{m:.1f}[/]")
+    table.add_row("[bold]both[/]", "total", "", "", f"[bold]{sum(minutes.values()):.1f}[/]")
     console.print(table)
-    t1 = sum(v for k, v in minutes.items() if "Table 2" not in k)
-    t2 = next(v for k, v in minutes.items() if "Table 2" in k)
     console.print(
-        f"Table 1 (3 methods x 4 families x 10 seeds): ~{t1:.0f} min; "
-        f"Table 2 (3 DATI variants x 10 seeds, circles): ~{t2:.0f} min; "
-        f"together ~{(t1 + t2) / 60:.1f} h on {workers} cores, before early stopping."
+        "A projection, not a run: every DATI and DDPG-TI member at 100 x 200 steps, rollouts "
+        "left out; workers run side by side, so a table's wall time is one worker's sum."
     )
     if args.run:
         small = dict(episodes=2, steps=40, seeds=2, references=3)
-        settings = SelftestSettings(
-            PAPER_FAMILIES,
-            small["seeds"],
-            small["references"],
-            small["steps"],
-            workers,
-            config=DATIConfig(episodes=small["episodes"]),
-            methods=TABLE1,
-            bc=BCConfig(episodes=small["episodes"]),
-            ddpg=DDPGTIConfig(episodes=small["episodes"]),
+        reduced = preset_settings(
+            args.preset,
+            small["episodes"],
+            families=PAPER_FAMILIES,
+            seeds=small["seeds"],
+            references=small["references"],
+            steps=small["steps"],
+            workers=w,
+            methods=("dati", "bc", "bc-paper", "ddpg-ti"),
         )
-        result = run_selftest(settings)
+        result = run_selftest(reduced)
         console.print(
-            f"reduced end-to-end Table 1 ({small}): {result.wall_seconds:.1f} s wall "
-            f"on {workers} workers"
+            f"reduced end-to-end Table 1 ({small}): {result.wall_seconds:.1f} s wall on {w} workers"
         )
 
 

@@ -139,9 +139,7 @@ class BCDetector(PolicyDetector):
     @classmethod
     def load(cls, stem: Path, card: dict[str, Any]) -> BCDetector:
         try:
-            raw = dict(card["config"])
-            raw["log_std_range"] = tuple(raw["log_std_range"])
-            cfg = BCConfig(**raw)
+            cfg = BCConfig.from_dict(card["config"])
             state_dim = AISSpace.from_card(card).state_dim
             policy = BCPolicy(state_dim, 3, cfg, card["seeds"])
             state = torch.load(stem.with_suffix(".pt"), map_location="cpu", weights_only=True)

@@ -18,6 +18,15 @@ policies roll out), `BCConfig.deterministic` uses the mean. All seeds train at o
 ensemble (every layer holds E members' weights, `aisdati.model.networks`), which is the same
 function as E separate runs.
 
+**BC as the paper ran it** (`BC_PAPER`, method `bc-paper` of `aisdati selftest`): the paper
+writes BC as π(s_t), and the authors' environment gives `imitation`'s BC only the position, so
+this policy has no time input. Otherwise `imitation`'s defaults: batch 32, one learned log σ per
+decision that does not depend on the state (SB3's Gaussian policies, starting at log σ = 0),
+entropy weight 10⁻³, Adam 10⁻³, and its schedule: the demonstrations of all episodes (the same
+100 references as ours) first, then `epochs` shuffled passes over them. The authors' BC script is
+not in DLR-MI/dati, so the number of epochs is ours: 1, the value of `imitation`'s BC tutorial
+(625 updates for 100 x 200 pairs; our BC makes 20,000).
+
 **DDPG-TI**: Stable-Baselines3's own `DDPG` on `TrajectoryImitationEnv` (it observes the agent's
 ŝ_t and t, and is rewarded ±1 by the smoothed normalised DTW), with `Time2VecExtractor` (80 tanh
 state features + Time2Vec(76) = 156) shared by actor and critic, 4 x 32 hidden layers, γ = 0.9,
@@ -26,9 +35,11 @@ state features + Time2Vec(76) = 156) shared by actor and critic, 4 x 32 hidden l
 optimisers, so `DDPGTI` (a subclass that changes nothing else) overrides the schedule update to
 give the critic its own rate. Choices where the paper is silent: batch 64, replay 50 000, one
 gradient step per environment step after 64 random-policy steps, tanh hidden units (as DATI's
-actors), no early stopping. At inference the actor's decision plus the OU noise is rolled out, as
-the paper writes it (ŝ_{t+1} = g(ŝ_t, π(ŝ_t, t) + η_t)); `DDPGTIConfig.inference_noise=False`
-rolls out the bare actor. One SB3 model per seed; `aisdati selftest` spreads them over processes.
+actors), no early stopping; Adam runs fused (the same update; SB3's default loops over the
+parameters in Python, 14 % of a DDPG-TI step when profiled). At inference the actor's decision
+plus the OU noise is rolled out, as the paper writes it (ŝ_{t+1} = g(ŝ_t, π(ŝ_t, t) + η_t));
+`DDPGTIConfig.inference_noise=False` rolls out the bare actor. One SB3 model per seed;
+`aisdati selftest` spreads them over processes.
 """
 
 from __future__ import annotations
@@ -66,13 +77,30 @@ class BCConfig:
     log_std_range: tuple[float, float] = (-7.0, 2.0)
     deterministic: bool = False
     """Roll out the Gaussian's mean instead of a sample."""
+    time_input: bool = True
+    """Whether the policy sees Time2Vec(t) beside the state (the paper's BC sees only s_t)."""
+    state_dependent_std: bool = True
+    """A log σ head on the hidden layer; False: one learned log σ per decision (`imitation`)."""
+    epochs: int | None = None
+    """None: τ updates after each episode on everything seen so far (ours). A number:
+    `imitation`'s schedule, every episode's demonstrations first, then this many shuffled passes
+    over them in batches of `batch_size`."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> BCConfig:
+        return cls(**{**data, "log_std_range": tuple(data["log_std_range"])})
+
+
+BC_PAPER = BCConfig(time_input=False, state_dependent_std=False, batch_size=32, epochs=1)
+"""BC as the paper ran it (`imitation`'s BC on the position only); see the module docstring."""
+
 
 class BCPolicy(nn.Module):
-    """E Gaussian policies p(a | s, t) as one ensemble: [E, B, ·] in, mean and log σ out."""
+    """E Gaussian policies p(a | s, t) (or p(a | s) without time input) as one ensemble:
+    [E, B, ·] in, mean and log σ out."""
 
     def __init__(self, state_dim: int, decision_dim: int, cfg: BCConfig, seeds: Sequence[int]):
         super().__init__()
@@ -81,20 +109,33 @@ class BCPolicy(nn.Module):
         gens = [torch.Generator().manual_seed(s) for s in self.seeds]
         net = NetworkConfig(hidden_units=cfg.hidden_units, hidden_layers=cfg.hidden_layers)
         self.state_features = EnsembleLinear(state_dim, cfg.state_features, gens)
-        self.time2vec = Time2Vec(cfg.time_embedding_dim, gens)
-        widths = [cfg.state_features, 1, cfg.time_embedding_dim - 1]
+        self.time2vec = Time2Vec(cfg.time_embedding_dim, gens) if cfg.time_input else None
+        widths = [cfg.state_features]
+        if cfg.time_input:
+            widths += [1, cfg.time_embedding_dim - 1]
         self.hidden = MLPTrunk(widths, net, gens, nn.Tanh())
         self.mean = EnsembleLinear(cfg.hidden_units, decision_dim, gens)
-        self.log_std = EnsembleLinear(cfg.hidden_units, decision_dim, gens)
+        self.log_std: nn.Module | nn.Parameter
+        if cfg.state_dependent_std:
+            self.log_std = EnsembleLinear(cfg.hidden_units, decision_dim, gens)
+        else:
+            self.log_std = nn.Parameter(torch.zeros(len(gens), 1, decision_dim))
 
     @property
     def feature_width(self) -> int:
-        return self.cfg.state_features + self.cfg.time_embedding_dim
+        return self.cfg.state_features + self.cfg.time_embedding_dim * self.cfg.time_input
 
     def forward(self, state: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
-        """Mean and log σ [E, B, k] of the decision given the state [E, B, d] and t [E, B, 1]."""
-        h = self.hidden([torch.tanh(self.state_features(state)), *self.time2vec(t)])
-        return self.mean(h), self.log_std(h).clamp(*self.cfg.log_std_range)
+        """Mean and log σ [E, B, k] of the decision given the state [E, B, d] and t [E, B, 1]
+        (t is ignored without time input)."""
+        time = self.time2vec(t) if self.time2vec is not None else []
+        h = self.hidden([torch.tanh(self.state_features(state)), *time])
+        mean = self.mean(h)
+        if isinstance(self.log_std, nn.Parameter):
+            log_std = self.log_std.expand_as(mean)
+        else:
+            log_std = self.log_std(h)
+        return mean, log_std.clamp(*self.cfg.log_std_range)
 
     def loss(self, state: Tensor, t: Tensor, action: Tensor) -> Tensor:
         """Per-member −mean log-likelihood − entropy_weight · mean entropy [E]."""
@@ -132,13 +173,24 @@ class BCData:
         return n
 
     def sample(self, batch: int, generators: Sequence[torch.Generator]) -> list[Tensor]:
+        """A batch per member drawn with replacement from everything it has seen."""
         idx = torch.stack(
             [
                 torch.randint(n, (batch,), generator=g)
                 for n, g in zip(self.size, generators, strict=True)
             ]
         )
-        rows = torch.arange(len(generators))[:, None]
+        return self._rows(idx)
+
+    def epoch(self, batch: int, generators: Sequence[torch.Generator]) -> list[list[Tensor]]:
+        """One shuffled pass over each member's data in batches (the last one may be smaller);
+        members hold as many pairs each (one reference of the family's τ per episode)."""
+        n = min(self.size)
+        order = torch.stack([torch.randperm(n, generator=g) for g in generators])
+        return [self._rows(order[:, i : i + batch]) for i in range(0, n, batch)]
+
+    def _rows(self, idx: Tensor) -> list[Tensor]:
+        rows = torch.arange(idx.shape[0])[:, None]
         return [self.state[rows, idx], self.time[rows, idx], self.action[rows, idx]]
 
 
@@ -166,23 +218,32 @@ class BCTrainer:
         self.losses: list[np.ndarray] = []
 
     def train_episode(self) -> np.ndarray:
-        """Draw one reference per member, add its pairs, then update; returns the mean loss [E]."""
+        """Draw one reference per member, add its pairs, then update (each episode, or after the
+        last one with `epochs`); returns the mean loss [E] of the updates made (NaN if none)."""
         first = self.episode == 0
         steps = 0
         for k, (env, seed) in enumerate(zip(self.envs, self.seeds, strict=True)):
             env.reset(seed=seed if first else None)
             steps = max(steps, self.data.add(k, env))
-        updates = self.cfg.updates_per_episode or steps
-        total = torch.zeros(len(self.envs))
-        for _ in range(updates):
-            s, t, a = self.data.sample(self.cfg.batch_size, self.generators)
+        self.episode += 1
+        cfg = self.cfg
+        if cfg.epochs is None:
+            updates = cfg.updates_per_episode or steps
+            batches = (self.data.sample(cfg.batch_size, self.generators) for _ in range(updates))
+        elif self.episode == cfg.episodes:
+            gens, size = self.generators, cfg.batch_size
+            batches = (b for _ in range(cfg.epochs) for b in self.data.epoch(size, gens))
+        else:
+            batches = iter(())
+        total, count = torch.zeros(len(self.envs)), 0
+        for s, t, a in batches:
             loss = self.policy.loss(s, t, a)
             self.opt.zero_grad(set_to_none=True)
             loss.sum().backward()
             self.opt.step()
             total += loss.detach()
-        self.episode += 1
-        mean = (total / max(updates, 1)).numpy()
+            count += 1
+        mean = (total / count).numpy() if count else np.full(len(self.envs), np.nan)
         self.losses.append(mean)
         return mean
 
@@ -322,6 +383,7 @@ def make_ddpg_ti(env: TrajectoryImitationEnv, seed: int, cfg: DDPGTIConfig | Non
         "share_features_extractor": True,
         "net_arch": [cfg.hidden_units] * cfg.hidden_layers,
         "activation_fn": nn.Tanh,
+        "optimizer_kwargs": {"fused": True},  # SB3's Adam, one kernel instead of a Python loop
     }
     model = ddpg_ti_class()(
         "MlpPolicy",

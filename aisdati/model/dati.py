@@ -16,7 +16,8 @@ Per environment step and member (section 4 and appendix A.2):
 4. the forward actor acts from ŝ_t with fresh latent noise, the environment moves it and reveals
    the reference's next point, and the transition is stored.
 Early stopping watches each member's own per-episode mean total loss (patience 10) and keeps the
-forward actor (with its Time2Vec) of the best episode.
+forward actor (with its Time2Vec) of the best episode; `keep="final"` keeps the last episode's
+instead (what the paper's code ends up doing, see `aisdati.model.selftest`).
 
 Choices where the paper is silent (all configurable, see `DATIConfig`): the gradient penalty
 interpolates between real samples and the *current* actor's fakes (Gulrajani et al.); the L1 terms
@@ -67,6 +68,20 @@ class DATIConfig:
     ou_dt: float = 1e-2
     patience: int = 10
     """Early stopping on the episode's total loss; 0 disables it."""
+    keep: str = "best"
+    """Which forward actor a member ends with: "best" (lowest episode metric) or "final"."""
+    adversarial_time2vec: bool = True
+    """Whether the actors' adversarial loss also updates the shared Time2Vec (through the
+    critics' time features). The paper's code freezes it there (critic.trainable = False when
+    compiling the GAN); the critic and L1 losses update it either way."""
+
+    def __post_init__(self) -> None:
+        if self.keep not in ("best", "final"):
+            raise ValueError(f"keep must be 'best' or 'final', got {self.keep!r}")
+
+    @property
+    def noise_process(self) -> NoiseProcess:
+        return NoiseProcess(self.noise, self.ou_dt)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -82,6 +97,14 @@ class DATIConfig:
 
     def with_network(self, **changes: Any) -> DATIConfig:
         return replace(self, network=replace(self.network, **changes))
+
+
+@dataclass(frozen=True)
+class NoiseProcess:
+    """One member's latent noise process: "gaussian" or "ou" with its time step."""
+
+    kind: str = "gaussian"
+    ou_dt: float = 1e-2
 
 
 @dataclass
@@ -102,11 +125,20 @@ class EpisodeLog:
 
 class LatentNoise:
     """Per-member latent noise η_t ([E, 1, latent]), Gaussian or Ornstein-Uhlenbeck, each member
-    drawing from its own generator and reset at the start of its episodes."""
+    drawing from its own generator and reset at the start of its episodes. `processes` gives
+    each member its own process (default: the config's for all)."""
 
-    def __init__(self, cfg: DATIConfig, generators: list[torch.Generator]):
+    def __init__(
+        self,
+        cfg: DATIConfig,
+        generators: list[torch.Generator],
+        processes: Sequence[NoiseProcess] | None = None,
+    ):
         self.cfg = cfg
         self.generators = generators
+        self.processes = list(processes or [cfg.noise_process] * len(generators))
+        if len(self.processes) != len(generators):
+            raise ValueError("give one noise process per member")
         self.state = torch.zeros(len(generators), 1, cfg.network.latent_dim)
 
     def draw(self, k: int) -> Tensor:
@@ -118,18 +150,17 @@ class LatentNoise:
         self.state[k].zero_()
 
     def sample(self) -> Tensor:
-        c = self.cfg
-        for k in range(len(self.generators)):
-            if c.noise == "ou":
-                x = self.state[k]
-                step = self.draw(k) * np.sqrt(c.ou_dt)
-                self.state[k] = x - c.ou_theta * x * c.ou_dt + step
+        for k, process in enumerate(self.processes):
+            if process.kind == "ou":
+                x, dt = self.state[k], process.ou_dt
+                self.state[k] = x - self.cfg.ou_theta * x * dt + self.draw(k) * np.sqrt(dt)
             else:
                 self.state[k] = self.draw(k)
         return self.state.clone()
 
     def keep(self, idx: list[int]) -> None:
         self.generators = [self.generators[i] for i in idx]
+        self.processes = [self.processes[i] for i in idx]
         self.state = self.state[idx]
 
 
@@ -185,11 +216,13 @@ class DATITrainer:
         seeds: Sequence[int],
         config: DATIConfig | None = None,
         validate: Callable[[DATITrainer, int], float] | None = None,
+        noise: Sequence[NoiseProcess] | None = None,
     ):
         """`validate(trainer, k)`, when given, scores live member k at the end of each of its
         episodes (lower is better); the best actor and early stopping then follow that score
         instead of the episode's loss (see `aisdati.model.ais` for the AIS one: the DTW of the
-        actor's rollouts on validation tracks)."""
+        actor's rollouts on validation tracks). `noise` gives each member its own latent noise
+        process (default: the config's)."""
         if len(envs) != len(seeds) or not envs:
             raise ValueError("give one environment per seed, at least one")
         self.cfg = config or DATIConfig()
@@ -204,7 +237,7 @@ class DATITrainer:
         self.active = list(range(len(seeds)))
         self.envs = list(envs)
         self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
-        self.noise = LatentNoise(self.cfg, self.generators)
+        self.noise = LatentNoise(self.cfg, self.generators, noise)
         dims = {
             "state": self.state_dim,
             "action": self.decision_dim,
@@ -297,7 +330,7 @@ class DATITrainer:
 
         for p in nets.critic_parameters():
             p.requires_grad_(False)
-        if nets.time2vec is not None:
+        if nets.time2vec is not None and c.adversarial_time2vec:
             nets.time2vec.requires_grad_(True)
         t = nets.time_features(step)
         gen_a = nets.forward_actor(s, eta, t)
@@ -311,6 +344,8 @@ class DATITrainer:
         adv.sum().backward()
         self.opt_actor.step()
 
+        if nets.time2vec is not None:
+            nets.time2vec.requires_grad_(True)
         t = nets.time_features(step)
         fa = nets.forward_actor(s, eta, t)
         back = nets.backward_actor(a_hat, eta, t)
@@ -365,15 +400,17 @@ class DATITrainer:
         mean_loss = self._episode_loss[k] / steps
         self.episode[member] += 1
         metric = mean_loss if self.validate is None else self.validate(self, k)
-        if metric < self.best_loss[member]:
+        improved = metric < self.best_loss[member]
+        if improved:
             self.best_loss[member] = metric
             self.best_episode[member] = self.episode[member]
             self.wait[member] = 0
-            self._save_best(k)
         else:
             self.wait[member] += 1
         patience_out = 0 < self.cfg.patience <= self.wait[member]
         stopped = patience_out or self.episode[member] >= self.cfg.episodes
+        if (improved and self.cfg.keep == "best") or (stopped and self.cfg.keep == "final"):
+            self._save_best(k)
         log = EpisodeLog(
             member,
             self.seeds[member],
@@ -393,7 +430,7 @@ class DATITrainer:
         return log
 
     def _save_best(self, k: int) -> None:
-        """Copy member k's forward actor and Time2Vec into the final networks."""
+        """Copy member k's forward actor and Time2Vec into the final networks (the kept one)."""
         member = self.active[k]
         live = dict(self.nets.named_parameters())
         with torch.no_grad():
@@ -433,8 +470,8 @@ class DATITrainer:
         return not self.active
 
     def train(self, on_step: Callable[[list[EpisodeLog]], None] | None = None) -> DATINetworks:
-        """Run until every member has stopped; returns the networks holding each member's best
-        forward actor."""
+        """Run until every member has stopped; returns the networks holding each member's kept
+        (best or final) forward actor."""
         while not self.done:
             logs = self.step()
             if on_step is not None:

@@ -102,7 +102,8 @@ class FamilySource(ReferenceSource):
 
     def __init__(self, family: Family) -> None:
         self.family = family
-        self.rule = PlanarRule(dt=family.dt, max_speed=family.max_speed)
+        low, high = family.speed_range
+        self.rule = PlanarRule(dt=family.dt, max_speed=high, min_speed=low)
         self.bounds = family.bounds
         self.max_steps = family.steps
 

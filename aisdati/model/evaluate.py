@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from scipy.stats import trim_mean
 
-from aisdati.model.dati import DATIConfig, LatentNoise
+from aisdati.model.dati import DATIConfig, LatentNoise, NoiseProcess
 from aisdati.model.env import Reference, TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks
 
@@ -70,12 +70,23 @@ def rollout_policy(
     return [[np.asarray(p) for p in row] for row in paths], scores
 
 
-def dati_policy(nets: DATINetworks, config: DATIConfig, refs: int, seed: int = 0) -> Act:
+def dati_policy(
+    nets: DATINetworks,
+    config: DATIConfig,
+    refs: int,
+    seed: int = 0,
+    noise: Sequence[NoiseProcess] | None = None,
+) -> Act:
     """DATI's forward actors as a batched policy; each (member, reference) pair draws its latent
-    noise from its own stream."""
+    noise from its own stream, with the member's process (`noise`, default: the config's)."""
+    processes = list(noise or [config.noise_process] * nets.members)
     noises = [
-        LatentNoise(config, [seed_generator(seed, member_seed, r) for r in range(refs)])
-        for member_seed in nets.seeds
+        LatentNoise(
+            config,
+            [seed_generator(seed, member_seed, r) for r in range(refs)],
+            [process] * refs,
+        )
+        for member_seed, process in zip(nets.seeds, processes, strict=True)
     ]
     state_dim = nets.forward_actor.input_features.weight.shape[1]
 
@@ -95,9 +106,10 @@ def rollout(
     references: Sequence[Sequence[Reference]],
     config: DATIConfig,
     seed: int = 0,
+    noise: Sequence[NoiseProcess] | None = None,
 ) -> Rollouts:
     """Roll out DATI member e on references[e][r] in env_grid[e][r]."""
-    act = dati_policy(nets, config, len(env_grid[0]), seed)
+    act = dati_policy(nets, config, len(env_grid[0]), seed, noise)
     return Rollouts(*rollout_policy(act, env_grid, references))
 
 

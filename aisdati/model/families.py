@@ -53,6 +53,10 @@ class Family:
     wraps: bool = False
     """True when α is an angle that winds around (Ribbons): the boundary members then coincide,
     and the DTW diameter is twice the distance between α_min and the median α."""
+    exact: bool = False
+    """The authors' geometry: the region is the family's exact bounding box and the decoded
+    speed spans exactly [s_min, s_max] of its steps. False (ours): `BOUNDS_MARGIN` on the box
+    and [0, `SPEED_MARGIN` x s_max], so that an agent a little off the family is not stuck."""
     grid_size: int = field(default=21, repr=False)
 
     @property
@@ -88,17 +92,26 @@ class Family:
 
     @cached_property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Low and high corners of the region the agent lives in (the family's box plus margin)."""
+        """Low and high corners of the region the agent lives in (the family's box, plus
+        `BOUNDS_MARGIN` unless `exact`)."""
         pts = self._grid.reshape(-1, 2)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
-        pad = BOUNDS_MARGIN * np.maximum(hi - lo, 1e-9)
+        pad = 0.0 if self.exact else BOUNDS_MARGIN * np.maximum(hi - lo, 1e-9)
         return lo - pad, hi + pad
 
     @cached_property
-    def max_speed(self) -> float:
-        """Upper end of the decoded speed range: the fastest step of the family, with headroom."""
+    def speed_range(self) -> tuple[float, float]:
+        """The decoded speed range: [s_min, s_max] of the family's steps when `exact`, else
+        [0, s_max] with headroom."""
         steps = np.linalg.norm(np.diff(self._grid, axis=1), axis=2) / self.dt
-        return float(steps.max() * SPEED_MARGIN)
+        if self.exact:
+            lo, hi = float(steps.min()), float(steps.max())
+            return lo, max(hi, lo + 1e-9)  # a constant-speed family still has a range
+        return 0.0, float(steps.max() * SPEED_MARGIN)
+
+    @property
+    def max_speed(self) -> float:
+        return self.speed_range[1]
 
     @cached_property
     def diameter(self) -> float:

@@ -61,12 +61,13 @@ class PlanarRule(UpdateRule):
 
     dt: float
     max_speed: float
+    min_speed: float = 0.0
     metric: str = "euclidean"
     decision_names: tuple[str, ...] = ("speed", "heading")
 
     @property
     def decision_scaler(self) -> BoxScaler:
-        return BoxScaler(np.array([0.0, -np.pi]), np.array([self.max_speed, np.pi]))
+        return BoxScaler(np.array([self.min_speed, -np.pi]), np.array([self.max_speed, np.pi]))
 
     def step(self, state: np.ndarray, decision: np.ndarray) -> np.ndarray:
         u, xi = decision[..., 0], decision[..., 1]

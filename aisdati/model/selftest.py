@@ -2,13 +2,25 @@
 
 Every (method, family, seed) triple is one member. The members are shared out over `workers`
 processes (one per core); inside a process the DATI members of one variant train as one batched
-ensemble (with early stopping), the BC members as one ensemble, and the DDPG-TI members one SB3
-model after another. Then each member's policy is rolled out from the first point of the same
-unseen references of its family. The paper's metric is the lowest normalised smoothed DTW over
-seeds x references (Table 2 adds the second lowest).
+ensemble, the BC members of one variant as one ensemble, and the DDPG-TI members one SB3 model
+after another. Then each member's policy is rolled out from the first point of unseen references
+of its family. The paper's metric is the lowest normalised smoothed DTW over seeds x references
+(Table 2 adds the second lowest). `repeats` runs the whole protocol again on further blocks of
+seeds, so that the metric's own spread over repeats can be read beside it.
 
-Methods: `dati`, `bc`, `ddpg-ti` (Table 1) and the ablated DATI variants
+Methods: `dati`, `bc`, `bc-paper`, `ddpg-ti` (Table 1) and the ablated DATI variants
 `dati-no-time-embedding`, `dati-no-reward-input` (Table 2, with `dati`: `ABLATION`).
+
+Presets (`SELFTEST_PRESETS`) name the set-up choices that the paper leaves to its code:
+- `ours`: early stopping (patience 10) keeping the lowest-loss actor; the shared Time2Vec also
+  learns from the actors' adversarial loss; Gaussian latent noise; the region is the family's box
+  plus 10 % and speeds decode in [0, 1.25 x s_max]; every seed is scored on the same references.
+- `paper`: the authors' code (DLR-MI/dati) as far as it can be read: 100 episodes and the final
+  actor (its running-sum early stopping never fires once the losses turn negative); Time2Vec
+  frozen under the actors' adversarial loss (critic.trainable = False when the GAN is compiled);
+  Ornstein-Uhlenbeck noise at the family's own dt for FixedStart, UShaped and Circles and Gaussian
+  for Ribbons (its results script takes Ribbons from the Gaussian run); the exact bounding box
+  and speeds in [s_min, s_max]; each seed scored on its own references (100 distinct ones).
 """
 
 from __future__ import annotations
@@ -21,13 +33,16 @@ from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from queue import Empty
+from typing import Any
 
 import numpy as np
 import pandas as pd
 import torch
 
 from aisdati import __version__
+from aisdati.errors import UserError
 from aisdati.model.baselines import (
+    BC_PAPER,
     BCConfig,
     BCTrainer,
     DDPGTIConfig,
@@ -36,7 +51,7 @@ from aisdati.model.baselines import (
     train_ddpg_ti,
 )
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.model.dati import DATIConfig, DATITrainer
+from aisdati.model.dati import DATIConfig, DATITrainer, NoiseProcess
 from aisdati.model.env import FamilySource, Reference, TrajectoryImitationEnv
 from aisdati.model.evaluate import Summary, rollout, rollout_policy, summarize
 from aisdati.model.families import PAPER_DATI, Family, get_family
@@ -48,18 +63,20 @@ PAPER_FAMILIES = ("fixedstart", "ushaped", "circles", "ribbons")
 METHODS = {
     "dati": "DATI",
     "bc": "BC",
+    "bc-paper": "BC (paper's: no time input)",
     "ddpg-ti": "DDPG-TI",
     "dati-no-time-embedding": "DATI, no time embedding",
     "dati-no-reward-input": "DATI, no reward input",
 }
 """Method names accepted by `--methods`, with their display labels."""
 
-TABLE1 = ("dati", "bc", "ddpg-ti")
+TABLE1 = ("dati", "bc", "bc-paper", "ddpg-ti")
 ABLATION = ("dati", "dati-no-time-embedding", "dati-no-reward-input")
 
 PAPER_TABLE1 = {
     "dati": PAPER_DATI,
     "bc": {"fixedstart": 0.124, "ushaped": 0.365, "circles": 0.106, "ribbons": 0.113},
+    "bc-paper": {"fixedstart": 0.124, "ushaped": 0.365, "circles": 0.106, "ribbons": 0.113},
     "ddpg-ti": {"fixedstart": 0.489, "ushaped": 2.138, "circles": 0.972, "ribbons": 0.172},
 }
 """Table 1 of the paper: best normalised smoothed DTW over 10 seeds x 10 references."""
@@ -86,9 +103,56 @@ def paper_numbers(method: str, family: str) -> tuple[float | None, float | None]
     return top1, (top2[1] if top2 else None)
 
 
+NOISES = ("gaussian", "ou", "family")
+"""Latent noise of the self-test's DATI: Gaussian, OU at `DATIConfig.ou_dt` for every family, or
+"family": the authors' choice per family (`PAPER_NOISE`)."""
+
+PAPER_NOISE = {"ribbons": "gaussian"}
+"""The authors' latent noise per family where it is not OU at the family's dt."""
+
+
+@dataclass(frozen=True)
+class SelftestPreset:
+    """The set-up choices that the paper leaves to its code (see the module docstring)."""
+
+    keep: str = "best"
+    """The actor a DATI seed ends with: "best" (lowest episode loss) or "final"."""
+    patience: int = 10
+    adversarial_time2vec: bool = True
+    noise: str = "gaussian"
+    exact_region: bool = False
+    """The family's exact box and [s_min, s_max] speeds (`Family.exact`)."""
+    distinct_references: bool = False
+    """Each seed scored on references of its own instead of the family's shared ones."""
+
+
+SELFTEST_PRESETS = {
+    "ours": SelftestPreset(),
+    "paper": SelftestPreset(
+        keep="final",
+        patience=0,
+        adversarial_time2vec=False,
+        noise="family",
+        exact_region=True,
+        distinct_references=True,
+    ),
+}
+"""`aisdati selftest --preset`; the first is the default."""
+
+
+def get_preset(name: str) -> SelftestPreset:
+    try:
+        return SELFTEST_PRESETS[name]
+    except KeyError:
+        raise UserError(
+            f"unknown self-test preset {name!r}; choose from {', '.join(SELFTEST_PRESETS)}"
+        ) from None
+
+
 @dataclass(frozen=True)
 class SelftestSettings:
-    """The protocol; defaults are the paper's (10 seeds, 10 unseen references, τ = 200)."""
+    """The protocol; defaults are the paper's (10 seeds, 10 unseen references, τ = 200) under
+    the `ours` preset; `preset_settings` builds them for any preset."""
 
     families: tuple[str, ...] = PAPER_FAMILIES
     seeds: int = 10
@@ -100,7 +164,16 @@ class SelftestSettings:
     config: DATIConfig = field(default_factory=DATIConfig)
     methods: tuple[str, ...] = ("dati",)
     bc: BCConfig = field(default_factory=BCConfig)
+    bc_paper: BCConfig = BC_PAPER
     ddpg: DDPGTIConfig = field(default_factory=DDPGTIConfig)
+    preset: str = "ours"
+    noise: str = "gaussian"
+    """One of `NOISES`: DATI's latent noise per family (`noise_process`); `config.noise` only
+    mirrors it."""
+    exact_region: bool = False
+    distinct_references: bool = False
+    repeats: int = 1
+    """Runs of the whole protocol, repeat r on seeds r·seeds .. (r+1)·seeds − 1."""
 
     def dati_config(self, method: str) -> DATIConfig:
         """DATI's configuration for a DATI method name (the ablations switch one input off)."""
@@ -109,6 +182,45 @@ class SelftestSettings:
         if method == "dati-no-reward-input":
             return self.config.with_network(reward_input=False)
         return self.config
+
+    def noise_process(self, fam: Family) -> NoiseProcess:
+        """DATI's latent noise process for a family."""
+        if self.noise == "family":
+            kind = PAPER_NOISE.get(fam.name, "ou")
+            return NoiseProcess(kind, fam.dt)
+        return NoiseProcess(self.noise, self.config.ou_dt)
+
+
+def preset_settings(
+    preset: str = "ours", episodes: int = 100, noise: str | None = None, **fields: Any
+) -> SelftestSettings:
+    """The settings of a named preset with every method's episode budget; `noise` overrides the
+    preset's, `fields` set the rest of `SelftestSettings` (a `config` given there is kept)."""
+    p = get_preset(preset)
+    noise = noise or p.noise
+    if noise not in NOISES:
+        raise UserError(f"--noise must be one of {', '.join(NOISES)}, got {noise!r}")
+    config = fields.pop(
+        "config",
+        DATIConfig(
+            episodes=episodes,
+            patience=p.patience,
+            keep=p.keep,
+            adversarial_time2vec=p.adversarial_time2vec,
+            noise="ou" if noise == "family" else noise,  # the family's dt: `noise_process`
+        ),
+    )
+    return SelftestSettings(
+        config=config,
+        bc=replace(BCConfig(), episodes=episodes),
+        bc_paper=replace(BC_PAPER, episodes=episodes),
+        ddpg=replace(DDPGTIConfig(), episodes=episodes),
+        preset=preset,
+        noise=noise,
+        exact_region=p.exact_region,
+        distinct_references=p.distinct_references,
+        **fields,
+    )
 
 
 QUICK = {"seeds": 2, "references": 3, "steps": 40, "episodes": 3}
@@ -124,6 +236,7 @@ class MemberResult:
     alphas: np.ndarray
     paths: list[np.ndarray]
     method: str = "dati"
+    repeat: int = 0
 
 
 @dataclass
@@ -138,6 +251,9 @@ class FamilyResult:
     method: str = "dati"
     second_best: float = float("nan")
     paper_second: float | None = None
+    repeat_best: list[float] = field(default_factory=list)
+    """The paper's metric of each repeat (its `best` is their mean)."""
+    repeat_second: list[float] = field(default_factory=list)
 
 
 @dataclass
@@ -147,14 +263,28 @@ class SelftestResult:
     wall_seconds: float
 
 
-def family_for(name: str, steps: int | None) -> Family:
+def family_for(name: str, steps: int | None, exact: bool = False) -> Family:
+    """A registered family with τ = `steps` (None: its own) and, if `exact`, the exact region."""
     fam = get_family(name)
-    return fam if steps is None or steps == fam.steps else replace(fam, steps=steps)
+    changes: dict[str, Any] = {}
+    if steps is not None and steps != fam.steps:
+        changes["steps"] = steps
+    if exact != fam.exact:
+        changes["exact"] = exact
+    return replace(fam, **changes) if changes else fam
 
 
-def evaluation_references(fam: Family, count: int, seed: int) -> list[Reference]:
-    """The unseen test references of a family: α drawn from an evaluation-only stream."""
-    rng = np.random.default_rng([seed, sum(map(ord, fam.name))])
+def settings_family(settings: SelftestSettings, name: str) -> Family:
+    return family_for(name, settings.steps, settings.exact_region)
+
+
+def evaluation_references(
+    fam: Family, count: int, seed: int, member: int | None = None
+) -> list[Reference]:
+    """The unseen test references of a family: α drawn from an evaluation-only stream, the
+    family's shared one or, given a member seed, that seed's own."""
+    key = [seed, sum(map(ord, fam.name)), *([] if member is None else [member])]
+    rng = np.random.default_rng(key)
     source = FamilySource(fam)
     return [source.reference(fam.sample_alpha(rng)) for _ in range(count)]
 
@@ -168,26 +298,33 @@ def _run_members(
     settings: SelftestSettings,
     report: Callable[[int, int, bool], None],
 ) -> list[MemberResult]:
-    """Train and evaluate a group of members: one ensemble per DATI variant, one BC ensemble,
+    """Train and evaluate a group of members: one ensemble per DATI variant, one per BC variant,
     one SB3 model per DDPG-TI member."""
     torch.set_num_threads(1)
     results: list[MemberResult] = []
     for method in dict.fromkeys(m for _, m, _, _ in members):
         group = [(i, name, seed) for i, m, name, seed in members if m == method]
-        run = {"bc": _run_bc, "ddpg-ti": _run_ddpg_ti}.get(method, _run_dati)
+        run = {"bc": _run_bc, "bc-paper": _run_bc, "ddpg-ti": _run_ddpg_ti}.get(method, _run_dati)
         out = run(method, group, settings, report)
         for r in out:
             r.method = method
+            r.repeat = r.seed // settings.seeds
         results.extend(out)
     return results
 
 
 def _grid(group, settings, fams):
-    """The unseen references of each member's family and one evaluation env per reference."""
-    refs = {
+    """Each member's unseen references and one evaluation env per reference."""
+    shared = {
         n: evaluation_references(f, settings.references, settings.eval_seed)
         for n, f in fams.items()
     }
+    refs = [
+        evaluation_references(fams[name], settings.references, settings.eval_seed, seed)
+        if settings.distinct_references
+        else shared[name]
+        for _, name, seed in group
+    ]
     grid = [
         [TrajectoryImitationEnv(FamilySource(fams[name])) for _ in range(settings.references)]
         for _, name, _ in group
@@ -202,18 +339,23 @@ def _results(group, refs, episodes, scores, paths) -> list[MemberResult]:
             seed,
             episodes[k],
             scores[k],
-            np.array([r.label["alpha"] for r in refs[name]]),
+            np.array([r.label["alpha"] for r in refs[k]]),
             paths[k],
         )
         for k, (_, name, seed) in enumerate(group)
     ]
 
 
+def _families(group, settings) -> dict[str, Family]:
+    return {name: settings_family(settings, name) for _, name, _ in group}
+
+
 def _run_dati(method, group, settings, report) -> list[MemberResult]:
     config = settings.dati_config(method)
-    fams = {name: family_for(name, settings.steps) for _, name, _ in group}
+    fams = _families(group, settings)
     envs = [TrajectoryImitationEnv(FamilySource(fams[name])) for _, name, _ in group]
-    trainer = DATITrainer(envs, [seed for _, _, seed in group], config)
+    noise = [settings.noise_process(fams[name]) for _, name, _ in group]
+    trainer = DATITrainer(envs, [seed for _, _, seed in group], config, noise=noise)
 
     def on_step(logs: list) -> None:
         for log in logs:
@@ -221,13 +363,13 @@ def _run_dati(method, group, settings, report) -> list[MemberResult]:
 
     nets = trainer.train(on_step)
     refs, grid = _grid(group, settings, fams)
-    out = rollout(nets, grid, [refs[name] for _, name, _ in group], config, seed=settings.eval_seed)
+    out = rollout(nets, grid, refs, config, seed=settings.eval_seed, noise=noise)
     return _results(group, refs, trainer.episode, out.scores, out.paths)
 
 
 def _run_bc(method, group, settings, report) -> list[MemberResult]:
-    cfg = settings.bc
-    fams = {name: family_for(name, settings.steps) for _, name, _ in group}
+    cfg = settings.bc_paper if method == "bc-paper" else settings.bc
+    fams = _families(group, settings)
     envs = [TrajectoryImitationEnv(FamilySource(fams[name])) for _, name, _ in group]
     trainer = BCTrainer(envs, [seed for _, _, seed in group], cfg)
 
@@ -238,21 +380,21 @@ def _run_bc(method, group, settings, report) -> list[MemberResult]:
     policy = trainer.train(on_episode)
     refs, grid = _grid(group, settings, fams)
     act = bc_act(policy, settings.references, settings.eval_seed)
-    paths, scores = rollout_policy(act, grid, [refs[name] for _, name, _ in group])
+    paths, scores = rollout_policy(act, grid, refs)
     return _results(group, refs, [trainer.episode] * len(group), scores, paths)
 
 
 def _run_ddpg_ti(method, group, settings, report) -> list[MemberResult]:
     cfg = settings.ddpg
-    fams = {name: family_for(name, settings.steps) for _, name, _ in group}
+    fams = _families(group, settings)
     refs, grid = _grid(group, settings, fams)
     results = []
     for k, (i, name, seed) in enumerate(group):
         env = TrajectoryImitationEnv(FamilySource(fams[name]))
         model = train_ddpg_ti(env, seed, cfg, lambda ep, i=i: report(i, ep, ep >= cfg.episodes))
         act = ddpg_ti_act([model], [seed], settings.references, cfg, settings.eval_seed)
-        paths, scores = rollout_policy(act, [grid[k]], [refs[name]])
-        results += _results([(i, name, seed)], refs, [cfg.episodes], scores, paths)
+        paths, scores = rollout_policy(act, [grid[k]], [refs[k]])
+        results += _results([(i, name, seed)], [refs[k]], [cfg.episodes], scores, paths)
     return results
 
 
@@ -272,6 +414,7 @@ def run_selftest(
     """Run the protocol; `report(member_index, episode, stopped)` follows training progress."""
     report = report or (lambda i, ep, stop: None)
     parse_methods(list(settings.methods))  # unknown names fail before any work starts
+    get_preset(settings.preset)
     for name in settings.families:
         get_family(name)
     members = [
@@ -280,7 +423,7 @@ def run_selftest(
             (method, name, seed)
             for method in settings.methods
             for name in settings.families
-            for seed in range(settings.seeds)
+            for seed in range(settings.seeds * settings.repeats)
         )
     ]
     start = time.perf_counter()
@@ -325,12 +468,18 @@ def _run_in_processes(members, settings, workers, report) -> list[MemberResult]:
     return results
 
 
+def _lowest_two(scores: np.ndarray) -> tuple[float, float]:
+    finite = np.sort(scores[np.isfinite(scores)])
+    return float(finite[0]), float(finite[1]) if len(finite) > 1 else float("nan")
+
+
 def _aggregate(settings: SelftestSettings, results: list[MemberResult]) -> list[FamilyResult]:
-    """One result per (method, family), methods in the order asked, then families."""
+    """One result per (method, family), methods in the order asked, then families: the paper's
+    metrics per repeat (and their mean), robust statistics over every repeat's scores."""
     out = []
     for method in settings.methods:
         for name in settings.families:
-            fam = family_for(name, settings.steps)
+            fam = settings_family(settings, name)
             mine = sorted(
                 (r for r in results if r.family == name and r.method == method),
                 key=lambda r: r.seed,
@@ -338,7 +487,10 @@ def _aggregate(settings: SelftestSettings, results: list[MemberResult]) -> list[
             scores = np.stack([r.scores for r in mine])
             k, j = np.unravel_index(np.nanargmin(scores), scores.shape)
             best_ref = fam.reference(float(mine[k].alphas[j]))
-            finite = np.sort(scores[np.isfinite(scores)])
+            per_repeat = [
+                _lowest_two(np.stack([r.scores for r in mine if r.repeat == rep]))
+                for rep in range(settings.repeats)
+            ]
             top1, top2 = paper_numbers(method, name)
             out.append(
                 FamilyResult(
@@ -350,21 +502,31 @@ def _aggregate(settings: SelftestSettings, results: list[MemberResult]) -> list[
                     mine[k].paths[j],
                     mine,
                     method,
-                    float(finite[1]) if len(finite) > 1 else float("nan"),
+                    float(np.mean([b for _, b in per_repeat])),
                     top2,
+                    [b for b, _ in per_repeat],
+                    [b for _, b in per_repeat],
                 )
             )
     return out
 
 
+def _sd(values: list[float]) -> float:
+    return float(np.std(values, ddof=1)) if len(values) > 1 else float("nan")
+
+
 def result_rows(result: SelftestResult) -> list[dict]:
-    """One row per family: the paper's metric, robust statistics and the paper's number."""
+    """One row per (method, family): the paper's metric (per repeat, and its mean and standard
+    deviation over repeats), robust statistics over all scores and the paper's number."""
     return [
         {
             "method": f.method,
             "family": f.family,
-            "best": f.summary.best,
+            "best": float(np.mean(f.repeat_best)),
+            "best_sd": _sd(f.repeat_best),
+            "best_per_repeat": f.repeat_best,
             "second_best": f.second_best,
+            "second_best_sd": _sd(f.repeat_second),
             "median": f.summary.median,
             "iqm": f.summary.iqm,
             "iqm_ci_low": f.summary.iqm_low,
@@ -372,6 +534,7 @@ def result_rows(result: SelftestResult) -> list[dict]:
             "paper_best": f.paper,
             "paper_second_best": f.paper_second,
             "n_scores": f.summary.n,
+            "repeats": len(f.repeat_best),
             "mean_episodes": f.mean_episodes,
         }
         for f in result.families
@@ -389,6 +552,7 @@ def write_outputs(result: SelftestResult, out_dir: Path) -> list[Path]:
                 "family": m.family,
                 "seed": m.seed,
                 "reference": j,
+                "repeat": m.repeat,
                 "alpha": m.alphas[j],
                 "score": m.scores[j],
                 "episodes": m.episodes,
@@ -407,15 +571,19 @@ def write_outputs(result: SelftestResult, out_dir: Path) -> list[Path]:
             **asdict(s),
             "config": s.config.to_dict(),
             "bc": s.bc.to_dict(),
+            "bc_paper": s.bc_paper.to_dict(),
             "ddpg": s.ddpg.to_dict(),
         },
         "results": rows,
     }
     written = [out_dir / "results.csv", out_dir / "results.json", out_dir / "scores.csv"]
-    atomic_write_bytes(written[0], pd.DataFrame(rows).to_csv(index=False).encode())
+    flat = [
+        {**r, "best_per_repeat": " ".join(f"{b:.6g}" for b in r["best_per_repeat"])} for r in rows
+    ]
+    atomic_write_bytes(written[0], pd.DataFrame(flat).to_csv(index=False).encode())
     atomic_write_bytes(written[1], json.dumps(doc, indent=2, default=float).encode())
     atomic_write_bytes(written[2], scores.to_csv(index=False).encode())
-    fams = [family_for(name, s.steps) for name in dict.fromkeys(f.family for f in result.families)]
+    fams = [settings_family(s, name) for name in dict.fromkeys(f.family for f in result.families)]
     plot_families(fams, out_dir / "families.png")
     plot_best_rollouts(rollout_panels(result), out_dir / "rollouts.png")
     return [*written, out_dir / "families.png", out_dir / "rollouts.png"]
@@ -424,8 +592,8 @@ def write_outputs(result: SelftestResult, out_dir: Path) -> list[Path]:
 def rollout_panels(result: SelftestResult) -> list[tuple]:
     """Per family, one panel of the paper's Fig. 2. With one method: its best rollout and the
     reference it was best on. With several: the reference on which the first method did best,
-    and every method's best rollout (over seeds) on that same reference, with its score there
-    (all methods are evaluated on the same references)."""
+    and every method's best rollout on that same reference (over the seeds scored on it: all of
+    them with shared references, the same seed with distinct ones), with its score there."""
     panels = []
     by_family: dict[str, list[FamilyResult]] = {}
     for f in result.families:
@@ -444,15 +612,20 @@ def rollout_panels(result: SelftestResult) -> list[tuple]:
             )
             continue
         scores = np.stack([m.scores for m in first.members])
-        j = int(np.unravel_index(np.nanargmin(scores), scores.shape)[1])
-        reference = family_for(name, result.settings.steps).reference(
-            float(first.members[0].alphas[j])
-        )
+        k, j = np.unravel_index(np.nanargmin(scores), scores.shape)
+        alpha = float(first.members[k].alphas[j])
+        reference = settings_family(result.settings, name).reference(alpha)
         rollouts, values = {}, {}
         for f in entries:
-            col = np.array([m.scores[j] for m in f.members])
-            k = int(np.nanargmin(col))
+            on_it = [
+                (float(m.scores[i]), m.paths[i])
+                for m in f.members
+                for i in np.flatnonzero(m.alphas == alpha)
+                if np.isfinite(m.scores[i])
+            ]
+            if not on_it:
+                continue
             label = METHODS.get(f.method, f.method)
-            rollouts[label], values[label] = f.members[k].paths[j], float(col[k])
+            values[label], rollouts[label] = min(on_it, key=lambda v: v[0])
         panels.append((name, reference, rollouts, values))
     return panels
