@@ -808,14 +808,9 @@ def _train_routes(
     from aisdati.detectors.train import train_routes
     from aisdati.model.ais import TrainSettings
     from aisdati.progress import EpisodeProgress
-    from aisdati.trackdata import MIN_ROUTE_TRACKS, read_track_table, routes_with
+    from aisdati.trackdata import routes_with
 
-    routes = routes_with(read_track_table(data))
-    if not routes:
-        raise UserError(
-            f"no route in {data} has {MIN_ROUTE_TRACKS} tracks or more: ingest with "
-            "--clusters routes (the default), or train one cluster"
-        )
+    routes = routes_with(data, "train")
     prepare_output_dir(out, "--out")
     settings = [
         TrainSettings(

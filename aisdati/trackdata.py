@@ -139,13 +139,21 @@ def select_cluster(
     return chosen
 
 
-def routes_with(table: pd.DataFrame, needed: int = MIN_ROUTE_TRACKS) -> list[str]:
-    """The routes of a track table with at least `needed` tracks, in route order."""
-    if "route" not in table.columns:
-        return []
-    counts = table["route"].dropna().value_counts()
-    chosen = [str(r) for r, n in counts.items() if n >= needed]
-    return sorted(chosen, key=lambda r: int(r.split("-")[1]))
+def routes_with(data_dir: Path, command: str, needed: int = MIN_ROUTE_TRACKS) -> list[str]:
+    """The routes of an ingest output with at least `needed` tracks, in route order; none is a
+    one-line `UserError` that says how to get some (`command`: what else the user can run on
+    one cluster, "train" or "evaluate")."""
+    table = read_track_table(data_dir)
+    counts = table["route"].dropna().value_counts() if "route" in table.columns else {}
+    chosen = sorted(
+        (str(r) for r, n in counts.items() if n >= needed), key=lambda r: int(r.split("-")[1])
+    )
+    if not chosen:
+        raise UserError(
+            f"no route in {data_dir} has {needed} tracks or more: ingest with --clusters "
+            f"routes (the default), or {command} one cluster"
+        )
+    return chosen
 
 
 def require_tracks(table: pd.DataFrame, name: str, needed: int) -> None:

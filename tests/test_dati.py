@@ -22,15 +22,6 @@ from aisdati.model.selftest import evaluation_references
 SMALL = DATIConfig(episodes=2, batch_size=16, patience=0)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Two cores, possibly shared with a training job: keep torch to one thread."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def tiny_family(steps: int = 12):
     return replace(get_family("circles"), steps=steps)
 

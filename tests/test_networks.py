@@ -16,15 +16,6 @@ E, B = 3, 5
 STATE, DECISION = 2, 3  # different on purpose, so that a swapped dimension fails
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Two cores, possibly shared with a training job: keep torch to one thread."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def _inputs(cfg: NetworkConfig, members: int = E, batch: int = B, seed: int = 0):
     g = torch.Generator().manual_seed(seed)
     x = torch.rand(members, batch, STATE, generator=g)

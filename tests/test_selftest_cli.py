@@ -7,19 +7,9 @@ import math
 
 import pandas as pd
 import pytest
-import torch
 
 TINY = ("--seeds", "2", "--episodes", "2", "--steps", "20", "--references", "2")
 FILES = ("results.csv", "results.json", "scores.csv", "families.png", "rollouts.png")
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Two cores, possibly shared with a training job: keep torch to one thread."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def selftest(cli, out, *args):

@@ -26,15 +26,6 @@ from aisdati.model.selftest import (
 )
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Two cores, possibly shared with a training job: keep torch to one thread."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def tiny_env(name: str = "circles", steps: int = 12, exact: bool = False):
     return TrajectoryImitationEnv(FamilySource(family_for(name, steps, exact)))
 

@@ -31,13 +31,7 @@ from aisdati.evaluate import dataset
 from aisdati.evaluate.metrics import flagging, ranking
 from aisdati.model.ais import TrainSettings
 from aisdati.model.ais_space import PRESETS, LaneConfig
-from aisdati.trackdata import (
-    MIN_ROUTE_TRACKS,
-    load_tracks,
-    read_track_table,
-    routes_with,
-    select_cluster,
-)
+from aisdati.trackdata import load_tracks, read_track_table, routes_with, select_cluster
 
 POSITION_KINDS = ("detour", "jump", "loiter")
 """The summary row the README's targets use: anomalies a position-only score can see."""
@@ -276,12 +270,7 @@ def evaluate_routes(
     train = train_detector or plain_train
     train_all = train_routes or plain_routes
     say = on_stage or (lambda _: None)
-    routes = routes_with(read_track_table(settings.data_dir))
-    if not routes:
-        raise UserError(
-            f"no route in {settings.data_dir} has {MIN_ROUTE_TRACKS} tracks or more: ingest "
-            "with --clusters routes (the default), or evaluate one cluster"
-        )
+    routes = routes_with(settings.data_dir, "evaluate")
     prepared: list[_Prepared] = []
     skipped: dict[str, str] = {}
     say(f"splitting and injecting {len(routes)} routes")
