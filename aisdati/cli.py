@@ -890,10 +890,11 @@ def detect(
         "dati", "--method", help="Use the models of this detector: dati, bc or nearest."
     ),
     score: str = typer.Option(
-        "step",
+        "lane",
         "--score",
-        help="How a policy judges a track: step (teacher-forced one-step errors), rollout "
-        "(free rollouts, the paper's) or both.",
+        help="How a policy judges a track: lane (distance to where its K free rollouts go; "
+        "for nearest: to where the training tracks go), step (teacher-forced one-step "
+        "errors), rollout (the best free rollout's DTW, the paper's) or both (rollout + step).",
     ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(

@@ -1,9 +1,10 @@
 """Detection of abnormal tracks (section 6.2 of the paper): scores -> flags -> outputs.
 
 Each test track goes to the model whose training tracks start nearest to where it starts, and is
-scored by that model's detector (`aisdati.detectors`): by default DATI, judged either by its free
-rollouts from the track's first point (`--score rollout`, the paper's), by its teacher-forced
-one-step predictions along the track (`--score step`) or by both. Every score is in metres and
+scored by that model's detector (`aisdati.detectors`): by default DATI, judged by the lane its K
+free rollouts from the track's first point cover (`--score lane`, the default), by its best
+rollout (`--score rollout`, the paper's), by its teacher-forced one-step predictions along the
+track (`--score step`) or by rollout and step together (`--score both`). Every score is in metres and
 higher means more abnormal. Flags: scores divided by their maximum over the test set above
 `threshold` (the paper's Λ = 0.75), or the `top_percent` highest, or scores above the model's
 calibrated threshold (`contamination`: the share of its own training tracks it would flag),
@@ -70,7 +71,7 @@ class DetectSettings:
     """Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all."""
     track_ids: tuple[int, ...] = ()
     """Explicit test tracks (overrides the cluster and the start rule)."""
-    score: str = "step"
+    score: str = "lane"
     rollouts: int = 10
     threshold: float = 0.75
     top_percent: float | None = None
@@ -103,6 +104,8 @@ class Detection:
 SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
+    "lane": "mean of the largest 10% of each report's distance to the nearest point of the K "
+    "free rollouts (nearest: of the training tracks starting within near_km) (m)",
     "both": "rollout / median training rollout score + step / median training step score",
     "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
     "track starting within near_km",
@@ -112,6 +115,7 @@ SCORE_DEFINITIONS = {
 EVIDENCE = {
     "rollout": "best rollout",
     "both": "best rollout",
+    "lane": "best rollout",
     "step": "one-step predictions",
     "nearest": "nearest training track",
 }
@@ -415,7 +419,9 @@ def evidence_figures(
 
     s = result.settings
     label = "one-step prediction error (m)" if s and s.score == "step" else "deviation (m)"
-    if s and s.method == "nearest":
+    if s and s.score == "lane":
+        label = "distance to the lane (m)"
+    elif s and s.method == "nearest":
         label = "distance to the nearest training track (m)"
     rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
     index = {t.track_id: i for i, t in enumerate(result.tracks)}
@@ -503,7 +509,9 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,
-        "score_definition": SCORE_DEFINITIONS[s.method if s.method == "nearest" else s.score]
+        "score_definition": SCORE_DEFINITIONS[
+            s.score if s.score == "lane" or s.method != "nearest" else "nearest"
+        ]
         if s
         else None,
     }

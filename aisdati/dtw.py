@@ -25,7 +25,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from aisdati.geo import EARTH_RADIUS_M
+from aisdati.geo import EARTH_RADIUS_M, unit_vectors
 
 _METRICS = {"euclidean": 0, "haversine": 1}
 _EUCLIDEAN = 0
@@ -363,15 +363,6 @@ class IncrementalDTW:
 
 
 # ------------------------------------------------------------------ batched great-circle DTW
-def unit_vectors(lonlat: np.ndarray) -> np.ndarray:
-    """(lon, lat) degrees [..., 2] -> unit vectors [..., 3]: the batched kernels below measure
-    great-circle distance as 2R asin(chord / 2), which equals the haversine formula."""
-    lon, lat = np.radians(lonlat[..., 0]), np.radians(lonlat[..., 1])
-    return np.ascontiguousarray(
-        np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
-    )
-
-
 @njit(cache=True)
 def _chord_m(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:
     dx = a[i, 0] - b[j, 0]

@@ -62,3 +62,26 @@ def spherical_decision(lon, lat, next_lon, next_lat, dt_h):
     with np.errstate(divide="ignore", invalid="ignore"):
         sog = np.where(np.asarray(dt_h) > 0, dist_deg * NM_PER_DEGREE / np.asarray(dt_h), 0.0)
     return sog, cog
+
+
+def unit_vectors(lonlat: np.ndarray) -> np.ndarray:
+    """(lon, lat) degrees [..., 2] -> unit vectors [..., 3]: the batched kernels (here and in
+    `aisdati.dtw`) measure great-circle distance as 2R asin(chord / 2), which equals the
+    haversine formula."""
+    lon, lat = np.radians(lonlat[..., 0]), np.radians(lonlat[..., 1])
+    return np.ascontiguousarray(
+        np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+    )
+
+
+def lane_distances(track: np.ndarray, lane: np.ndarray) -> np.ndarray:
+    """For each point of `track` (lon, lat), the great-circle distance (m) to the nearest point
+    of `lane` [m, 2], a cloud of points in no order (several rollouts or training tracks
+    stacked): how far the track is from anywhere that traffic goes, whatever the timing. A
+    k-d tree on unit vectors finds the nearest chord, which orders points as the arc does."""
+    from scipy.spatial import cKDTree
+
+    chord, _ = cKDTree(unit_vectors(np.asarray(lane, np.float64))).query(
+        unit_vectors(np.asarray(track, np.float64))
+    )
+    return 2 * EARTH_RADIUS_M * np.arcsin(np.minimum(chord / 2, 1.0))

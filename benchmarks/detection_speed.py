@@ -21,10 +21,10 @@ import time
 import numpy as np
 import torch
 
-from aisdati.detectors.base import ScoreSettings
+from aisdati.detectors.base import ScoreSettings, tail_mean
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.model.ais import build_source
-from aisdati.model.ais_policy import AISPolicy, dati_act, tail_mean
+from aisdati.model.ais_policy import AISPolicy, dati_act
 from aisdati.model.ais_space import LaneConfig
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks

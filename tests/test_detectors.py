@@ -207,6 +207,13 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     assert (tmp_path / "other.corridor.npz").is_file()
     det = load_detector(tmp_path / "other")
     assert det.policy().space.config == lane and det.corridor is not None
+    # the lane of K rollouts is never farther from a report than the best rollout's match
+    assert len(card["calibration"]["lane"]) == len(ids)
+    few = load_tracks(kitimat, list(ids[:2]))
+    lane_s = det.score(few, ScoreSettings(score="lane", rollouts=3))
+    best_s = det.score(few, ScoreSettings(score="rollout", rollouts=3))
+    for a, b in zip(lane_s.profiles, best_s.profiles, strict=True):
+        assert np.all(a <= b + 1e-6)
     # a card from before lane configurations and calibration: the paper's set-up, step score
     old = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
     (tmp_path / "old.json").write_text(json.dumps(old))
@@ -241,3 +248,30 @@ def test_train_every_route_as_one_ensemble(cli, kitimat, tmp_path):
     assert len(seeds) == len(trained)  # each route its own member
     det = load_detector(models / trained[0])
     assert det.policy().space.corridor is not None
+
+
+def test_lane_distances_equal_the_brute_force_nearest_great_circle_distance(tracks):
+    from aisdati.geo import haversine_m, lane_distances
+
+    track, lane = tracks[0].positions, np.concatenate([t.positions for t in tracks[1:4]])
+    brute = haversine_m(
+        track[:, None, 0], track[:, None, 1], lane[None, :, 0], lane[None, :, 1]
+    ).min(axis=1)
+    np.testing.assert_allclose(lane_distances(track, lane), brute, rtol=1e-6, atol=1e-3)
+
+
+def test_nearest_lane_score_sees_a_jump_and_is_calibrated_per_vessel(kitimat):
+    table = read_track_table(kitimat)
+    held, *lane = load_tracks(kitimat, table.loc[table["route"] == "route-1", "track_id"][:20])
+    det = NearestDetector.fit("n", [t for t in lane if t.mmsi != held.mmsi], {}, near_km=10.0)
+    assert np.all(np.asarray(det.card["calibration"]["lane"]) >= 0)
+    times = np.r_[0.0, np.cumsum(held.dts)] * 3600.0
+    params = {"jump": {"span": (0.1, 0.2), "km": (5.0, 5.0)}}
+    got = inject("jump", held.positions, times, np.random.default_rng(1), params)
+    jumped = replace(held, positions=got.positions, dts=np.diff(got.times_s) / 3600.0)
+    how = ScoreSettings(score="lane")
+    scored = det.score([held, jumped], how, also=("nearest",))
+    assert set(scored.parts) == {"nearest", "lane"}
+    assert scored.score_m[1] > scored.score_m[0] + 2000  # the jumped stretch is 5 km off
+    assert len(scored.profiles[1]) == len(jumped.positions)
+    assert det.calibration_key(how) == "lane" and det.threshold(how, 0.05) > 0

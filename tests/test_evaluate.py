@@ -137,10 +137,12 @@ def test_evaluate_nearest_is_deterministic_and_writes_everything(cli, kitimat, t
     det = cli(
         "detect", "--data", a / "data", "--models", a / "models", "--method", "nearest",
         "--cluster", "other", "--labels", a / "data" / "labels.csv", "--out", tmp_path / "r",
-        "--contamination", "0.05",
+        "--contamination", "0.05", "--score", "lane",
     )
     assert det.exit_code == 0, det.output
     assert "ROC AUC" in det.output
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["score_definition"].startswith("mean of the largest 10%")
 
 
 def test_evaluate_other_seed_changes_the_injected_set(cli, kitimat, tmp_path):
@@ -237,10 +239,12 @@ def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat
     assert set(scores["route"]) == {"route-1", "route-2"}
     np.testing.assert_allclose(scores["ratio"], scores["value"] / scores["threshold"])
     np.testing.assert_array_equal(scores["flagged"], scores["ratio"] > 1)
+    assert set(scores["score"]) == {"nearest", "lane"}  # nearest's DTW and lane scores
     for route, info in doc["routes"].items():
         per = json.loads((out / route / "evaluation.json").read_text())
         assert per["split"]["heldout_tracks"] == info["heldout_tracks"]
-        assert (scores["route"] == route).sum() == info["heldout_tracks"]
+        for _, g in scores[scores["route"] == route].groupby("score"):
+            assert len(g) == info["heldout_tracks"]
     pooled = next(r for r in doc["results"] if r["kind"] == "all")
     assert pooled["anomalies"] == sum(i["injected"] for i in doc["routes"].values())
     assert pooled["roc_auc"] > 0.5

@@ -6,6 +6,7 @@ flag), which does not depend on the test set."""
 from __future__ import annotations
 
 import json
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -17,13 +18,23 @@ import numpy as np
 from aisdati.errors import UserError
 from aisdati.trackdata import Track
 
-SCORES = ("rollout", "step", "both")
+SCORES = ("rollout", "step", "lane", "both")
+TAIL = 0.1
+"""Step and lane scores: the mean of the largest 10 % of a track's per-report distances."""
+
+
+def tail_mean(values: np.ndarray, fraction: float = TAIL) -> float:
+    """Mean of the largest `fraction` of the values (at least one): a short stretch far off
+    counts as much in a long track as in a short one."""
+    k = max(1, math.ceil(len(values) * fraction))
+    return float(np.partition(values, len(values) - k)[-k:].mean())
 
 
 @dataclass(frozen=True)
 class ScoreSettings:
-    score: str = "step"
-    """rollout (the paper's), step (teacher-forced) or both; see `aisdati.detectors.policy`."""
+    score: str = "lane"
+    """lane, rollout (the paper's), step (teacher-forced) or both; see
+    `aisdati.model.ais_policy`."""
     rollouts: int = 10
     """K: free rollouts per track, and one-step draws per report."""
     near_km: float = 10.0
@@ -43,7 +54,7 @@ class Scores:
     """Per track, what it was compared with ([m, 2] lon/lat): best rollout, nearest training
     track, or the one-step predictions."""
     parts: dict[str, np.ndarray] = field(default_factory=dict)
-    """Component scores when several are combined (`both`)."""
+    """Every score computed in the pass, by kind ([N] each, `score_m` among them)."""
 
 
 class Detector(ABC):
@@ -80,8 +91,11 @@ class Detector(ABC):
 
     # ------------------------------------------------------------------- scoring
     @abstractmethod
-    def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
-        """Score tracks; higher = more abnormal."""
+    def score(
+        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str] = ()
+    ) -> Scores:
+        """Score tracks the way `how.score` says (higher = more abnormal), and compute the
+        kinds in `also` in the same pass (into `Scores.parts`)."""
 
     def calibration_key(self, how: ScoreSettings) -> str:
         return how.score

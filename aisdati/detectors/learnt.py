@@ -1,9 +1,10 @@
 """Detectors that judge tracks with a learnt policy: `dati` (the paper's) and `bc`.
 
-Both score the same two ways (`aisdati.detectors.policy`): free rollouts (`rollout`, the
-paper's), teacher-forced one-step errors (`step`), or `both`: the sum of the two scores, each
-divided by the median of the training tracks' own scores of that kind, so neither dominates by
-its unit of scale (a track as typical as the median training track scores 2).
+Both score the same ways (`aisdati.model.ais_policy`): free rollouts (`rollout`, the paper's),
+teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
+`both`: the rollout and step scores, each divided by the median of the training tracks' own
+scores of that kind, summed, so neither dominates by its unit of scale (a track as typical as
+the median training track scores 2). The step profile stands for `both` on maps.
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from aisdati.detectors.base import Detector, Scores, ScoreSettings
+from aisdati.detectors.base import Detector, Scores, ScoreSettings, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
-from aisdati.model.ais_policy import Act, AISPolicy, dati_act, tail_mean
+from aisdati.geo import lane_distances
+from aisdati.model.ais_policy import Act, AISPolicy, dati_act
 from aisdati.model.ais_space import AISSpace
 from aisdati.model.baselines import BCConfig, BCPolicy
 from aisdati.model.checkpoint import atomic_write_bytes, load_networks
@@ -41,40 +43,53 @@ class PolicyDetector(Detector):
     def make_act(self, n: int, seed: int, temporal: bool) -> Act:
         raise NotImplementedError
 
-    def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
+    def score(
+        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str] = ()
+    ) -> Scores:
         policy = self.policy()
         positions = [t.positions for t in tracks]
+        wanted = {how.score, *also}
+        if "both" in wanted:
+            wanted |= {"rollout", "step"}
         parts: dict[str, np.ndarray] = {}
-        evidence: list[np.ndarray] = []
-        profiles: list[np.ndarray] = []
-        if how.score in ("rollout", "both"):
-            parts["rollout"], evidence = policy.rollout_scores(positions, how.rollouts, how.seed)
-            profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
-        if how.score in ("step", "both"):
+        profiles: dict[str, list[np.ndarray]] = {}
+        evidence: dict[str, list[np.ndarray]] = {}
+        if wanted & {"rollout", "lane"}:
+            parts["rollout"], best, every = policy.rollout_scores(positions, how.rollouts, how.seed)
+            evidence["rollout"] = evidence["lane"] = best
+            profiles["rollout"] = [
+                matched_distances(p, b) for p, b in zip(positions, best, strict=True)
+            ]
+            profiles["lane"] = [
+                lane_distances(p, e.reshape(-1, 2)) for p, e in zip(positions, every, strict=True)
+            ]
+            parts["lane"] = np.array([tail_mean(d) for d in profiles["lane"]])
+        if "step" in wanted:
             errors, predicted = policy.step_errors(
                 positions, [t.dts for t in tracks], how.rollouts, how.seed
             )
             parts["step"] = np.array([tail_mean(e) for e in errors])
-            profiles = [np.concatenate([[0.0], e]) for e in errors]
-            if how.score == "step":
-                evidence = [
-                    np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
-                ]
-        if how.score == "both":
+            profiles["step"] = [np.concatenate([[0.0], e]) for e in errors]
+            evidence["step"] = [
+                np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
+            ]
+        if "both" in wanted:
             cal = self.card.get("calibration", {})
             if not cal.get("rollout") or not cal.get("step"):
                 raise UserError(f"model {self.name} has no calibration scores: retrain it")
-            score = sum(parts[k] / float(np.median(cal[k])) for k in ("rollout", "step"))
-        else:
-            score = parts[how.score]
-        return Scores(np.asarray(score, np.float64), profiles, evidence, parts)
+            parts["both"] = sum(parts[k] / float(np.median(cal[k])) for k in ("rollout", "step"))
+            profiles["both"], evidence["both"] = profiles["step"], evidence["rollout"]
+        return Scores(
+            np.asarray(parts[how.score], np.float64),
+            profiles[how.score],
+            evidence[how.score],
+            parts,
+        )
 
     def calibrate(self, tracks: Sequence[Track], how: ScoreSettings) -> None:
-        """Score the training tracks each way; `threshold` and `both` read these."""
-        cal = {
-            k: [round(float(v), 2) for v in self.score(tracks, replace(how, score=k)).score_m]
-            for k in ("rollout", "step")
-        }
+        """Score the training tracks every way; `threshold` and `both` read these."""
+        parts = self.score(tracks, replace(how, score="rollout"), also=("step", "lane")).parts
+        cal = {k: [round(float(v), 2) for v in parts[k]] for k in ("rollout", "step", "lane")}
         both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
         self.card["calibration"] = {**cal, "both": [round(float(v), 4) for v in both]}
 

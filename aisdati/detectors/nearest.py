@@ -1,11 +1,14 @@
 """`nearest`: the distance to the closest normal track, with no learning at all.
 
-A track's score is its mean great-circle DTW (metres along the warping path, the same unit as
-DATI's scores) to the nearest training track that starts within `near_km` of its start (all
-training tracks when none does). It is the bar every learnt detector has to clear: if imitating
-the traffic does not beat remembering it, the imitation adds nothing to detection. The search is
-exact (see `aisdati.dtw.nearest_mean_dtw_m` for the pruning). Its calibration scores are
-leave-one-vessel-out: each training track against the training tracks of other vessels.
+A track's score (`--score` anything but lane) is its mean great-circle DTW (metres along the
+warping path, the same unit as DATI's scores) to the nearest training track that starts within
+`near_km` of its start (all training tracks when none does). With `--score lane` it is, as for
+the policies, the mean of the largest 10 % of each report's distance to the nearest point of
+those training tracks: the lane that remembered traffic covers. It is the bar every learnt
+detector has to clear: if imitating the traffic does not beat remembering it, the imitation adds
+nothing to detection. The DTW search is exact (see `aisdati.dtw.nearest_mean_dtw_m` for the
+pruning). Its calibration scores are leave-one-vessel-out: each training track against the
+training tracks of other vessels.
 """
 
 from __future__ import annotations
@@ -18,10 +21,10 @@ from typing import Any
 
 import numpy as np
 
-from aisdati.detectors.base import Detector, Scores, ScoreSettings
+from aisdati.detectors.base import Detector, Scores, ScoreSettings, tail_mean
 from aisdati.dtw import matched_distances, nearest_mean_dtw_m
 from aisdati.errors import UserError
-from aisdati.geo import haversine_m
+from aisdati.geo import haversine_m, lane_distances
 from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.trackdata import Track
 
@@ -38,12 +41,16 @@ class NearestDetector(Detector):
     @classmethod
     def fit(cls, name: str, tracks: Sequence[Track], card: dict[str, Any], near_km: float = 10.0):
         det = cls(name, card, [t.positions for t in tracks], np.array([t.mmsi for t in tracks]))
-        own = det.search([t.positions for t in tracks], near_km, exclude=det.mmsi)[0]
-        card["calibration"] = {"nearest": [round(float(s), 2) for s in own]}
+        queries = [t.positions for t in tracks]
+        own = det.search(queries, near_km, exclude=det.mmsi)[0]
+        lane = det.lane_scores(queries, near_km, exclude=det.mmsi)[0]
+        card["calibration"] = {
+            k: [round(float(s), 2) for s in v] for k, v in (("nearest", own), ("lane", lane))
+        }
         return det
 
     def calibration_key(self, how: ScoreSettings) -> str:
-        return "nearest"
+        return "lane" if how.score == "lane" else "nearest"
 
     def _candidates(self, starts: np.ndarray, near_km: float, exclude: np.ndarray | None):
         own = np.array([t[0] for t in self.tracks])
@@ -62,12 +69,30 @@ class NearestDetector(Detector):
         cands = self._candidates(starts, near_km, exclude)
         return nearest_mean_dtw_m(queries, self.tracks, cands)
 
-    def score(self, tracks: Sequence[Track], how: ScoreSettings) -> Scores:
+    def lane_scores(self, queries: list[np.ndarray], near_km: float, exclude=None):
+        """Tail mean of each query's per-report distances to the union of its candidate
+        training tracks, and those distances."""
+        starts = np.array([q[0] for q in queries])
+        cands = self._candidates(starts, near_km, exclude)
+        profiles = [
+            lane_distances(q, np.concatenate([self.tracks[j] for j in c]))
+            for q, c in zip(queries, cands, strict=True)
+        ]
+        return np.array([tail_mean(d) for d in profiles]), profiles
+
+    def score(
+        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str] = ()
+    ) -> Scores:
         positions = [t.positions for t in tracks]
         dist, arg = self.search(positions, how.near_km)
         evidence = [self.tracks[a] for a in arg]
+        parts = {"nearest": dist}
         profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
-        return Scores(dist, profiles, evidence)
+        if how.score == "lane" or "lane" in also:
+            parts["lane"], lane_profiles = self.lane_scores(positions, how.near_km)
+            if how.score == "lane":
+                profiles = lane_profiles
+        return Scores(parts[self.calibration_key(how)], profiles, evidence, parts)
 
     # -------------------------------------------------------------------- files
     def save(self, stem: Path) -> None:

@@ -212,7 +212,7 @@ def _table(frame: pd.DataFrame, title: str, caption: str, width: int, ratio: boo
             auc = f"[{style}]{auc}[/]"
         cells = {
             "detector": r.detector,
-            "score": "-" if r.score == "nearest" else r.score,
+            "score": "dtw" if r.score == "nearest" else r.score,
             "kind": "d+j+l" if narrow and "+" in r.kind else r.kind,
             "n": str(r.anomalies),
             "AUC": auc,

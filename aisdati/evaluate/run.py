@@ -211,11 +211,11 @@ def _score(
         det = detectors[method]
         t1 = time.perf_counter()
         say(f"scoring {settings.cluster} with {method}")
-        kinds = ["nearest"] if method == "nearest" else ["rollout", "step", "both"]
-        scored = det.score(heldout, how if method != "nearest" else replace(how, score="step"))
+        kinds = ["nearest", "lane"] if method == "nearest" else ["rollout", "step", "lane", "both"]
+        scored = det.score(heldout, how, also=kinds)
         timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
         for kind in kinds:
-            values = scored.score_m if kind in ("nearest", "both") else scored.parts[kind]
+            values = scored.parts[kind]
             threshold = det.threshold(replace(how, score=kind), settings.contamination)
             flagged = values > threshold
             key = (method, kind)

@@ -313,7 +313,7 @@ class Validator:
 
     def __call__(self, trainer: DATITrainer, k: int) -> float:
         policy = AISPolicy(self.space, dati_act(trainer.nets, self.config, member=k))
-        scores, _ = policy.rollout_scores(self.tracks, self.rollouts, self.seed)
+        scores = policy.rollout_scores(self.tracks, self.rollouts, self.seed)[0]
         return float(np.median(scores))
 
 

@@ -11,9 +11,14 @@ t), and decide (SOG, COG, dt) scaled into [-1, 1], which the spherical rule turn
   are drawn at (s_t, t), moved by the rule over the track's *real* time step, and the error is the
   great-circle distance from the predicted position to the real s_{t+1}; the best of the K is the
   step error (the model as a one-step predictive density, as likelihood-based AIS detectors do).
-  Each draw takes fresh latent noise. A track's score aggregates its step errors (`STEP_TAIL`):
-  the mean of the largest `STEP_TAIL` fraction, so a short jump or loiter counts as much as a
-  long detour, whatever the track's length.
+  Each draw takes fresh latent noise.
+- **lane** (a departure from the paper): each report's distance to the nearest point of any of
+  the K free rollouts, whatever its timing: whether the track stays where the traffic the model
+  generates from its start goes. Best-of-K DTW judges a track against one rollout; a lane of
+  K rollouts also covers the spread of normal traffic across the channel.
+
+Step and lane scores aggregate a track's per-report distances with `aisdati.detectors.base.
+tail_mean`, so a short jump or loiter counts as much as a long detour, whatever the length.
 """
 
 from __future__ import annotations
@@ -32,9 +37,6 @@ from aisdati.model.ais_space import AISSpace
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
 from aisdati.model.rules import SphericalRule
-
-STEP_TAIL = 0.1
-"""Step score: the mean of the largest 10 % of a track's step errors (at least one)."""
 
 Act = Callable[[np.ndarray], np.ndarray]
 """observations [N, state + 1] (`AISSpace.features`, then the time input) -> scaled decisions
@@ -70,7 +72,11 @@ class AISPolicy:
 
     # ---------------------------------------------------------------- free rollouts
     def generate(
-        self, starts: np.ndarray, horizons: np.ndarray, rollouts: int, seed: int = 0
+        self,
+        starts: np.ndarray,
+        horizons: np.ndarray,
+        rollouts: int,
+        seed: int = 0,
     ) -> np.ndarray:
         """K rollouts from each start in one batch: positions [N * K, max horizon + 1, 2],
         rollout k of start i at row i * K + k; rows past their horizon hold the last position.
@@ -96,9 +102,13 @@ class AISPolicy:
         return out
 
     def rollout_scores(
-        self, tracks: Sequence[np.ndarray], rollouts: int, seed: int = 0
-    ) -> tuple[np.ndarray, list[np.ndarray]]:
-        """Best-of-K mean great-circle DTW (metres) of each track, and its best rollout."""
+        self,
+        tracks: Sequence[np.ndarray],
+        rollouts: int,
+        seed: int = 0,
+    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+        """Best-of-K mean great-circle DTW (metres) of each track, its best rollout, and all
+        its K rollouts [K, n, 2] (the lane the policy generates from the track's start)."""
         starts = np.array([t[0] for t in tracks])
         horizons = np.array([len(t) - 1 for t in tracks])
         paths = self.generate(starts, horizons, rollouts, seed)
@@ -109,8 +119,9 @@ class AISPolicy:
             np.repeat(np.arange(len(tracks)), rollouts),
         ).reshape(len(tracks), rollouts)
         best = dists.argmin(axis=1)
-        chosen = [paths[i * rollouts + b, : horizons[i] + 1].copy() for i, b in enumerate(best)]
-        return dists[np.arange(len(tracks)), best], chosen
+        every = [paths[i * rollouts : (i + 1) * rollouts, : h + 1] for i, h in enumerate(horizons)]
+        chosen = [e[b].copy() for e, b in zip(every, best, strict=True)]
+        return dists[np.arange(len(tracks)), best], chosen, every
 
     # ------------------------------------------------------------- one-step errors
     def step_errors(
@@ -190,12 +201,6 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
         return act
 
     return make
-
-
-def tail_mean(errors: np.ndarray, fraction: float = STEP_TAIL) -> float:
-    """Mean of the largest `fraction` of the values (at least one)."""
-    k = max(1, math.ceil(len(errors) * fraction))
-    return float(np.partition(errors, len(errors) - k)[-k:].mean())
 
 
 class one_thread:
