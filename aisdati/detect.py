@@ -4,11 +4,11 @@ Each test track goes to the model whose training tracks start nearest to where i
 scored by that model's detector (`aisdati.detectors`): by default DATI, judged by the lane its K
 free rollouts from the track's first point cover (`--score lane`, the default), by its best
 rollout (`--score rollout`, the paper's), by its teacher-forced one-step predictions along the
-track (`--score step`) or by rollout and step together (`--score both`). Every score is in metres and
-higher means more abnormal. Flags: scores divided by their maximum over the test set above
-`threshold` (the paper's Λ = 0.75), or the `top_percent` highest, or scores above the model's
-calibrated threshold (`contamination`: the share of its own training tracks it would flag),
-which does not depend on the test set. For every track the point of largest local deviation
+track (`--score step`) or by rollout and step together (`--score both`). Every score is in
+metres and higher means more abnormal. Flags: scores divided by their maximum over the test
+set above `threshold` (the paper's Λ = 0.75), or the `top_percent` highest, or scores above the
+model's calibrated threshold (`contamination`: the share of its own training tracks it would
+flag), which does not depend on the test set. For every track the point of largest local deviation
 (the peak of its deviation profile) tells where it strays most.
 
 Default test set (section 6.2): tracks of the `other` cluster, not used in training, whose first
@@ -83,7 +83,9 @@ class DetectSettings:
 
     @property
     def how(self) -> ScoreSettings:
-        return ScoreSettings(self.score, self.rollouts, self.near_km, self.seed)
+        return ScoreSettings(
+            score=self.score, rollouts=self.rollouts, near_km=self.near_km, seed=self.seed
+        )
 
 
 @dataclass

@@ -210,9 +210,15 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     # the lane of K rollouts is never farther from a report than the best rollout's match
     assert len(card["calibration"]["lane"]) == len(ids)
     few = load_tracks(kitimat, list(ids[:2]))
-    lane_s = det.score(few, ScoreSettings(score="lane", rollouts=3))
+    lane_s = det.score(few, ScoreSettings(score="lane", rollouts=3), also=("rollout",))
     best_s = det.score(few, ScoreSettings(score="rollout", rollouts=3))
     for a, b in zip(lane_s.profiles, best_s.profiles, strict=True):
+        assert np.all(a <= b + 1e-6)
+    # the lane's longer rollouts begin with the rollout score's own: that score is unchanged,
+    # and a lane that reaches further is nowhere farther from a report
+    np.testing.assert_array_equal(lane_s.parts["rollout"], best_s.score_m)
+    short = det.score(few, ScoreSettings(score="lane", rollouts=3, lane_reach=1.0))
+    for a, b in zip(lane_s.profiles, short.profiles, strict=True):
         assert np.all(a <= b + 1e-6)
     # a card from before lane configurations and calibration: the paper's set-up, step score
     old = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}

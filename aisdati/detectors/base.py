@@ -30,13 +30,19 @@ def tail_mean(values: np.ndarray, fraction: float = TAIL) -> float:
     return float(np.partition(values, len(values) - k)[-k:].mean())
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ScoreSettings:
     score: str = "lane"
     """lane, rollout (the paper's), step (teacher-forced) or both; see
     `aisdati.model.ais_policy`."""
     rollouts: int = 10
     """K: free rollouts per track, and one-step draws per report."""
+    lane_reach: float = 2.0
+    """Lane score: the rollouts run this many times the track's number of steps (the rollout
+    score always uses the track's own number). DATI's rollouts on Kitimat ran at half to twice
+    the real pace (SOG x dt), so over the track's number of steps a slow one stopped half-way
+    and every later report was "far from the lane"; twice as many steps cover a model at half
+    pace, and a fast one just goes on along the corridor."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0

@@ -55,7 +55,10 @@ class PolicyDetector(Detector):
         profiles: dict[str, list[np.ndarray]] = {}
         evidence: dict[str, list[np.ndarray]] = {}
         if wanted & {"rollout", "lane"}:
-            parts["rollout"], best, every = policy.rollout_scores(positions, how.rollouts, how.seed)
+            reach = how.lane_reach if "lane" in wanted else 1.0
+            parts["rollout"], best, every = policy.rollout_scores(
+                positions, how.rollouts, how.seed, reach
+            )
             evidence["rollout"] = evidence["lane"] = best
             profiles["rollout"] = [
                 matched_distances(p, b) for p, b in zip(positions, best, strict=True)

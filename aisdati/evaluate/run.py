@@ -143,7 +143,9 @@ class _Prepared:
 
 
 def _how(settings: EvaluateSettings) -> ScoreSettings:
-    return ScoreSettings("both", settings.rollouts, settings.near_km, settings.seed)
+    return ScoreSettings(
+        score="both", rollouts=settings.rollouts, near_km=settings.near_km, seed=settings.seed
+    )
 
 
 def _prepare(settings: EvaluateSettings) -> _Prepared:

@@ -15,7 +15,10 @@ t), and decide (SOG, COG, dt) scaled into [-1, 1], which the spherical rule turn
 - **lane** (a departure from the paper): each report's distance to the nearest point of any of
   the K free rollouts, whatever its timing: whether the track stays where the traffic the model
   generates from its start goes. Best-of-K DTW judges a track against one rollout; a lane of
-  K rollouts also covers the spread of normal traffic across the channel.
+  K rollouts also covers the spread of normal traffic across the channel. The lane's rollouts
+  run `ScoreSettings.lane_reach` (2) x the track's number of steps: the lane is where the
+  model's traffic goes from the track's start, not how far it gets in the track's number of
+  steps, so a model whose pace is off by up to half still reaches the track's end.
 
 Step and lane scores aggregate a track's per-report distances with `aisdati.detectors.base.
 tail_mean`, so a short jump or loiter counts as much as a long detour, whatever the length.
@@ -77,24 +80,28 @@ class AISPolicy:
         horizons: np.ndarray,
         rollouts: int,
         seed: int = 0,
+        reach: float = 1.0,
     ) -> np.ndarray:
-        """K rollouts from each start in one batch: positions [N * K, max horizon + 1, 2],
-        rollout k of start i at row i * K + k; rows past their horizon hold the last position.
-        A step that would leave the region sticks or slides (`AISSpace.resolve`)."""
+        """K rollouts from each start in one batch: positions [N * K, max steps + 1, 2],
+        rollout k of start i at row i * K + k; rows past their last step hold their last
+        position. Each runs `reach` x its horizon steps (rounded up); the time input still
+        counts towards the horizon, so the first `horizon` steps are the same whatever the
+        reach. A step that would leave the region sticks or slides (`AISSpace.resolve`)."""
         with one_thread():
             n = len(starts) * rollouts
             pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
             prev, last_dt = pos.copy(), np.zeros(n)
-            steps = int(np.max(horizons))
+            limit = np.repeat(np.asarray(horizons), rollouts)
+            runs = np.ceil(limit * reach).astype(int)
+            steps = int(np.max(runs))
             out = np.empty((n, steps + 1, 2))
             out[:, 0] = pos
             act = self.make_act(n, seed, True)
-            limit = np.repeat(np.asarray(horizons), rollouts)
             for t in range(steps):
                 action = act(self.observe(pos, prev, last_dt, np.full(n, t), limit))
                 decision = self.rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
                 moved = self.space.resolve(pos, self.rule.step(pos, decision))
-                live = t < limit
+                live = t < runs
                 prev = np.where(live[:, None], pos, prev)
                 last_dt = np.where(live, decision[:, 2], last_dt)
                 pos = np.where(live[:, None], moved, pos)
@@ -106,12 +113,14 @@ class AISPolicy:
         tracks: Sequence[np.ndarray],
         rollouts: int,
         seed: int = 0,
+        reach: float = 1.0,
     ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
-        """Best-of-K mean great-circle DTW (metres) of each track, its best rollout, and all
-        its K rollouts [K, n, 2] (the lane the policy generates from the track's start)."""
+        """Best-of-K mean great-circle DTW (metres) of each track over its own number of
+        steps, its best rollout, and all its K rollouts run `reach` x as many steps
+        ([K, steps + 1, 2]: the lane the policy generates from the track's start)."""
         starts = np.array([t[0] for t in tracks])
         horizons = np.array([len(t) - 1 for t in tracks])
-        paths = self.generate(starts, horizons, rollouts, seed)
+        paths = self.generate(starts, horizons, rollouts, seed, reach)
         dists = batch_mean_dtw_m(
             paths,
             np.repeat(horizons + 1, rollouts),
@@ -119,8 +128,9 @@ class AISPolicy:
             np.repeat(np.arange(len(tracks)), rollouts),
         ).reshape(len(tracks), rollouts)
         best = dists.argmin(axis=1)
-        every = [paths[i * rollouts : (i + 1) * rollouts, : h + 1] for i, h in enumerate(horizons)]
-        chosen = [e[b].copy() for e, b in zip(every, best, strict=True)]
+        runs = np.ceil(horizons * reach).astype(int)
+        every = [paths[i * rollouts : (i + 1) * rollouts, : r + 1] for i, r in enumerate(runs)]
+        chosen = [e[b, : h + 1].copy() for e, b, h in zip(every, best, horizons, strict=True)]
         return dists[np.arange(len(tracks)), best], chosen, every
 
     # ------------------------------------------------------------- one-step errors
