@@ -107,7 +107,8 @@ SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
     "lane": "mean of the largest 10% of each report's distance to the nearest point of the K "
-    "free rollouts (nearest: of the training tracks starting within near_km) (m)",
+    "free rollouts of twice the track's steps (nearest: of the training tracks starting within "
+    "near_km) (m)",
     "both": "rollout / median training rollout score + step / median training step score",
     "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
     "track starting within near_km",

@@ -127,9 +127,10 @@ def _curves(scores: pd.DataFrame, column: str, path: Path) -> Path:
 
 
 def _examples(ev: Evaluation) -> list[tuple]:
-    """The top-scored altered track of each kind under the first detector's headline score."""
+    """The top-scored altered track of each kind under the first detector's lane score (the
+    default of `aisdati detect`)."""
     det = ev.settings.detectors[0]
-    score = "nearest" if det == "nearest" else "rollout"
+    score = "lane"
     s = ev.scores[(ev.scores["detector"] == det) & (ev.scores["score"] == score)]
     data = ev.settings.out_dir / "data"
     panels = []
