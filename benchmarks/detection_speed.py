@@ -1,7 +1,8 @@
-"""Speed of the two cheap detectors' scoring at the issue's scale: teacher-forced step scoring of
-1,000 tracks of 500 reports with K = 10 draws (target <= 20 s on 2 cores), and the exact
-nearest-track search of 1,000 test tracks among 1,000 training tracks of 500 points (target
-<= 60 s on 2 cores).
+"""Speed of scoring at the issue's scale: teacher-forced step scoring of 1,000 tracks of 500
+reports with K = 10 draws (target <= 20 s on 2 cores), lane scoring of the same tracks (K = 10
+free rollouts of twice the track's steps, their best-of-K DTW for the map, and each report's
+distance to the lane), and the exact nearest-track search of 1,000 test tracks among 1,000
+training tracks of 500 points (target <= 60 s on 2 cores).
 
 The tracks are synthetic lanes (a few shared routes, each track jittered around its route, ~12 kn,
 3-minute reports), so that many training tracks start near every test track, as in real traffic;
@@ -23,6 +24,7 @@ import torch
 
 from aisdati.detectors.base import ScoreSettings, tail_mean
 from aisdati.detectors.nearest import NearestDetector
+from aisdati.geo import lane_distances
 from aisdati.model.ais import build_source
 from aisdati.model.ais_policy import AISPolicy, dati_act
 from aisdati.model.ais_space import LaneConfig
@@ -46,10 +48,25 @@ def lanes(rng: np.random.Generator, n_tracks: int, points: int, routes: int = 5)
     return out
 
 
-def bench_step(tracks: list[Track], draws: int) -> float:
+def untrained_policy(tracks: list[Track]) -> AISPolicy:
     source = build_source(tracks[:50], LaneConfig())
     cfg = DATIConfig()
-    policy = AISPolicy(source.space, dati_act(DATINetworks(2, 3, cfg.network, [0]), cfg))
+    return AISPolicy(source.space, dati_act(DATINetworks(2, 3, cfg.network, [0]), cfg))
+
+
+def bench_lane(tracks: list[Track], rollouts: int) -> float:
+    policy = untrained_policy(tracks)
+    how = ScoreSettings(score="lane", rollouts=rollouts)
+    positions = [t.positions for t in tracks]
+    policy.rollout_scores(positions[:2], rollouts, 0, how.lane_reach)  # compile
+    t0 = time.perf_counter()
+    _, _, every = policy.rollout_scores(positions, rollouts, 0, how.lane_reach)
+    [tail_mean(lane_distances(p, e.reshape(-1, 2))) for p, e in zip(positions, every, strict=True)]
+    return time.perf_counter() - t0
+
+
+def bench_step(tracks: list[Track], draws: int) -> float:
+    policy = untrained_policy(tracks)
     policy.step_errors([t.positions for t in tracks[:2]], [t.dts for t in tracks[:2]], draws)
     t0 = time.perf_counter()
     errors, _ = policy.step_errors([t.positions for t in tracks], [t.dts for t in tracks], draws)
@@ -77,6 +94,7 @@ def main() -> None:
     test = lanes(rng, args.tracks, args.points)
     train = lanes(rng, args.tracks, args.points)
     step_s = bench_step(test, args.draws)
+    lane_s = bench_lane(test, args.draws)
     near_s, med = bench_nearest(train, test)
     n, p = args.tracks, args.points
     print(f"Detection speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
@@ -84,6 +102,10 @@ def main() -> None:
     print("|---|---|---|")
     k = args.draws
     print(f"| step scoring: {n} tracks x {p} reports, K = {k} | {step_s:.1f} s | <= 20 s |")
+    print(
+        f"| lane scoring: {n} tracks x {p} reports, K = {k} rollouts of 2x the steps | "
+        f"{lane_s:.1f} s | |"
+    )
     print(
         f"| nearest: {n} test x {n} training tracks of {p} points (exact, pruned; median "
         f"distance {med:,.0f} m) | {near_s:.1f} s | <= 60 s |"
