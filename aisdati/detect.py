@@ -513,7 +513,7 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,
         "score_definition": SCORE_DEFINITIONS[
-            s.score if s.score == "lane" or s.method != "nearest" else "nearest"
+            "nearest" if s.method == "nearest" and s.score != "lane" else s.score
         ]
         if s
         else None,

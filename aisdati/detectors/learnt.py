@@ -60,9 +60,11 @@ class PolicyDetector(Detector):
                 positions, how.rollouts, how.seed, reach
             )
             evidence["rollout"] = evidence["lane"] = best
-            profiles["rollout"] = [
-                matched_distances(p, b) for p, b in zip(positions, best, strict=True)
-            ]
+            if "rollout" in wanted:
+                profiles["rollout"] = [
+                    matched_distances(p, b) for p, b in zip(positions, best, strict=True)
+                ]
+        if "lane" in wanted:
             profiles["lane"] = [
                 lane_distances(p, e.reshape(-1, 2)) for p, e in zip(positions, every, strict=True)
             ]

@@ -52,7 +52,9 @@ class NearestDetector(Detector):
     def calibration_key(self, how: ScoreSettings) -> str:
         return "lane" if how.score == "lane" else "nearest"
 
-    def _candidates(self, starts: np.ndarray, near_km: float, exclude: np.ndarray | None):
+    def _candidates(self, queries: list[np.ndarray], near_km: float, exclude: np.ndarray | None):
+        """Per query, the training tracks it is compared with (see the module docstring)."""
+        starts = np.array([q[0] for q in queries])
         own = np.array([t[0] for t in self.tracks])
         d = haversine_m(starts[:, None, 0], starts[:, None, 1], own[None, :, 0], own[None, :, 1])
         out = []
@@ -65,15 +67,12 @@ class NearestDetector(Detector):
         return out
 
     def search(self, queries: list[np.ndarray], near_km: float, exclude=None):
-        starts = np.array([q[0] for q in queries])
-        cands = self._candidates(starts, near_km, exclude)
-        return nearest_mean_dtw_m(queries, self.tracks, cands)
+        return nearest_mean_dtw_m(queries, self.tracks, self._candidates(queries, near_km, exclude))
 
     def lane_scores(self, queries: list[np.ndarray], near_km: float, exclude=None):
         """Tail mean of each query's per-report distances to the union of its candidate
         training tracks, and those distances."""
-        starts = np.array([q[0] for q in queries])
-        cands = self._candidates(starts, near_km, exclude)
+        cands = self._candidates(queries, near_km, exclude)
         profiles = [
             lane_distances(q, np.concatenate([self.tracks[j] for j in c]))
             for q, c in zip(queries, cands, strict=True)
@@ -87,11 +86,10 @@ class NearestDetector(Detector):
         dist, arg = self.search(positions, how.near_km)
         evidence = [self.tracks[a] for a in arg]
         parts = {"nearest": dist}
-        profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
         if how.score == "lane" or "lane" in also:
-            parts["lane"], lane_profiles = self.lane_scores(positions, how.near_km)
-            if how.score == "lane":
-                profiles = lane_profiles
+            parts["lane"], profiles = self.lane_scores(positions, how.near_km)
+        if how.score != "lane":
+            profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
         return Scores(parts[self.calibration_key(how)], profiles, evidence, parts)
 
     # -------------------------------------------------------------------- files
