@@ -62,7 +62,9 @@ LANE_OPTION = typer.Option(
     "--lane",
     help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
     "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
-    "ranges=max|quantile, noise=gaussian|ou, validation_tracks=8, validation_rollouts=3.",
+    "ranges=max|quantile, noise=gaussian|ou, fourier=6 (octaves of position features; 0 off), "
+    "pretrain=50 (epochs of cloning before the adversarial training; 0 off), members=1, "
+    "critic=decision|state, validation_tracks=8, validation_rollouts=3.",
 )
 
 

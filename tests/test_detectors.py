@@ -15,6 +15,7 @@ import torch
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.dtw import dtw_path_length, nearest_mean_dtw_m
+from aisdati.errors import UserError
 from aisdati.evaluate.inject import inject
 from aisdati.model.ais import TrainSettings, build_source, make_env, track_reference
 from aisdati.model.ais_policy import AISPolicy
@@ -153,6 +154,30 @@ def test_enlarged_state_shape_scaling_and_env_checker(tracks):
         assert env.observation_space.contains(obs)
 
 
+def test_fourier_state_encodes_the_position_at_each_octave(tracks):
+    from gymnasium.utils.env_checker import check_env
+
+    plain = build_source(tracks[:8], LaneConfig(state="motion")).space
+    source = build_source(tracks[:8], LaneConfig(state="motion", fourier=3))
+    space = source.space
+    assert space.state_dim == 5 + 12
+    env = make_env(source)
+    assert env.observation_space.shape == (18,)
+    check_env(env, skip_render_check=True)
+    pos, prev, dts = tracks[0].positions[1:], tracks[0].positions[:-1], tracks[0].dts
+    got, base = space.features(pos, prev, dts), plain.features(pos, prev, dts)
+    np.testing.assert_array_equal(got[:, :5], base)  # the paper's view comes first, unchanged
+    for coord in range(2):  # lon's 3 sines and 3 cosines, then lat's
+        for octave in range(3):
+            angle = np.pi * 2**octave * base[:, coord]
+            np.testing.assert_allclose(got[:, 5 + 6 * coord + octave], np.sin(angle))
+            np.testing.assert_allclose(got[:, 8 + 6 * coord + octave], np.cos(angle))
+    lo, hi = space.state_bounds
+    assert np.all(got >= lo - 1e-12) and np.all(got <= hi + 1e-12)
+    with pytest.raises(UserError, match="fourier"):
+        LaneConfig(fourier=-1)
+
+
 def test_validation_selects_the_actor_with_the_best_validation_score():
     from aisdati.model.dati import DATIConfig, DATITrainer
     from aisdati.model.env import make_family_env
@@ -220,10 +245,19 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     short = det.score(few, ScoreSettings(score="lane", rollouts=3, lane_reach=1.0))
     for a, b in zip(lane_s.profiles, short.profiles, strict=True):
         assert np.all(a <= b + 1e-6)
-    # a card from before lane configurations and calibration: the paper's set-up, step score
+    # a card from before lane configurations and calibration: the paper's set-up (the paper's
+    # state, so a model of the position alone), step score; with a wider state it is refused
+    wide = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
+    (tmp_path / "wide.json").write_text(json.dumps(wide))
+    (tmp_path / "wide.pt").write_bytes((tmp_path / "other.pt").read_bytes())
+    with pytest.raises(UserError, match="state_dim must be one of 2, got 26"):
+        load_detector(tmp_path / "wide")
+    plain = replace(settings, lane=replace(lane, fourier=0), stem="plain")
+    train_detector("dati", plain, ScoreSettings(rollouts=2))
+    card = json.loads((tmp_path / "plain.json").read_text())
     old = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
     (tmp_path / "old.json").write_text(json.dumps(old))
-    (tmp_path / "old.pt").write_bytes((tmp_path / "other.pt").read_bytes())
+    (tmp_path / "old.pt").write_bytes((tmp_path / "plain.pt").read_bytes())
     det = load_detector(tmp_path / "old")
     assert det.policy().space.config == LaneConfig()
     tracks = load_tracks(kitimat, list(ids[:2]))

@@ -152,6 +152,18 @@ def test_a_valid_card_passes_and_keys_match_by_vessel_and_overlap():
     assert list(training_mask(card, tracks)) == [True, False, False, True]
 
 
+def test_the_state_width_must_match_the_lane_configuration():
+    card = _card()
+    card["lane_config"] = {"state": "motion", "fourier": 3}
+    with pytest.raises(UserError, match="state_dim must be one of 17, got 2"):
+        validate_ais_card(json.loads(json.dumps(card)), Path("up.json"))
+    card["state_dim"] = 17
+    validate_ais_card(json.loads(json.dumps(card)), Path("up.json"))
+    card["lane_config"]["fourier"] = 2.5
+    with pytest.raises(UserError, match=r"lane_config\.fourier must be an integer"):
+        validate_ais_card(json.loads(json.dumps(card)), Path("up.json"))
+
+
 @pytest.mark.parametrize(
     "path, value, message",
     [

@@ -1,5 +1,6 @@
-"""Levers 6 and 8 of lane learning on real Kitimat tracks: a seed ensemble trained and saved as
-one lane model whose draws spread over its members, and the state-aware (conditional) critic."""
+"""Lane-learning levers on real Kitimat tracks: a seed ensemble trained and saved as one lane
+model whose draws spread over its members, the state-aware (conditional) critic, and the actors'
+pretraining on the demonstrations."""
 
 from __future__ import annotations
 
@@ -43,7 +44,8 @@ def test_a_seed_ensemble_is_one_model_whose_draws_spread_over_its_members(kitima
     det = load_detector(tmp_path / "other")
     assert det.nets.members == 3
     # row i acts with member i mod 3: the spread policy's rows equal each member's own rows
-    obs = np.tile(np.array([[0.1, -0.2, 3.0]], np.float32), (6, 1))
+    width = det.nets.forward_actor.input_features.weight.shape[1]  # the state, then t
+    obs = np.tile(np.r_[np.linspace(-0.2, 0.1, width), 3.0].astype(np.float32), (6, 1))
     spread = dati_act(det.nets, det.config)(6, 5, False)(obs)
     for m in range(3):
         own = dati_act(det.nets, det.config, member=m)(6, 5, False)(obs)
@@ -110,4 +112,42 @@ def test_the_state_aware_critic_trains_and_round_trips_through_the_card(kitimat,
     _, card = _train(kitimat, tmp_path, replace(SMALL, critic="state"))
     assert card["config"]["network"]["conditional_critic"] is True
     det = load_detector(tmp_path / "other")
-    assert det.nets.forward_critic.input_features.weight.shape[1] == 5
+    state_dim = det.nets.forward_actor.input_features.weight.shape[1]
+    assert det.nets.forward_critic.input_features.weight.shape[1] == state_dim + 3
+
+
+def _forward_error(trainer: DATITrainer, demo) -> float:
+    """Mean L1 of member 0's forward actor against the perfect decisions of a demonstration."""
+    states, times, actions = (torch.as_tensor(x, dtype=torch.float32)[None] for x in demo)
+    nets = trainer.nets
+    with torch.no_grad():
+        eta = torch.zeros(1, states.shape[1], nets.cfg.latent_dim)
+        out = nets.forward_actor(states, eta, nets.time_features(times[..., None]))
+    return float((out - actions).abs().mean())
+
+
+def test_pretraining_makes_the_actor_follow_its_demonstrations():
+    env = make_family_env(replace(get_family("circles"), steps=12))
+    env.reset(seed=0)
+    demo = env.demonstration(env.reference)
+    assert demo[0].shape == (12, 2) and demo[1].shape == (12,) and demo[2].shape == (12, 2)
+    np.testing.assert_allclose(demo[2], env.perfect_actions)
+    cold = DATITrainer([env], [0], DATIConfig(batch_size=16))
+    warm = DATITrainer([env], [0], DATIConfig(batch_size=16, pretrain_epochs=300))
+    before = _forward_error(warm, demo)
+    assert before == pytest.approx(_forward_error(cold, demo))  # same seed, same start
+    warm.pretrain([demo])
+    cold.pretrain([demo])  # 0 epochs, the paper's way: nothing changes
+    assert _forward_error(cold, demo) == before
+    assert _forward_error(warm, demo) < 0.5 * before
+    assert not warm.history  # pretraining is no episode
+    with pytest.raises(ValueError):
+        warm.pretrain([demo, demo])
+
+
+def test_pretrain_option_reaches_the_card(kitimat, tmp_path):
+    with pytest.raises(UserError, match="pretrain"):
+        lane_config("lanes", ["pretrain=-1"])
+    _, card = _train(kitimat, tmp_path, replace(SMALL, pretrain=2))
+    assert card["lane_config"]["pretrain"] == 2
+    assert card["config"]["pretrain_epochs"] == 2

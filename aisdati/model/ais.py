@@ -53,6 +53,8 @@ EPSILON_READING = (
     "epsilon (metres) is compared with the exponentially smoothed mean great-circle distance "
     "along the optimal DTW warping path (DTW sum / number of path cells), not with the DTW sum"
 )
+
+
 def track_reference(track: Track) -> Reference:
     return Reference(
         track.positions,
@@ -289,7 +291,17 @@ def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
         config = replace(config, noise="ou", ou_dt=dt)
     if settings.lane.critic == "state":
         config = config.with_network(conditional_critic=True)
-    return config
+    return replace(config, pretrain_epochs=settings.lane.pretrain)
+
+
+def demonstrations(envs: Sequence[TrajectoryImitationEnv]) -> list[tuple[np.ndarray, ...]]:
+    """Each environment's training tracks as supervised pairs (states, time inputs, scaled
+    perfect decisions), for `DATITrainer.pretrain`."""
+    out = []
+    for env in envs:
+        parts = [env.demonstration(ref) for ref in env.source.references]
+        out.append(tuple(np.concatenate(p) for p in zip(*parts, strict=True)))
+    return out
 
 
 class Validator:
@@ -367,7 +379,7 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
         load_trainer_state(trainer, doc["trainer"], [by_id[int(i)] for i in doc["current"]])
         log_lines = list(doc["log_lines"])
         steps, wall_before = int(doc["steps"]), float(doc["wall_seconds"])
-        resumed_from = len(trainer.history)
+        resumed_from = len(trainer.history)  # >= 1: checkpoints are written after episodes
     elif settings.resume and stem.with_suffix(".json").is_file():
         try:
             old = json.loads(stem.with_suffix(".json").read_text())
@@ -384,6 +396,8 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
                 "(drop --resume to train again)"
             )
     t0 = time.perf_counter()
+    if not resumed_from:
+        trainer.pretrain(demonstrations(envs))
 
     def elapsed() -> float:
         return wall_before + time.perf_counter() - t0
@@ -493,8 +507,9 @@ def train_ais_ensemble(
     ]
     validate = _MemberValidators(validators) if settings[0].lane.validation else None
     seeds = member_seeds(settings[0].seed, members * len(settings))
-    trainer = DATITrainer(envs, seeds, config, validate)
     t0 = time.perf_counter()
+    trainer = DATITrainer(envs, seeds, config, validate)
+    trainer.pretrain(demonstrations(envs))
     steps = 0
     while not trainer.done:
         logs = trainer.step()

@@ -29,6 +29,17 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
 - `critic="state"`: the critics also see the state the decision is taken in (a conditional
   WGAN, a departure from the paper, whose critics see only the decision, t and r): the
   adversarial term then matches p(a | s, t, r) instead of p(a | t, r) averaged over states.
+- `fourier=F`: the state adds sin and cos of the scaled position at F octaves (π, 2π, ...,
+  2^(F-1) π), Fourier features (Tancik et al. 2020). The paper's actor sees the position through
+  16 tanh units of a linear map; a lane that winds through a box needs a policy that changes
+  course within a few hundred metres of a box tens of km wide, which such a small network
+  cannot resolve: its rollouts turn at the wrong places, run into the corridor's edge and stop.
+- `pretrain=N`: before the adversarial training, N passes of the forward actor's L1 pull over
+  the training tracks as demonstrated (each report's state and perfect decision): behaviour
+  cloning as a warm start, as GAIL is often started. From the first episode the agent then stays
+  near its reference, so the pull pairs the reference's decisions with states near the
+  reference's own. The paper starts from random actors; the episodes (and the actor kept) are
+  the adversarial training's, as without it: the pretrained actor itself is never kept.
 """
 
 from __future__ import annotations
@@ -51,6 +62,8 @@ DECISION_HEADROOM = 1.1
 RANGE_QUANTILE = 0.99
 PROGRESS_SCALE = 100.0
 MAX_MEMBERS = 16
+MAX_PRETRAIN = 1000
+MAX_FOURIER = 12
 
 
 @dataclass(frozen=True)
@@ -68,6 +81,8 @@ class LaneConfig:
     noise: str = "gaussian"
     members: int = 1
     critic: str = "decision"
+    pretrain: int = 0
+    fourier: int = 0
 
     def __post_init__(self) -> None:
         choices = {
@@ -83,6 +98,10 @@ class LaneConfig:
                 raise UserError(f"{name} must be one of {', '.join(allowed)}")
         if not (np.isfinite(self.corridor_km) and self.corridor_km > 0):
             raise UserError(f"corridor_km must be positive, got {self.corridor_km}")
+        if not 0 <= self.fourier <= MAX_FOURIER:
+            raise UserError(f"fourier must be in [0, {MAX_FOURIER}] octaves, got {self.fourier}")
+        if not 0 <= self.pretrain <= MAX_PRETRAIN:
+            raise UserError(f"pretrain must be in [0, {MAX_PRETRAIN}] epochs, got {self.pretrain}")
         if not 1 <= self.members <= MAX_MEMBERS:
             raise UserError(f"members must be in [1, {MAX_MEMBERS}], got {self.members}")
 
@@ -96,7 +115,14 @@ class LaneConfig:
 
 PRESETS: dict[str, LaneConfig] = {
     "paper": LaneConfig(),
-    "lanes": LaneConfig(validation=True, region="corridor", ranges="quantile", noise="ou"),
+    "lanes": LaneConfig(
+        validation=True,
+        region="corridor",
+        ranges="quantile",
+        noise="ou",
+        fourier=6,
+        pretrain=50,
+    ),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
 combination that measured best with `aisdati evaluate` (README, "Lane learning")."""
@@ -172,13 +198,16 @@ class AISSpace:
 
     @property
     def state_dim(self) -> int:
-        return 5 if self.config.state == "motion" else 2
+        return len(self.state_bounds[0])
 
     @property
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if self.config.state == "motion":
-            return np.array([0.0, 0.0, -1.0, -1.0, 0.0]), np.array([1.0, 1.0, 1.0, 1.0, 2.0])
-        return np.zeros(2), np.ones(2)
+            lo, hi = np.array([0.0, 0.0, -1.0, -1.0, 0.0]), np.array([1.0, 1.0, 1.0, 1.0, 2.0])
+        else:
+            lo, hi = np.zeros(2), np.ones(2)
+        waves = 4 * self.config.fourier
+        return np.r_[lo, -np.ones(waves)], np.r_[hi, np.ones(waves)]
 
     def time_high(self, max_steps: int) -> float:
         return PROGRESS_SCALE if self.config.time == "progress" else float(max_steps)
@@ -208,8 +237,18 @@ class AISSpace:
         lo, hi = self.bounds
         positions = np.asarray(positions, np.float64)
         scaled = np.clip((positions - lo) / (hi - lo), 0.0, 1.0)
-        if self.config.state != "motion":
-            return scaled
+        parts = [scaled]
+        if self.config.state == "motion":
+            parts.append(self._motion(positions, previous, dts))
+        if self.config.fourier:
+            angles = scaled[..., None] * (np.pi * 2.0 ** np.arange(self.config.fourier))
+            waves = np.concatenate([np.sin(angles), np.cos(angles)], axis=-1)
+            parts.append(waves.reshape((*scaled.shape[:-1], -1)))
+        return np.concatenate(parts, axis=-1) if len(parts) > 1 else scaled
+
+    def _motion(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """The agent's current course (sin, cos) and speed (scaled by the SOG range), from its
+        last move; zeros before it has moved."""
         previous = np.asarray(previous, np.float64)
         dts = np.asarray(dts, np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -218,7 +257,7 @@ class AISSpace:
             )
         moving = (dts > 0) & (sog > 0) & np.isfinite(sog)
         rad = np.radians(cog)
-        motion = np.stack(
+        return np.stack(
             [
                 np.where(moving, np.sin(rad), 0.0),
                 np.where(moving, np.cos(rad), 0.0),
@@ -226,7 +265,6 @@ class AISSpace:
             ],
             axis=-1,
         )
-        return np.concatenate([scaled, motion], axis=-1)
 
     def time_input(self, t: np.ndarray, horizon: int | np.ndarray) -> np.ndarray:
         t = np.asarray(t, np.float64)

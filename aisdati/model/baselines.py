@@ -166,9 +166,10 @@ class BCData:
             for name in ("state", "time", "action"):
                 old = getattr(self, name)
                 setattr(self, name, torch.cat([old, torch.zeros_like(old[:, :grow])], dim=1))
-        self.state[k, lo : lo + n] = torch.as_tensor(env.source.reference_states(ref))
-        self.time[k, lo : lo + n, 0] = torch.as_tensor(env.source.time_input(np.arange(n), n))
-        self.action[k, lo : lo + n] = torch.as_tensor(env.perfect_actions)
+        states, times, actions = env.demonstration(ref)
+        self.state[k, lo : lo + n] = torch.as_tensor(states)
+        self.time[k, lo : lo + n, 0] = torch.as_tensor(times)
+        self.action[k, lo : lo + n] = torch.as_tensor(actions)
         self.size[k] += n
         return n
 

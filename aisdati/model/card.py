@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.errors import UserError
-from aisdati.model.ais_space import MAX_MEMBERS
+from aisdati.model.ais_space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN
 
 MAX_MMSI = 2**53
 _MISSING = object()
@@ -173,6 +173,9 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
         for key in ("validation_tracks", "validation_rollouts"):
             if key in lane:
                 card.integer(f"lane_config.{key}", 1)
+        for key, most in (("fourier", MAX_FOURIER), ("pretrain", MAX_PRETRAIN)):
+            if key in lane:
+                card.integer(f"lane_config.{key}", 0, most)
 
     # the networks
     if fmt in ("aisdati-dati/1", "aisdati-bc/1"):
@@ -182,7 +185,9 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
         for i, seed in enumerate(seeds):
             card.integer(f"seeds[{i}]", value=seed)
     if fmt == "aisdati-dati/1":
-        card.choice("state_dim", (2, 5))
+        view = lane if isinstance(lane, dict) else {}
+        base = 5 if view.get("state") == "motion" else 2
+        card.choice("state_dim", (base + 4 * view.get("fourier", 0),))
         card.integer("decision_dim", 3, 3)
         card.choice("config.noise", ("gaussian", "ou"))
         card.number("config.noise_sigma", 0.0, 100.0)

@@ -70,6 +70,10 @@ class DATIConfig:
     """Early stopping on the episode's total loss; 0 disables it."""
     keep: str = "best"
     """Which forward actor a member ends with: "best" (lowest episode metric) or "final"."""
+    pretrain_epochs: int = 0
+    """Passes of the L1 terms over the references' own (state, perfect decision) pairs before
+    the adversarial training (`DATITrainer.pretrain`). 0 is the paper's way, random actors; a
+    warm start is a departure (as GAIL is often started from BC) that the AIS lanes measure."""
     adversarial_time2vec: bool = True
     """Whether the actors' adversarial loss also updates the shared Time2Vec (through the
     critics' time features). The paper's code freezes it there (critic.trainable = False when
@@ -346,6 +350,15 @@ class DATITrainer:
 
         if nets.time2vec is not None:
             nets.time2vec.requires_grad_(True)
+        l1 = self._l1_step(s, a_hat, a_real, eta, step)
+        return critic_loss.detach() + adv.detach() + l1
+
+    def _l1_step(
+        self, s: Tensor, a_hat: Tensor, a_real: Tensor, eta: Tensor, step: Tensor
+    ) -> Tensor:
+        """One update of the L1 terms (cycle consistency both ways and the pull towards the
+        perfect decisions); returns each member's weighted L1 loss [E]."""
+        nets = self.nets
         t = nets.time_features(step)
         fa = nets.forward_actor(s, eta, t)
         back = nets.backward_actor(a_hat, eta, t)
@@ -353,11 +366,46 @@ class DATITrainer:
             (nets.backward_actor(fa, eta, t) - s).abs().mean(dim=(1, 2))
             + (fa - a_real).abs().mean(dim=(1, 2))
             + (nets.forward_actor(back, eta, t) - a_hat).abs().mean(dim=(1, 2))
-        ) * c.l1_weight
+        ) * self.cfg.l1_weight
         self.opt_l1.zero_grad(set_to_none=True)
         l1.sum().backward()
         self.opt_l1.step()
-        return critic_loss.detach() + adv.detach() + l1.detach()
+        return l1.detach()
+
+    def pretrain(self, demonstrations: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
+        """`pretrain_epochs` passes of the forward actor's pull towards the perfect decisions
+        over each member's references as demonstrated (states [n, d], time inputs [n], scaled
+        perfect decisions [n, k]; one tuple per member): behaviour cloning by L1, with the
+        L1 terms' optimiser. Each member draws its batches with replacement from its own pairs,
+        as many batches as an epoch of the largest member. The cycle terms are left out: the
+        untrained backward actor's states would teach the forward actor to ignore the state.
+        Call before the first step (`DATIConfig.pretrain_epochs`)."""
+        c, nets = self.cfg, self.nets
+        if not c.pretrain_epochs:
+            return
+        if len(demonstrations) != len(self.active) or self.history:
+            raise ValueError("pretrain once, before training, with one demonstration per member")
+        data = [[torch.as_tensor(x, dtype=torch.float32) for x in d] for d in demonstrations]
+        updates = c.pretrain_epochs * -(-max(len(d[0]) for d in data) // c.batch_size)
+        for _ in range(updates):
+            picks = [
+                torch.randint(len(d[0]), (c.batch_size,), generator=g)
+                for d, g in zip(data, self.generators, strict=True)
+            ]
+            s, step, a = (
+                torch.stack([d[i][p] for d, p in zip(data, picks, strict=True)]) for i in range(3)
+            )
+            eta = torch.stack(
+                [
+                    torch.randn(c.batch_size, c.network.latent_dim, generator=g)
+                    for g in self.generators
+                ]
+            )
+            t = nets.time_features(step[..., None])
+            pull = (nets.forward_actor(s, eta * c.noise_sigma, t) - a).abs().mean(dim=(1, 2))
+            self.opt_l1.zero_grad(set_to_none=True)
+            (pull.sum() * c.l1_weight).backward()
+            self.opt_l1.step()
 
     def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         obs = torch.as_tensor(np.stack(self._obs), dtype=torch.float32)[:, None, :]

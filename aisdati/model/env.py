@@ -162,9 +162,7 @@ class TrajectoryImitationEnv(gym.Env):
         options = options or {}
         ref = options.get("reference") or self.source.sample(self.np_random)
         self.reference = ref
-        self._perfect = np.clip(
-            self.decision_scaler.scale(self.rule.perfect_decisions(ref.positions, ref.dts)), -1, 1
-        )
+        self._perfect = self.scaled_perfect(ref)
         self.position = ref.positions[0].astype(np.float64).copy()
         self.previous = self.position.copy()
         self.last_dt = 0.0
@@ -173,6 +171,18 @@ class TrajectoryImitationEnv(gym.Env):
         self._dtw.reset()
         self._dtw.push(self.position, ref.positions[0])
         return self._observation(), {"reference": ref}
+
+    def scaled_perfect(self, ref: Reference) -> np.ndarray:
+        """The perfect decisions [n, k] of a reference (definition 3.2), scaled into [-1, 1]."""
+        perfect = self.rule.perfect_decisions(ref.positions, ref.dts)
+        return np.clip(self.decision_scaler.scale(perfect), -1, 1)
+
+    def demonstration(self, ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The reference as supervised pairs: its own states [n, d], time inputs [n] and scaled
+        perfect decisions [n, k] (what BC learns from, and DATI's optional pretraining)."""
+        n = ref.steps
+        times = np.asarray(self.source.time_input(np.arange(n), n), np.float64)
+        return self.source.reference_states(ref), times, self.scaled_perfect(ref)
 
     @property
     def perfect_actions(self) -> np.ndarray:
