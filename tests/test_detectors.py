@@ -134,6 +134,27 @@ def test_env_with_a_corridor_never_leaves_it(tracks):
         assert source.space.contains(env.position)
 
 
+def test_an_agent_outside_the_corridor_moves_in_and_then_stays(tracks):
+    space = build_source(tracks[:8], LaneConfig(region="corridor", corridor_km=1.0)).space
+    lane = tracks[0].positions
+    start = lane[20] + np.array([0.0, 0.05])  # ~5.5 km north of the lane, inside the box
+    assert not space.contains(start) and space._in_box(start)
+    # a step that stays outside is taken (refused, the agent could never move at all) ...
+    north = space.resolve(start, start + np.array([0.0, 0.01]))
+    np.testing.assert_array_equal(north, start + np.array([0.0, 0.01]))
+    # ... and steps towards the lane bring it in, after which it never leaves
+    pos = start
+    for _ in range(20):
+        pos = space.resolve(pos, pos + np.array([0.0, -0.01]))
+        if space.contains(pos):
+            break
+    assert space.contains(pos)
+    out = space.resolve(pos, pos + np.array([0.0, 0.2]))
+    assert space.contains(out)
+    # a step out of the box is refused wherever the agent is
+    np.testing.assert_array_equal(space.resolve(start, start + np.array([0.0, 5.0])), start)
+
+
 def test_enlarged_state_shape_scaling_and_env_checker(tracks):
     from gymnasium.utils.env_checker import check_env
 

@@ -213,24 +213,29 @@ class AISSpace:
         return PROGRESS_SCALE if self.config.time == "progress" else float(max_steps)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
-        points = np.asarray(points, np.float64)
-        lo, hi = self.bounds
-        inside = np.all(np.isfinite(points), axis=-1) & np.all(
-            (points >= lo) & (points <= hi), axis=-1
-        )
+        inside = self._in_box(points)
         if self.corridor is not None:
-            inside &= self.corridor.allowed(points)
+            inside &= self.corridor.allowed(np.asarray(points, np.float64))
         return inside
 
+    def _in_box(self, points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, np.float64)
+        lo, hi = self.bounds
+        return np.all(np.isfinite(points), axis=-1) & np.all(
+            (points >= lo) & (points <= hi), axis=-1
+        )
+
     def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        """Rows [N, 2] (or one point): where each move ends (sticking or sliding)."""
+        """Rows [N, 2] (or one point): where each move ends (sticking or sliding). The corridor
+        keeps an agent in, it does not hold one out: an agent outside it (a track that starts
+        off the training tracks' lanes) moves freely within the box until it enters; refused
+        there, it could never move at all."""
         single = np.ndim(proposed) == 1
         pos, prop = np.atleast_2d(position), np.atleast_2d(proposed)
         if self.corridor is not None:
-            out = self.corridor.slide(pos, prop)
-            out = np.where(self.contains(out)[:, None], out, pos)
-        else:
-            out = np.where(self.contains(prop)[:, None], prop, pos)
+            inside = self.corridor.allowed(pos)
+            prop = np.where(inside[:, None], self.corridor.slide(pos, prop), prop)
+        out = np.where(self._in_box(prop)[:, None], prop, pos)
         return out[0] if single else out
 
     def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:

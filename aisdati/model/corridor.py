@@ -7,7 +7,8 @@ training tracks buffered by `buffer_km`, minus land where a coastline is availab
 a grid of `cell_m` cells so that a lookup costs O(1). A move that would leave it *slides*: the
 same step length is tried with the course turned by 15°, 30°, ... up to 90° either way (the
 smaller turn first), so a rollout follows a channel's bend instead of stopping dead; when no
-turn fits, the agent stays where it is (the paper's sticking).
+turn fits, the agent stays where it is (the paper's sticking). An agent outside the corridor (a
+track that starts off the lanes) moves freely until it enters (`AISSpace.resolve`).
 """
 
 from __future__ import annotations
