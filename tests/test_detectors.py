@@ -136,21 +136,31 @@ def test_env_with_a_corridor_never_leaves_it(tracks):
 
 def test_an_agent_outside_the_corridor_moves_in_and_then_stays(tracks):
     space = build_source(tracks[:8], LaneConfig(region="corridor", corridor_km=1.0)).space
-    lane = tracks[0].positions
-    start = lane[20] + np.array([0.0, 0.05])  # ~5.5 km north of the lane, inside the box
+    corridor = space.corridor
+    lo, hi = space.bounds
+    grid = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], 60), np.linspace(lo[1], hi[1], 60)), -1)
+    grid = grid.reshape(-1, 2)
+    gaps = corridor.gap_m(grid)
+    start = grid[np.argmin(np.abs(gaps - 3000))]  # a start ~3 km off the lanes
     assert not space.contains(start) and space._in_box(start)
-    # a step that stays outside is taken (refused, the agent could never move at all) ...
-    north = space.resolve(start, start + np.array([0.0, 0.01]))
-    np.testing.assert_array_equal(north, start + np.array([0.0, 0.01]))
-    # ... and steps towards the lane bring it in, after which it never leaves
+    g0 = corridor.gap_m(start[None])[0]
+    moves = 0.01 * np.array([[np.cos(a), np.sin(a)] for a in np.radians(np.arange(0, 360, 45))])
+    for move in moves:
+        got = space.resolve(start, start + move)
+        if corridor.gap_m((start + move)[None])[0] <= g0:
+            np.testing.assert_array_equal(got, start + move)  # no farther: taken
+        else:
+            assert np.array_equal(got, start) or space.contains(got)  # farther: refused
+    # an agent that steps towards the corridor gets in, and then never leaves it
     pos = start
-    for _ in range(20):
-        pos = space.resolve(pos, pos + np.array([0.0, -0.01]))
+    for _ in range(40):
+        step = min(moves, key=lambda m: corridor.gap_m((pos + m)[None])[0])
+        pos = space.resolve(pos, pos + step)
         if space.contains(pos):
             break
-    assert space.contains(pos)
-    out = space.resolve(pos, pos + np.array([0.0, 0.2]))
-    assert space.contains(out)
+    assert space.contains(pos) and corridor.gap_m(pos[None])[0] == 0
+    for move in moves * 20:
+        assert space.contains(space.resolve(pos, pos + move))
     # a step out of the box is refused wherever the agent is
     np.testing.assert_array_equal(space.resolve(start, start + np.array([0.0, 5.0])), start)
 

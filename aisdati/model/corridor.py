@@ -8,14 +8,16 @@ a grid of `cell_m` cells so that a lookup costs O(1). A move that would leave it
 same step length is tried with the course turned by 15°, 30°, ... up to 90° either way (the
 smaller turn first), so a rollout follows a channel's bend instead of stopping dead; when no
 turn fits, the agent stays where it is (the paper's sticking). An agent outside the corridor (a
-track that starts off the lanes) moves freely until it enters (`AISSpace.resolve`).
+track that starts off the lanes) may take any move that does not take it farther from the
+corridor (`gap_m`), so it can find its way in; refused every move that does not enter at once,
+it was held at its start for good.
 """
 
 from __future__ import annotations
 
 import io
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
@@ -35,6 +37,7 @@ class Corridor:
     """(lon, lat) of the grid's lower-left corner."""
     step: np.ndarray
     """(dlon, dlat) cell size in degrees."""
+    _gap: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_tracks(
@@ -67,12 +70,33 @@ class Corridor:
             mask[visited] = True  # where ships sailed is water, whatever the coastline says
         return cls(mask, origin, step)
 
-    def allowed(self, points: np.ndarray) -> np.ndarray:
+    def gap_m(self, points: np.ndarray) -> np.ndarray:
+        """Distance (m, to the cell) from each point to the nearest allowed cell: 0 inside;
+        off the grid, the distance to the grid's nearest cell plus that cell's; inf for a
+        non-finite point. The grid's distance map is computed once, on first use."""
+        lat = self.origin[1] + self.step[1] * self.mask.shape[0] / 2
+        cell = self.step * M_PER_DEG * np.array([np.cos(np.radians(lat)), 1.0])
+        if self._gap is None:
+            self._gap = distance_transform_edt(~self.mask, sampling=(cell[1], cell[0]))
+        raw = np.floor((np.asarray(points, np.float64) - self.origin) / self.step)
+        finite = np.all(np.isfinite(raw), axis=-1)
+        raw = np.where(finite[..., None], raw, 0.0)
+        rows, cols = self.mask.shape
+        ij = np.clip(raw, 0, [cols - 1, rows - 1]).astype(int)
+        beyond = np.hypot(*((raw - ij) * cell).T)
+        return np.where(finite, self._gap[ij[..., 1], ij[..., 0]] + beyond, np.inf)
+
+    def _cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Grid indices (col, row) of points and whether each lies on the grid."""
         ij = np.floor((points - self.origin) / self.step)
         ok = np.all(np.isfinite(ij), axis=-1)
         ij = np.where(ok[..., None], ij, -1).astype(int)
         rows, cols = self.mask.shape
         ok &= (ij[..., 0] >= 0) & (ij[..., 0] < cols) & (ij[..., 1] >= 0) & (ij[..., 1] < rows)
+        return ij, ok
+
+    def allowed(self, points: np.ndarray) -> np.ndarray:
+        ij, ok = self._cells(points)
         out = np.zeros(ok.shape, dtype=bool)
         out[ok] = self.mask[ij[ok][:, 1], ij[ok][:, 0]]
         return out
