@@ -228,16 +228,12 @@ class AISSpace:
     def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """Rows [N, 2] (or one point): where each move ends (sticking or sliding). The corridor
         keeps an agent in, it does not hold one out: an agent outside it (a track that starts
-        off the training tracks' lanes) takes any move that does not take it farther from the
-        corridor, so it can find its way in (held to moves that enter at once, it could stay
-        at its start for good)."""
+        off the training tracks' lanes) takes moves, turned if need be, that take it no farther
+        from the corridor, so it finds its way in (`Corridor.slide`)."""
         single = np.ndim(proposed) == 1
         pos, prop = np.atleast_2d(position), np.atleast_2d(proposed)
         if self.corridor is not None:
-            inside = self.corridor.allowed(pos)
-            slid = self.corridor.slide(pos, prop)
-            nearer = self.corridor.gap_m(prop) <= self.corridor.gap_m(pos)
-            prop = np.where((inside | ~nearer)[:, None], slid, prop)
+            prop = self.corridor.slide(pos, prop)
         out = np.where(self._in_box(prop)[:, None], prop, pos)
         return out[0] if single else out
 

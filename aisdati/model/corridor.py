@@ -7,10 +7,10 @@ training tracks buffered by `buffer_km`, minus land where a coastline is availab
 a grid of `cell_m` cells so that a lookup costs O(1). A move that would leave it *slides*: the
 same step length is tried with the course turned by 15°, 30°, ... up to 90° either way (the
 smaller turn first), so a rollout follows a channel's bend instead of stopping dead; when no
-turn fits, the agent stays where it is (the paper's sticking). An agent outside the corridor (a
-track that starts off the lanes) may take any move that does not take it farther from the
-corridor (`gap_m`), so it can find its way in; refused every move that does not enter at once,
-it was held at its start for good.
+turn fits, the agent stays where it is (the paper's sticking). The same rule holds an agent
+outside the corridor (a track that starts off the lanes) to moves that take it no farther from
+the corridor (`gap_m`), turned like the others, so it finds its way in; refused every move that
+does not enter at once, it was held at its start for good.
 """
 
 from __future__ import annotations
@@ -102,10 +102,14 @@ class Corridor:
         return out
 
     def slide(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        """Where each agent ends up: the proposed point if allowed, else the smallest turn of the
-        same step that is allowed, else where it is. Rows of [N, 2] arrays."""
-        out = np.where(self.allowed(proposed)[:, None], proposed, position)
-        todo = ~self.allowed(proposed) & np.all(np.isfinite(proposed), axis=1)
+        """Where each agent ends up: the proposed point if it takes the agent no farther from
+        the corridor (`gap_m`; inside, that is staying inside), else the smallest turn of the
+        same step that does, else where it is. Rows of [N, 2] arrays."""
+        limit = self.gap_m(position)
+        finite = np.all(np.isfinite(proposed), axis=1)
+        fits = finite & (self.gap_m(proposed) <= limit)
+        out = np.where(fits[:, None], proposed, position)
+        todo = ~fits & finite
         if not todo.any():
             return out
         coslat = np.cos(np.radians(position[todo, 1]))
@@ -117,7 +121,7 @@ class Corridor:
             rx = d[:, 0] * np.cos(a) + d[:, 1] * np.sin(a)
             ry = -d[:, 0] * np.sin(a) + d[:, 1] * np.cos(a)
             cand = position[todo] + np.column_stack([rx / coslat, ry])
-            ok = ~found & self.allowed(cand)
+            ok = ~found & (self.gap_m(cand) <= limit[todo])
             result[ok] = cand[ok]
             found |= ok
             if found.all():
