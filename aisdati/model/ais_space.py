@@ -154,6 +154,12 @@ def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:
     return LaneConfig(**values)
 
 
+def state_width(state: str, fourier: int) -> int:
+    """Width of the agent's state: the position (2) or position and motion (5), plus sin and
+    cos of both coordinates at each Fourier octave (the layout of `AISSpace.features`)."""
+    return (5 if state == "motion" else 2) + 4 * fourier
+
+
 def region_box(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     allpos = np.concatenate(positions)
     lo, hi = allpos.min(axis=0), allpos.max(axis=0)
@@ -198,7 +204,7 @@ class AISSpace:
 
     @property
     def state_dim(self) -> int:
-        return len(self.state_bounds[0])
+        return state_width(self.config.state, self.config.fourier)
 
     @property
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:

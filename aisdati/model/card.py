@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.errors import UserError
-from aisdati.model.ais_space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN
+from aisdati.model.ais_space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, state_width
 
 MAX_MMSI = 2**53
 _MISSING = object()
@@ -186,8 +186,7 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
             card.integer(f"seeds[{i}]", value=seed)
     if fmt == "aisdati-dati/1":
         view = lane if isinstance(lane, dict) else {}
-        base = 5 if view.get("state") == "motion" else 2
-        card.choice("state_dim", (base + 4 * view.get("fourier", 0),))
+        card.choice("state_dim", (state_width(view.get("state", ""), view.get("fourier", 0)),))
         card.integer("decision_dim", 3, 3)
         card.choice("config.noise", ("gaussian", "ou"))
         card.number("config.noise_sigma", 0.0, 100.0)

@@ -83,23 +83,13 @@ class Corridor:
         raw = np.where(finite[..., None], raw, 0.0)
         rows, cols = self.mask.shape
         ij = np.clip(raw, 0, [cols - 1, rows - 1]).astype(int)
-        beyond = np.hypot(*((raw - ij) * cell).T)
+        off = (raw - ij) * cell
+        beyond = np.hypot(off[..., 0], off[..., 1])
         return np.where(finite, self._gap[ij[..., 1], ij[..., 0]] + beyond, np.inf)
 
-    def _cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Grid indices (col, row) of points and whether each lies on the grid."""
-        ij = np.floor((points - self.origin) / self.step)
-        ok = np.all(np.isfinite(ij), axis=-1)
-        ij = np.where(ok[..., None], ij, -1).astype(int)
-        rows, cols = self.mask.shape
-        ok &= (ij[..., 0] >= 0) & (ij[..., 0] < cols) & (ij[..., 1] >= 0) & (ij[..., 1] < rows)
-        return ij, ok
-
     def allowed(self, points: np.ndarray) -> np.ndarray:
-        ij, ok = self._cells(points)
-        out = np.zeros(ok.shape, dtype=bool)
-        out[ok] = self.mask[ij[ok][:, 1], ij[ok][:, 0]]
-        return out
+        """Whether each point lies in an allowed cell (no gap to the corridor)."""
+        return self.gap_m(points) == 0.0
 
     def slide(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """Where each agent ends up: the proposed point if it takes the agent no farther from

@@ -71,9 +71,10 @@ class DATIConfig:
     keep: str = "best"
     """Which forward actor a member ends with: "best" (lowest episode metric) or "final"."""
     pretrain_epochs: int = 0
-    """Passes of the L1 terms over the references' own (state, perfect decision) pairs before
-    the adversarial training (`DATITrainer.pretrain`). 0 is the paper's way, random actors; a
-    warm start is a departure (as GAIL is often started from BC) that the AIS lanes measure."""
+    """Passes of the forward actor's L1 pull over the references' own (state, perfect decision)
+    pairs before the adversarial training (`DATITrainer.pretrain`). 0 is the paper's way, random
+    actors; a warm start is a departure (as GAIL is often started from BC) that the AIS lanes
+    measure."""
     adversarial_time2vec: bool = True
     """Whether the actors' adversarial loss also updates the shared Time2Vec (through the
     critics' time features). The paper's code freezes it there (critic.trainable = False when
@@ -145,9 +146,9 @@ class LatentNoise:
             raise ValueError("give one noise process per member")
         self.state = torch.zeros(len(generators), 1, cfg.network.latent_dim)
 
-    def draw(self, k: int) -> Tensor:
-        """A [1, latent] draw of N(0, σ²) from member k's generator."""
-        shape = (1, self.cfg.network.latent_dim)
+    def draw(self, k: int, rows: int = 1) -> Tensor:
+        """A [rows, latent] draw of N(0, σ²) from member k's generator."""
+        shape = (rows, self.cfg.network.latent_dim)
         return torch.randn(shape, generator=self.generators[k]) * self.cfg.noise_sigma
 
     def reset(self, k: int) -> None:
@@ -395,14 +396,9 @@ class DATITrainer:
             s, step, a = (
                 torch.stack([d[i][p] for d, p in zip(data, picks, strict=True)]) for i in range(3)
             )
-            eta = torch.stack(
-                [
-                    torch.randn(c.batch_size, c.network.latent_dim, generator=g)
-                    for g in self.generators
-                ]
-            )
+            eta = torch.stack([self.noise.draw(k, c.batch_size) for k in range(len(data))])
             t = nets.time_features(step[..., None])
-            pull = (nets.forward_actor(s, eta * c.noise_sigma, t) - a).abs().mean(dim=(1, 2))
+            pull = (nets.forward_actor(s, eta, t) - a).abs().mean(dim=(1, 2))
             self.opt_l1.zero_grad(set_to_none=True)
             (pull.sum() * c.l1_weight).backward()
             self.opt_l1.step()
