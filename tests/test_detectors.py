@@ -124,6 +124,19 @@ def test_corridor_refuses_steps_out_of_it_and_onto_land(tracks):
     assert not (dry.allowed(onland) & ~corridor.allowed(onland)).any()
 
 
+def test_an_agent_at_the_closed_end_of_a_channel_turns_round():
+    # a channel 20 km long running east from 129 W at 53 N, 1 km either side
+    channel = np.column_stack([np.linspace(-129.0, -128.7, 60), np.full(60, 53.0)])
+    corridor = Corridor.from_tracks([channel], buffer_km=1.0)
+    tip = channel[:1]
+    west = tip + np.array([[-0.045, 0.0]])  # 3 km further west: out of the channel
+    got = corridor.slide(tip, west)
+    # a quarter turn leaves the channel too (3 km north or south); turned (nearly) round it
+    # sails east along the channel
+    assert not corridor.allowed(tip + np.array([[0.0, 0.027], [0.0, -0.027]])).any()
+    assert corridor.allowed(got).all() and got[0, 0] > tip[0, 0] + 0.04
+
+
 def test_env_with_a_corridor_never_leaves_it(tracks):
     source = build_source(tracks[:8], LaneConfig(region="corridor", corridor_km=1.0))
     env = make_env(source)

@@ -14,7 +14,7 @@ import torch
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.train import train_detector
 from aisdati.errors import UserError
-from aisdati.model.ais import TrainSettings
+from aisdati.model.ais import TrainSettings, _curves
 from aisdati.model.ais_policy import dati_act
 from aisdati.model.ais_space import PRESETS, lane_config
 from aisdati.model.dati import DATIConfig, DATITrainer
@@ -151,3 +151,29 @@ def test_pretrain_option_reaches_the_card(kitimat, tmp_path):
     _, card = _train(kitimat, tmp_path, replace(SMALL, pretrain=2))
     assert card["lane_config"]["pretrain"] == 2
     assert card["config"]["pretrain_epochs"] == 2
+
+
+def test_the_pretrained_actor_is_kept_unless_an_episode_beats_it_on_validation():
+    env = make_family_env(replace(get_family("circles"), steps=12))
+    env.reset(seed=0)
+    demo = env.demonstration(env.reference)
+
+    calls: list[int] = []
+
+    def validate(trainer: DATITrainer, k: int) -> float:
+        calls.append(k)
+        return 1.0 if len(calls) == 1 else 2.0  # no episode beats the warm start
+
+    cfg = DATIConfig(episodes=2, batch_size=16, patience=0, pretrain_epochs=5)
+    trainer = DATITrainer([env], [0], cfg, validate)
+    trainer.pretrain([demo])
+    assert trainer.pretrained_metric == [1.0]
+    warm = {k: v.clone() for k, v in trainer.nets.forward_actor.state_dict().items()}
+    final = trainer.train()
+    assert [h.validation for h in trainer.history] == [2.0, 2.0]
+    live = trainer.nets.forward_actor.state_dict()
+    assert any(not torch.equal(warm[k], live[k]) for k in warm)  # training moved on
+    kept = final.forward_actor.state_dict()
+    assert all(torch.equal(warm[k], kept[k]) for k in warm)
+    assert _curves(trainer.history, True, 2, trainer.pretrained_metric[0])["best_episode"] == 0
+    assert _curves(trainer.history, True, 2, 3.0)["best_episode"] == 1

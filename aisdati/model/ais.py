@@ -237,15 +237,21 @@ def model_card(
     history: Sequence[EpisodeLog],
     wall: float,
     steps: int,
+    pretrained: Sequence[float | None] = (),
 ) -> dict[str, Any]:
     """The card of a trained lane model; with several members (`LaneConfig.members`) the
-    top-level curves are the first member's and `training.members` holds each member's."""
+    top-level curves are the first member's and `training.members` holds each member's.
+    `pretrained` holds each member's validation score after pretraining, in member order."""
     by_member: dict[int, list[EpisodeLog]] = {}
     for g in history:
         by_member.setdefault(g.member, []).append(g)
     validation, cap = source.space.config.validation, settings.episodes
-    curves = [_curves(logs, validation, cap) for _, logs in sorted(by_member.items())]
-    first = curves[0] if curves else _curves([], validation, cap)
+    starts = list(pretrained) + [None] * (len(by_member) - len(pretrained))
+    curves = [
+        _curves(logs, validation, cap, start)
+        for (_, logs), start in zip(sorted(by_member.items()), starts, strict=False)
+    ]
+    first = curves[0] if curves else _curves([], validation, cap, None)
     training = {
         **first,
         "episodes_max": settings.episodes,
@@ -265,13 +271,20 @@ def model_card(
     }
 
 
-def _curves(logs: Sequence[EpisodeLog], validation: bool, episodes: int) -> dict[str, Any]:
-    """One member's training curves and the episode its kept actor comes from."""
+def _curves(
+    logs: Sequence[EpisodeLog], validation: bool, episodes: int, pretrained: float | None
+) -> dict[str, Any]:
+    """One member's training curves and the episode its kept actor comes from (0: the
+    pretrained actor, which no episode beat on validation)."""
     key = (lambda g: g.validation) if validation else (lambda g: g.mean_loss)
     best = min(logs, key=key) if logs else None
+    best_episode = best.episode if best else None
+    if pretrained is not None and (best is None or pretrained <= key(best)):
+        best_episode = 0
     return {
         "episodes_run": len(logs),
-        "best_episode": best.episode if best else None,
+        "best_episode": best_episode,
+        "pretrained_validation_dtw_m": None if pretrained is None else round(pretrained, 1),
         "stopped_early": bool(logs and logs[-1].stopped and len(logs) < episodes),
         "mean_reward": [round(g.mean_reward, 4) for g in logs],
         "final_dtw_m": [round(g.final_dtw, 1) for g in logs],
@@ -403,7 +416,9 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
         return wall_before + time.perf_counter() - t0
 
     def checkpoint() -> None:
-        card = model_card(settings, source, data, trainer.history, elapsed(), steps)
+        card = model_card(
+            settings, source, data, trainer.history, elapsed(), steps, trainer.pretrained_metric
+        )
         card["training"]["finished"] = trainer.done
         save_networks(stem, trainer.final, config, card)
         if source.space.corridor is not None:
@@ -437,7 +452,9 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     if resumed_from and not steps:
         checkpoint()
     wall = elapsed()
-    card = model_card(settings, source, data, trainer.history, wall, steps)
+    card = model_card(
+        settings, source, data, trainer.history, wall, steps, trainer.pretrained_metric
+    )
     card["training"]["finished"] = True
     return TrainResult(
         stem.with_suffix(".pt"), card, list(trainer.history), wall, steps, resumed_from
@@ -522,7 +539,8 @@ def train_ais_ensemble(
         mine = slice(k * members, (k + 1) * members)
         history = [h for h in trainer.history if mine.start <= h.member < mine.stop]
         stem = model_stem(s)
-        card = model_card(s, sources[k], datas[k], history, wall, steps)
+        starts = trainer.pretrained_metric[mine]
+        card = model_card(s, sources[k], datas[k], history, wall, steps, starts)
         card["seed"] = seeds[mine.start]
         card["training"]["finished"] = True
         card["training"]["routes_in_ensemble"] = len(settings)

@@ -257,6 +257,8 @@ class DATITrainer:
         self.best_loss = [float("inf")] * n
         self.wait = [0] * n
         self.best_episode = [0] * n
+        self.pretrained_metric: list[float | None] = [None] * n
+        """Each member's validation score right after `pretrain` (None without it)."""
         self.history: list[EpisodeLog] = []
         self._obs = [env.reset(seed=s)[0] for env, s in zip(self.envs, self.seeds, strict=True)]
         self._episode_loss = [0.0] * n
@@ -380,6 +382,7 @@ class DATITrainer:
         L1 terms' optimiser. Each member draws its batches with replacement from its own pairs,
         as many batches as an epoch of the largest member. The cycle terms are left out: the
         untrained backward actor's states would teach the forward actor to ignore the state.
+        With a validator the pretrained actor is scored and kept as episode 0's.
         Call before the first step (`DATIConfig.pretrain_epochs`)."""
         c, nets = self.cfg, self.nets
         if not c.pretrain_epochs:
@@ -402,6 +405,13 @@ class DATITrainer:
             self.opt_l1.zero_grad(set_to_none=True)
             (pull.sum() * c.l1_weight).backward()
             self.opt_l1.step()
+        if self.validate is not None:
+            # the warm start is a candidate like any episode's actor (episode 0): the
+            # adversarial training must beat it on validation to replace it
+            for k in range(len(data)):
+                metric = self.validate(self, k)
+                self.pretrained_metric[k] = self.best_loss[k] = metric
+                self._save_best(k)
 
     def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         obs = torch.as_tensor(np.stack(self._obs), dtype=torch.float32)[:, None, :]

@@ -55,6 +55,7 @@ def trainer_state(trainer: DATITrainer) -> dict[str, Any]:
         "best_loss": list(trainer.best_loss),
         "wait": list(trainer.wait),
         "best_episode": list(trainer.best_episode),
+        "pretrained_metric": list(trainer.pretrained_metric),
         "history": [dict(log.__dict__) for log in trainer.history],
         "obs": [torch.as_tensor(o) for o in trainer._obs],
         "episode_loss": list(trainer._episode_loss),
@@ -92,6 +93,7 @@ def load_trainer_state(
     trainer.best_loss = [float(x) for x in state["best_loss"]]
     trainer.wait = [int(x) for x in state["wait"]]
     trainer.best_episode = [int(x) for x in state["best_episode"]]
+    trainer.pretrained_metric = list(state.get("pretrained_metric", trainer.pretrained_metric))
     trainer.history = [EpisodeLog(**h) for h in state["history"]]
     trainer._obs = [o.numpy().copy() for o in state["obs"]]
     trainer._episode_loss = [float(x) for x in state["episode_loss"]]
