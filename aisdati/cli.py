@@ -665,6 +665,9 @@ def evaluate(
     episodes: int = typer.Option(170, help="Training episodes of dati and bc."),
     patience: int = typer.Option(10, help="DATI early stopping patience; 0 disables."),
     rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts / draws per track."),
+    lane_rollouts: int = typer.Option(
+        30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
+    ),
     near_km: float = typer.Option(10.0, "--near-km", help="nearest: start-distance filter."),
     contamination: float = typer.Option(
         0.05, help="Calibrated flagging: share of training tracks a detector would flag."
@@ -718,6 +721,7 @@ def evaluate(
         episodes=episodes,
         patience=patience,
         rollouts=rollouts,
+        lane_rollouts=lane_rollouts,
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
@@ -908,6 +912,9 @@ def detect(
         None, "--track", help="Judge these track ids instead (repeatable)."
     ),
     rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts per track (paper: 1)."),
+    lane_rollouts: int = typer.Option(
+        30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
+    ),
     threshold: float = typer.Option(0.75, help="Flag normalised scores above this, in (0, 1]."),
     top_percent: float | None = typer.Option(
         None, "--top-percent", help="Flag this percentage of highest scores instead."
@@ -957,6 +964,7 @@ def detect(
         track_ids=tuple(track or ()),
         score=score.strip().lower(),
         rollouts=rollouts,
+        lane_rollouts=lane_rollouts,
         threshold=threshold,
         top_percent=top_percent,
         contamination=contamination,

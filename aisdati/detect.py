@@ -73,6 +73,7 @@ class DetectSettings:
     """Explicit test tracks (overrides the cluster and the start rule)."""
     score: str = "lane"
     rollouts: int = 10
+    lane_rollouts: int = ScoreSettings().lane_rollouts
     threshold: float = 0.75
     top_percent: float | None = None
     contamination: float | None = None
@@ -84,7 +85,11 @@ class DetectSettings:
     @property
     def how(self) -> ScoreSettings:
         return ScoreSettings(
-            score=self.score, rollouts=self.rollouts, near_km=self.near_km, seed=self.seed
+            score=self.score,
+            rollouts=self.rollouts,
+            lane_rollouts=self.lane_rollouts,
+            near_km=self.near_km,
+            seed=self.seed,
         )
 
 
@@ -204,8 +209,11 @@ def check_settings(settings: DetectSettings) -> None:
         raise UserError(f"--contamination must be in (0, 1), got {settings.contamination:g}")
     if settings.top_percent is not None and settings.contamination is not None:
         raise UserError("give --top-percent or --contamination, not both")
-    if settings.rollouts < 1:
-        raise UserError(f"--rollouts must be at least 1, got {settings.rollouts}")
+    if settings.rollouts < 1 or settings.lane_rollouts < 1:
+        raise UserError(
+            f"--rollouts and --lane-rollouts must be at least 1, got {settings.rollouts} and "
+            f"{settings.lane_rollouts}"
+        )
     if not settings.near_km > 0:
         raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
     if settings.score not in SCORES:

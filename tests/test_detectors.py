@@ -289,6 +289,11 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     # the lane's longer rollouts begin with the rollout score's own: that score is unchanged,
     # and a lane that reaches further is nowhere farther from a report
     np.testing.assert_array_equal(lane_s.parts["rollout"], best_s.score_m)
+    # the lane holds L rollouts, the K scored ones first, drawn as without a lane
+    policy, starts = det.policy(), [t.positions for t in few]
+    _, _, k3 = policy.rollout_scores(starts, 3, 0, 2.0)
+    _, _, l7 = policy.rollout_scores(starts, 3, 0, 2.0, lane_rollouts=7)
+    assert all(len(b) == 7 and np.array_equal(b[:3], a) for a, b in zip(k3, l7, strict=True))
     short = det.score(few, ScoreSettings(score="lane", rollouts=3, lane_reach=1.0))
     for a, b in zip(lane_s.profiles, short.profiles, strict=True):
         assert np.all(a <= b + 1e-6)

@@ -195,6 +195,7 @@ def test_bad_label_files_are_refused_before_any_work(trained, tmp_path, text, ne
         (("--threshold", "nan"), "--threshold must be a finite number in \\(0, 1\\], got nan"),
         (("--top-percent", "inf"), "--top-percent must be a finite number .*got inf"),
         (("--top-percent", "-1"), "--top-percent must be a finite number .*got -1"),
+        (("--lane-rollouts", "0"), "--lane-rollouts must be at least 1, got 1 and 0"),
     ],
 )
 def test_detect_float_options(trained, tmp_path, extra, needle):

@@ -56,8 +56,9 @@ class PolicyDetector(Detector):
         evidence: dict[str, list[np.ndarray]] = {}
         if wanted & {"rollout", "lane"}:
             reach = how.lane_reach if "lane" in wanted else 1.0
+            lane = how.lane_rollouts if "lane" in wanted else how.rollouts
             parts["rollout"], best, every = policy.rollout_scores(
-                positions, how.rollouts, how.seed, reach
+                positions, how.rollouts, how.seed, reach, lane
             )
             evidence["rollout"] = evidence["lane"] = best
             if "rollout" in wanted:

@@ -50,6 +50,7 @@ class EvaluateSettings:
     episodes: int = 170
     patience: int = 10
     rollouts: int = 10
+    lane_rollouts: int = ScoreSettings().lane_rollouts
     near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
@@ -76,8 +77,8 @@ def check(settings: EvaluateSettings) -> None:
         raise UserError(f"--train-fraction must be in [0.1, 0.9], got {settings.train_fraction:g}")
     if not 0.0 < settings.contamination < 0.5:
         raise UserError(f"--contamination must be in (0, 0.5), got {settings.contamination:g}")
-    if settings.rollouts < 1 or settings.episodes < 1:
-        raise UserError("--rollouts and --episodes must be at least 1")
+    if min(settings.rollouts, settings.lane_rollouts, settings.episodes) < 1:
+        raise UserError("--rollouts, --lane-rollouts and --episodes must be at least 1")
     if not np.isfinite(settings.near_km) or settings.near_km <= 0:
         raise UserError(f"--near-km must be a positive number, got {settings.near_km:g}")
 
@@ -144,7 +145,11 @@ class _Prepared:
 
 def _how(settings: EvaluateSettings) -> ScoreSettings:
     return ScoreSettings(
-        score="both", rollouts=settings.rollouts, near_km=settings.near_km, seed=settings.seed
+        score="both",
+        rollouts=settings.rollouts,
+        lane_rollouts=settings.lane_rollouts,
+        near_km=settings.near_km,
+        seed=settings.seed,
     )
 
 

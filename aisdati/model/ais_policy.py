@@ -114,10 +114,14 @@ class AISPolicy:
         rollouts: int,
         seed: int = 0,
         reach: float = 1.0,
+        lane_rollouts: int | None = None,
     ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
         """Best-of-K mean great-circle DTW (metres) of each track over its own number of
-        steps, its best rollout, and all its K rollouts run `reach` x as many steps
-        ([K, steps + 1, 2]: the lane the policy generates from the track's start)."""
+        steps, its best rollout, and all its L rollouts (`lane_rollouts`, default K) run
+        `reach` x as many steps ([L, steps + 1, 2]: the lane the policy generates from the
+        track's start). The K scored rollouts come first and are drawn as without a lane, so
+        the rollout score does not depend on L; the other L - K come from a stream of their
+        own."""
         starts = np.array([t[0] for t in tracks])
         horizons = np.array([len(t) - 1 for t in tracks])
         paths = self.generate(starts, horizons, rollouts, seed, reach)
@@ -130,6 +134,14 @@ class AISPolicy:
         best = dists.argmin(axis=1)
         runs = np.ceil(horizons * reach).astype(int)
         every = [paths[i * rollouts : (i + 1) * rollouts, : r + 1] for i, r in enumerate(runs)]
+        more = (lane_rollouts or rollouts) - rollouts
+        if more > 0:
+            stream = int(np.random.SeedSequence([seed, 1]).generate_state(1)[0])
+            extra = self.generate(starts, horizons, more, stream, reach)
+            every = [
+                np.concatenate([e, extra[i * more : (i + 1) * more, : r + 1]])
+                for i, (e, r) in enumerate(zip(every, runs, strict=True))
+            ]
         chosen = [e[b, : h + 1].copy() for e, b, h in zip(every, best, horizons, strict=True)]
         return dists[np.arange(len(tracks)), best], chosen, every
 

@@ -3,16 +3,15 @@
 The paper keeps the agent inside a region of interest drawn around the traffic, sticking at its
 edge. A lon/lat box around winding channels contains the land between them, so rollouts that
 stick only at the box cut across islands and leave the lanes. The corridor is the union of the
-training tracks buffered by `buffer_km`, minus land where a coastline is available, rasterised on
-a grid of `cell_m` cells so that a lookup costs O(1). A move that would leave it *slides*: the
-same step length is tried with the course turned by 15°, 30°, ... up to 180° either way (the
-smaller turn first), so a rollout follows a channel's bend instead of stopping dead, and an agent
-at the closed end of a channel (a berth, the tip of an inlet) turns round instead of staying
-there for good; when no turn fits, the agent stays where it is (the paper's sticking). The same rule holds an agent
-outside the corridor (a track that starts off the lanes) to moves that take it no farther from
-the corridor (`gap_m`), turned like the others, so it finds its way in; refused every move that
-does not enter at once, it was held at its start for good.
-"""
+training tracks buffered by `buffer_km`, minus land where a coastline is available, rasterised
+on a grid of `cell_m` cells so that a lookup costs O(1). A move that would leave it *slides*:
+the same step length is tried with the course turned by 15°, 30°, ... up to 180° either way (the
+smaller turn first), so a rollout follows a channel's bend instead of stopping dead, and an
+agent at the closed end of a channel (a berth, the tip of an inlet) turns round instead of
+staying there for good; when no turn fits, the agent stays where it is (the paper's sticking).
+The same rule holds an agent outside the corridor (a track that starts off the lanes) to moves
+that take it no farther from the corridor (`gap_m`), turned like the others, so it finds its way
+in; refused every move that does not enter at once, it was held at its start for good."""
 
 from __future__ import annotations
 
@@ -26,7 +25,7 @@ from scipy.ndimage import distance_transform_edt
 from aisdati.geo import EARTH_RADIUS_M
 
 M_PER_DEG = np.pi * EARTH_RADIUS_M / 180.0
-TURNS_DEG = tuple(a for k in range(15, 180, 15) for a in (k, -k)) + (180,)
+TURNS_DEG = (*(a for k in range(15, 180, 15) for a in (k, -k)), 180)
 """Courses tried, in this order, when a step would leave the corridor. Up to 90° was not
 enough: Kitimat track 97 starts at the tip of an inlet open only to the east-south-east, its
 policy heads north-west like its route, and its rollouts never left the start (131 km)."""
