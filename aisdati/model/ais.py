@@ -237,19 +237,19 @@ def model_card(
     history: Sequence[EpisodeLog],
     wall: float,
     steps: int,
-    pretrained: Sequence[float | None] = (),
+    pretrained: dict[int, float | None],
 ) -> dict[str, Any]:
     """The card of a trained lane model; with several members (`LaneConfig.members`) the
     top-level curves are the first member's and `training.members` holds each member's.
-    `pretrained` holds each member's validation score after pretraining, in member order."""
+    `pretrained` maps each member (as `EpisodeLog.member` numbers it) to its validation score
+    after pretraining."""
     by_member: dict[int, list[EpisodeLog]] = {}
     for g in history:
         by_member.setdefault(g.member, []).append(g)
     validation, cap = source.space.config.validation, settings.episodes
-    starts = list(pretrained) + [None] * (len(by_member) - len(pretrained))
     curves = [
-        _curves(logs, validation, cap, start)
-        for (_, logs), start in zip(sorted(by_member.items()), starts, strict=False)
+        _curves(logs, validation, cap, pretrained.get(member))
+        for member, logs in sorted(by_member.items())
     ]
     first = curves[0] if curves else _curves([], validation, cap, None)
     training = {
@@ -411,14 +411,13 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     t0 = time.perf_counter()
     if not resumed_from:
         trainer.pretrain(demonstrations(envs))
+    pretrained = dict(enumerate(trainer.pretrained_metric))  # members 0 .. M-1
 
     def elapsed() -> float:
         return wall_before + time.perf_counter() - t0
 
     def checkpoint() -> None:
-        card = model_card(
-            settings, source, data, trainer.history, elapsed(), steps, trainer.pretrained_metric
-        )
+        card = model_card(settings, source, data, trainer.history, elapsed(), steps, pretrained)
         card["training"]["finished"] = trainer.done
         save_networks(stem, trainer.final, config, card)
         if source.space.corridor is not None:
@@ -452,9 +451,7 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
     if resumed_from and not steps:
         checkpoint()
     wall = elapsed()
-    card = model_card(
-        settings, source, data, trainer.history, wall, steps, trainer.pretrained_metric
-    )
+    card = model_card(settings, source, data, trainer.history, wall, steps, pretrained)
     card["training"]["finished"] = True
     return TrainResult(
         stem.with_suffix(".pt"), card, list(trainer.history), wall, steps, resumed_from
@@ -539,7 +536,7 @@ def train_ais_ensemble(
         mine = slice(k * members, (k + 1) * members)
         history = [h for h in trainer.history if mine.start <= h.member < mine.stop]
         stem = model_stem(s)
-        starts = trainer.pretrained_metric[mine]
+        starts = {m: trainer.pretrained_metric[m] for m in range(mine.start, mine.stop)}
         card = model_card(s, sources[k], datas[k], history, wall, steps, starts)
         card["seed"] = seeds[mine.start]
         card["training"]["finished"] = True
