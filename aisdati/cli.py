@@ -57,6 +57,12 @@ SELFTEST_PRESET_OPTION = typer.Option(
     "far as it reads: final actor, Time2Vec frozen under the adversarial loss, OU noise at the "
     "family's dt but Gaussian for Ribbons, exact region and speeds, references per seed).",
 )
+LANE_COURSE_OPTION = typer.Option(
+    4.0,
+    "--lane-course-km",
+    help="Lane score: what sailing against the lane's course costs, in km (across it: 0.7 x "
+    "as much; 0: position only). As the models were calibrated (training uses the default).",
+)
 LANE_OPTION = typer.Option(
     None,
     "--lane",
@@ -72,7 +78,6 @@ def lane_settings(preset: str, lane: list[str] | None) -> dict[str, Any]:
     """The `preset` (its name and overrides, for the model card) and `lane` (the resolved
     LaneConfig) of the train and evaluate settings, from --preset and --lane."""
     from aisdati.model.ais_space import lane_config
-
 
     name = preset if not lane else f"{preset} + {', '.join(lane)}"
     return {"preset": name, "lane": lane_config(preset, lane or ())}
@@ -668,6 +673,7 @@ def evaluate(
     lane_rollouts: int = typer.Option(
         30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
     ),
+    lane_course_km: float = LANE_COURSE_OPTION,
     near_km: float = typer.Option(10.0, "--near-km", help="nearest: start-distance filter."),
     contamination: float = typer.Option(
         0.05, help="Calibrated flagging: share of training tracks a detector would flag."
@@ -705,6 +711,7 @@ def evaluate(
         {
             "--train-fraction": train_fraction,
             "--near-km": near_km,
+            "--lane-course-km": lane_course_km,
             "--contamination": contamination,
             "--seed": seed,
         }
@@ -722,6 +729,7 @@ def evaluate(
         patience=patience,
         rollouts=rollouts,
         lane_rollouts=lane_rollouts,
+        lane_course_km=lane_course_km,
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
@@ -915,6 +923,7 @@ def detect(
     lane_rollouts: int = typer.Option(
         30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
     ),
+    lane_course_km: float = LANE_COURSE_OPTION,
     threshold: float = typer.Option(0.75, help="Flag normalised scores above this, in (0, 1]."),
     top_percent: float | None = typer.Option(
         None, "--top-percent", help="Flag this percentage of highest scores instead."
@@ -952,6 +961,7 @@ def detect(
             "--top-percent": top_percent,
             "--contamination": contamination,
             "--near-km": near_km,
+            "--lane-course-km": lane_course_km,
         }
     )
     settings = DetectSettings(
@@ -965,6 +975,7 @@ def detect(
         score=score.strip().lower(),
         rollouts=rollouts,
         lane_rollouts=lane_rollouts,
+        lane_course_km=lane_course_km,
         threshold=threshold,
         top_percent=top_percent,
         contamination=contamination,

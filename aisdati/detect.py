@@ -74,6 +74,7 @@ class DetectSettings:
     score: str = "lane"
     rollouts: int = 10
     lane_rollouts: int = ScoreSettings().lane_rollouts
+    lane_course_km: float = ScoreSettings().lane_course_km
     threshold: float = 0.75
     top_percent: float | None = None
     contamination: float | None = None
@@ -88,6 +89,7 @@ class DetectSettings:
             score=self.score,
             rollouts=self.rollouts,
             lane_rollouts=self.lane_rollouts,
+            lane_course_km=self.lane_course_km,
             near_km=self.near_km,
             seed=self.seed,
         )

@@ -7,6 +7,8 @@ rule is eq. (5) of the paper: a flat-Earth step whose longitude is rescaled by c
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 EARTH_RADIUS_M = 6_371_008.8
@@ -74,14 +76,50 @@ def unit_vectors(lonlat: np.ndarray) -> np.ndarray:
     )
 
 
-def lane_distances(track: np.ndarray, lane: np.ndarray) -> np.ndarray:
-    """For each point of `track` (lon, lat), the great-circle distance (m) to the nearest point
-    of `lane` [m, 2], a cloud of points in no order (several rollouts or training tracks
-    stacked): how far the track is from anywhere that traffic goes, whatever the timing. A
-    k-d tree on unit vectors finds the nearest chord, which orders points as the arc does."""
+def courses_deg(polyline: np.ndarray) -> np.ndarray:
+    """Course at each point of a polyline (lon, lat) [n, 2], from its neighbours (the
+    previous point to the next; the ends use the one neighbour they have)."""
+    p = np.asarray(polyline, np.float64)
+    nxt = np.r_[np.arange(1, len(p)), len(p) - 1]
+    prv = np.r_[0, np.arange(len(p) - 1)]
+    return initial_bearing_deg(p[prv, 0], p[prv, 1], p[nxt, 0], p[nxt, 1])
+
+
+def _course_vectors(polyline: np.ndarray) -> np.ndarray:
+    """[n, 2] unit (cos, sin) of each point's course; zero where the point does not move
+    (a stuck rollout has no course, so it is equally near every heading)."""
+    p = np.asarray(polyline, np.float64)
+    theta = np.radians(courses_deg(p))
+    nxt = np.r_[np.arange(1, len(p)), len(p) - 1]
+    prv = np.r_[0, np.arange(len(p) - 1)]
+    moves = np.any(p[nxt] != p[prv], axis=1)
+    return np.column_stack([np.cos(theta), np.sin(theta)]) * moves[:, None]
+
+
+def lane_distances(
+    track: np.ndarray, lane: Sequence[np.ndarray], course_m: float = 0.0
+) -> np.ndarray:
+    """For each point of `track` (lon, lat), its distance (m) to the nearest point of `lane`,
+    polylines [n_i, 2] (several rollouts or training tracks) pooled into one cloud: how far the
+    track is from anywhere that traffic goes, whatever the timing.
+
+    With `course_m` > 0 the distance also weighs the course: sqrt(d^2 + (course_m sin(dθ/2))^2)
+    for great-circle distance d and course difference dθ, so sailing against the traffic, or
+    across it, costs up to `course_m` (a loiter's circles do both where the lane's points are
+    near). A k-d tree on unit vectors (scaled to metres), joined by the course vectors scaled by
+    course_m / 2, finds the nearest point in that metric (chord for arc: equal to well under a
+    millimetre at lane scales); the distance is then recomputed exactly."""
     from scipy.spatial import cKDTree
 
-    chord, _ = cKDTree(unit_vectors(np.asarray(lane, np.float64))).query(
-        unit_vectors(np.asarray(track, np.float64))
-    )
-    return 2 * EARTH_RADIUS_M * np.arcsin(np.minimum(chord / 2, 1.0))
+    track = np.asarray(track, np.float64)
+    cloud = np.concatenate([np.asarray(p, np.float64) for p in lane])
+    keys = [EARTH_RADIUS_M * unit_vectors(cloud)]
+    query = [EARTH_RADIUS_M * unit_vectors(track)]
+    if course_m > 0:
+        keys.append(course_m / 2 * np.concatenate([_course_vectors(p) for p in lane]))
+        query.append(course_m / 2 * _course_vectors(track))
+    _, idx = cKDTree(np.hstack(keys)).query(np.hstack(query))
+    d = haversine_m(track[:, 0], track[:, 1], cloud[idx, 0], cloud[idx, 1])
+    if course_m > 0:
+        d = np.hypot(d, np.linalg.norm(query[1] - keys[1][idx], axis=1))
+    return d

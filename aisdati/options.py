@@ -112,6 +112,7 @@ OPTION_RANGES: dict[str, Range] = {
     "--threshold": Range(low=0.0, low_open=True, high=1.0),
     "--top-percent": Range(low=0.0, low_open=True, high=100.0),
     "--near-km": Range(low=0.0, low_open=True, high=20_037.5),  # half the Earth's circumference
+    "--lane-course-km": Range(low=0.0, high=1000.0),
     "--contamination": Range(low=0.0, low_open=True, high=1.0, high_open=True),
     # evaluate
     "--train-fraction": Range(low=0.1, high=0.9),

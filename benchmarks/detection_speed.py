@@ -61,7 +61,10 @@ def bench_lane(tracks: list[Track], rollouts: int) -> float:
     policy.rollout_scores(positions[:2], rollouts, 0, how.lane_reach)  # compile
     t0 = time.perf_counter()
     _, _, every = policy.rollout_scores(positions, rollouts, 0, how.lane_reach, how.lane_rollouts)
-    [tail_mean(lane_distances(p, e.reshape(-1, 2))) for p, e in zip(positions, every, strict=True)]
+    [
+        tail_mean(lane_distances(p, list(e), how.lane_course_km * 1000.0))
+        for p, e in zip(positions, every, strict=True)
+    ]
     return time.perf_counter() - t0
 
 

@@ -42,7 +42,7 @@ def test_nearest_search_is_exact_despite_pruning(tracks):
 
 
 def test_nearest_calibration_leaves_each_vessel_out(tracks):
-    det = NearestDetector.fit("n", tracks, {}, near_km=10.0)
+    det = NearestDetector.fit("n", tracks, {})
     cal = np.asarray(det.card["calibration"]["nearest"])
     assert np.all(cal > 0)  # no track is compared with itself or its own vessel
     scored = det.score(tracks[:3], ScoreSettings())
@@ -280,9 +280,11 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     det = load_detector(tmp_path / "other")
     assert det.policy().space.config == lane and det.corridor is not None
     # the lane of K rollouts is never farther from a report than the best rollout's match
+    # (by position: the course weight is a metric of its own)
     assert len(card["calibration"]["lane"]) == len(ids)
     few = load_tracks(kitimat, list(ids[:2]))
-    lane_s = det.score(few, ScoreSettings(score="lane", rollouts=3), also=("rollout",))
+    where = ScoreSettings(score="lane", rollouts=3, lane_course_km=0.0)
+    lane_s = det.score(few, where, also=("rollout",))
     best_s = det.score(few, ScoreSettings(score="rollout", rollouts=3))
     for a, b in zip(lane_s.profiles, best_s.profiles, strict=True):
         assert np.all(a <= b + 1e-6)
@@ -294,7 +296,7 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     _, _, k3 = policy.rollout_scores(starts, 3, 0, 2.0)
     _, _, l7 = policy.rollout_scores(starts, 3, 0, 2.0, lane_rollouts=7)
     assert all(len(b) == 7 and np.array_equal(b[:3], a) for a, b in zip(k3, l7, strict=True))
-    short = det.score(few, ScoreSettings(score="lane", rollouts=3, lane_reach=1.0))
+    short = det.score(few, replace(where, lane_reach=1.0))
     for a, b in zip(lane_s.profiles, short.profiles, strict=True):
         assert np.all(a <= b + 1e-6)
     # a card from before lane configurations and calibration: the paper's set-up (the paper's
@@ -349,13 +351,47 @@ def test_lane_distances_equal_the_brute_force_nearest_great_circle_distance(trac
     brute = haversine_m(
         track[:, None, 0], track[:, None, 1], lane[None, :, 0], lane[None, :, 1]
     ).min(axis=1)
-    np.testing.assert_allclose(lane_distances(track, lane), brute, rtol=1e-6, atol=1e-3)
+    np.testing.assert_allclose(lane_distances(track, [lane]), brute, rtol=1e-6, atol=1e-3)
+
+
+def test_the_course_weighted_lane_distance_is_the_brute_force_minimum(tracks):
+    from aisdati.geo import courses_deg, haversine_m, lane_distances
+
+    track, lane = tracks[0].positions, [t.positions for t in tracks[1:4]]
+    cloud = np.concatenate(lane)
+    courses = np.concatenate([courses_deg(p) for p in lane])
+    dtheta = np.radians(courses_deg(track)[:, None] - courses[None, :])
+    gc = haversine_m(track[:, None, 0], track[:, None, 1], cloud[None, :, 0], cloud[None, :, 1])
+    brute = np.hypot(gc, 3000.0 * np.sin(dtheta / 2)).min(axis=1)
+    np.testing.assert_allclose(lane_distances(track, lane, 3000.0), brute, rtol=1e-6, atol=1e-3)
+
+
+def test_sailing_a_lane_backwards_costs_the_course_weight(tracks):
+    from aisdati.geo import lane_distances
+
+    track = tracks[0].positions
+    np.testing.assert_allclose(lane_distances(track, [track], 3000.0), 0.0, atol=1e-6)
+    backwards = lane_distances(track[::-1], [track], 3000.0)
+    assert np.all(backwards <= 3000.0 + 1e-6)
+    assert np.median(backwards) > 2500.0  # the same places, the opposite way
+    np.testing.assert_allclose(lane_distances(track[::-1], [track]), 0.0, atol=1e-6)
+
+
+def test_a_threshold_needs_the_course_weight_the_model_was_calibrated_with(tracks):
+    det = NearestDetector.fit("n", tracks, {}, ScoreSettings(lane_course_km=2.0))
+    assert det.card["calibrated_with"]["lane_course_km"] == 2.0
+    how = ScoreSettings(score="lane", lane_course_km=2.0)
+    assert det.threshold(how, 0.05) > 0
+    with pytest.raises(UserError, match="--lane-course-km 2, not 0"):
+        det.threshold(replace(how, lane_course_km=0.0), 0.05)
+    del det.card["calibrated_with"]  # a card from before the course weight
+    assert det.threshold(replace(how, lane_course_km=0.0), 0.05) > 0
 
 
 def test_nearest_lane_score_sees_a_jump_and_is_calibrated_per_vessel(kitimat):
     table = read_track_table(kitimat)
     held, *lane = load_tracks(kitimat, table.loc[table["route"] == "route-1", "track_id"][:20])
-    det = NearestDetector.fit("n", [t for t in lane if t.mmsi != held.mmsi], {}, near_km=10.0)
+    det = NearestDetector.fit("n", [t for t in lane if t.mmsi != held.mmsi], {})
     assert np.all(np.asarray(det.card["calibration"]["lane"]) >= 0)
     times = np.r_[0.0, np.cumsum(held.dts)] * 3600.0
     params = {"jump": {"span": (0.1, 0.2), "km": (5.0, 5.0)}}
@@ -367,3 +403,9 @@ def test_nearest_lane_score_sees_a_jump_and_is_calibrated_per_vessel(kitimat):
     assert scored.score_m[1] > scored.score_m[0] + 2000  # the jumped stretch is 5 km off
     assert len(scored.profiles[1]) == len(jumped.positions)
     assert det.calibration_key(how) == "lane" and det.threshold(how, 0.05) > 0
+
+
+def test_detect_and_evaluate_default_to_the_score_settings_course_weight():
+    from aisdati.cli import LANE_COURSE_OPTION
+
+    assert LANE_COURSE_OPTION.default == ScoreSettings().lane_course_km

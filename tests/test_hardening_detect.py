@@ -196,6 +196,7 @@ def test_bad_label_files_are_refused_before_any_work(trained, tmp_path, text, ne
         (("--top-percent", "inf"), "--top-percent must be a finite number .*got inf"),
         (("--top-percent", "-1"), "--top-percent must be a finite number .*got -1"),
         (("--lane-rollouts", "0"), "--lane-rollouts must be at least 1, got 1 and 0"),
+        (("--lane-course-km", "-1"), "--lane-course-km must be a finite number .*got -1"),
     ],
 )
 def test_detect_float_options(trained, tmp_path, extra, needle):

@@ -50,6 +50,9 @@ class ScoreSettings:
     the real pace (SOG x dt), so over the track's number of steps a slow one stopped half-way
     and every later report was "far from the lane"; twice as many steps cover a model at half
     pace, and a fast one just goes on along the corridor."""
+    lane_course_km: float = 4.0
+    """Lane score: what sailing against the lane's course costs, km (across it: 0.7 x as
+    much); 0 judges position only. See `aisdati.geo.lane_distances`."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0
@@ -115,11 +118,20 @@ class Detector(ABC):
 
     def threshold(self, how: ScoreSettings, contamination: float) -> float:
         """The (1 - contamination) quantile of the training tracks' own scores."""
-        cal = self.card.get("calibration", {}).get(self.calibration_key(how))
+        key = self.calibration_key(how)
+        cal = self.card.get("calibration", {}).get(key)
         if not cal:
             raise UserError(
                 f"model {self.name} has no calibration scores for --score {how.score}: "
                 "retrain it, or flag with --threshold / --top-percent"
+            )
+        # cards from before the course weight were calibrated on position only
+        calibrated = float(self.card.get("calibrated_with", {}).get("lane_course_km", 0.0))
+        if key == "lane" and not math.isclose(calibrated, how.lane_course_km):
+            raise UserError(
+                f"model {self.name}'s lane scores were calibrated with --lane-course-km "
+                f"{calibrated:g}, not {how.lane_course_km:g}: pass that, retrain, or flag with "
+                "--threshold / --top-percent"
             )
         return float(np.quantile(np.asarray(cal, np.float64), 1.0 - contamination))
 

@@ -67,7 +67,8 @@ class PolicyDetector(Detector):
                 ]
         if "lane" in wanted:
             profiles["lane"] = [
-                lane_distances(p, e.reshape(-1, 2)) for p, e in zip(positions, every, strict=True)
+                lane_distances(p, list(e), how.lane_course_km * 1000.0)
+                for p, e in zip(positions, every, strict=True)
             ]
             parts["lane"] = np.array([tail_mean(d) for d in profiles["lane"]])
         if "step" in wanted:
@@ -98,6 +99,7 @@ class PolicyDetector(Detector):
         cal = {k: [round(float(v), 2) for v in parts[k]] for k in ("rollout", "step", "lane")}
         both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
         self.card["calibration"] = {**cal, "both": [round(float(v), 4) for v in both]}
+        self.card["calibrated_with"] = {"lane_course_km": how.lane_course_km}
 
 
 # ----------------------------------------------------------------------------------- DATI

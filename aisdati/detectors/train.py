@@ -94,7 +94,7 @@ def train_detector(
     card = base_card(settings, source, data_card(settings, tracks, total))
     stem = model_stem(settings)
     if method == "nearest":
-        det = NearestDetector.fit(stem.name, tracks, card, how.near_km)
+        det = NearestDetector.fit(stem.name, tracks, card, how)
     elif method == "bc":
         torch.set_num_threads(1)
         config = BCConfig(episodes=settings.episodes)

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aisdati.errors import UserError
-from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg
+from aisdati.geo import EARTH_RADIUS_M, courses_deg, haversine_m
 from aisdati.options import parse_names
 
 Range = tuple[float, float]
@@ -84,20 +84,13 @@ def _move(positions: np.ndarray, bearing_deg: np.ndarray, metres: np.ndarray) ->
     return positions + np.column_stack([dlon, dlat])
 
 
-def _headings(p: np.ndarray) -> np.ndarray:
-    """Course at each point (from its neighbours)."""
-    nxt = np.r_[np.arange(1, len(p)), len(p) - 1]
-    prv = np.r_[0, np.arange(len(p) - 1)]
-    return initial_bearing_deg(p[prv, 0], p[prv, 1], p[nxt, 0], p[nxt, 1])
-
-
 def detour(p, t, rng, prm) -> Injected:
     i, j = _stretch(rng, len(p), prm["span"])
     u = (np.arange(i, j) - i + 1) / (j - i + 1)
     side = 90.0 if rng.random() < 0.5 else -90.0
     amp = _draw(rng, prm["km"]) * 1000.0
     out = p.copy()
-    out[i:j] = _move(p[i:j], _headings(p)[i:j] + side, amp * np.sin(np.pi * u) ** 2)
+    out[i:j] = _move(p[i:j], courses_deg(p)[i:j] + side, amp * np.sin(np.pi * u) ** 2)
     return Injected(out, t.copy(), (i, j))
 
 
@@ -117,7 +110,7 @@ def loiter(p, t, rng, prm) -> Injected:
     step_m = float(np.median(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])))
     dt = float(np.median(np.diff(t)))
     m = max(8, round(2 * np.pi * radius * loops / max(step_m, 1.0)))
-    start_bearing = _headings(p)[at] - 90.0
+    start_bearing = courses_deg(p)[at] - 90.0
     centre = _move(p[at : at + 1], np.array([start_bearing + 180.0]), np.array([radius]))
     angles = start_bearing + 360.0 * loops * np.arange(1, m + 1) / m
     ring = _move(np.repeat(centre, m, axis=0), angles, np.full(m, radius))

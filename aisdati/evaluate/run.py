@@ -51,6 +51,7 @@ class EvaluateSettings:
     patience: int = 10
     rollouts: int = 10
     lane_rollouts: int = ScoreSettings().lane_rollouts
+    lane_course_km: float = ScoreSettings().lane_course_km
     near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
@@ -148,6 +149,7 @@ def _how(settings: EvaluateSettings) -> ScoreSettings:
         score="both",
         rollouts=settings.rollouts,
         lane_rollouts=settings.lane_rollouts,
+        lane_course_km=settings.lane_course_km,
         near_km=settings.near_km,
         seed=settings.seed,
     )

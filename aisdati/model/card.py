@@ -227,6 +227,12 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
             card.array(f"calibration.{key}", min_length=1)
             for i, v in enumerate(values):
                 card.number(f"calibration.{key}[{i}]", 0.0, value=v)
+    calibrated_with = card.get("calibrated_with", None)  # the scoring settings of calibration
+    if calibrated_with is not None:
+        if not isinstance(calibrated_with, dict):
+            raise card.fail("calibrated_with", "an object", calibrated_with)
+        if "lane_course_km" in calibrated_with:  # older cards: position only
+            card.number("calibrated_with.lane_course_km", 0.0, 1000.0)
 
     # training state: `detect` warns about a model whose training did not finish
     card.boolean("training.finished", None)
