@@ -40,9 +40,7 @@ def scored(seed_dir: Path, detector: str, how: ScoreSettings) -> pd.DataFrame:
         det = load_detector(seed_dir / route / "models" / stem)
         train = load_tracks(data, [int(i) for i in det.card["data"]["track_ids"]])
         if isinstance(det, NearestDetector):  # each training track against the other vessels
-            own = det.lane_scores(
-                [t.positions for t in train], how.near_km, how.lane_course_km, det.mmsi
-            )[0]
+            own = det.lane_scores([t.positions for t in train], how, det.mmsi)[0]
         else:
             own = det.score(train, how).score_m
         threshold = np.quantile(own, 1.0 - CONTAMINATION)

@@ -51,7 +51,7 @@ class NearestDetector(Detector):
         det = cls(name, card, [t.positions for t in tracks], np.array([t.mmsi for t in tracks]))
         queries = [t.positions for t in tracks]
         own = det.search(queries, how.near_km, exclude=det.mmsi)[0]
-        lane = det.lane_scores(queries, how.near_km, how.lane_course_km, exclude=det.mmsi)[0]
+        lane = det.lane_scores(queries, how, exclude=det.mmsi)[0]
         card["calibration"] = {
             k: [round(float(s), 2) for s in v] for k, v in (("nearest", own), ("lane", lane))
         }
@@ -78,14 +78,12 @@ class NearestDetector(Detector):
     def search(self, queries: list[np.ndarray], near_km: float, exclude=None):
         return nearest_mean_dtw_m(queries, self.tracks, self._candidates(queries, near_km, exclude))
 
-    def lane_scores(
-        self, queries: list[np.ndarray], near_km: float, course_km: float, exclude=None
-    ):
-        """Tail mean of each query's per-report distances to the union of its candidate
+    def lane_scores(self, queries: list[np.ndarray], how: ScoreSettings, exclude=None):
+        """Tail mean of each query's per-report distances to the lane of its candidate
         training tracks, and those distances."""
-        cands = self._candidates(queries, near_km, exclude)
+        cands = self._candidates(queries, how.near_km, exclude)
         profiles = [
-            lane_distances(q, [self.tracks[j] for j in c], course_km * 1000.0)
+            lane_distances(q, [self.tracks[j] for j in c], how.lane_course_km * 1000.0)
             for q, c in zip(queries, cands, strict=True)
         ]
         return np.array([tail_mean(d) for d in profiles]), profiles
@@ -98,7 +96,7 @@ class NearestDetector(Detector):
         evidence = [self.tracks[a] for a in arg]
         parts = {"nearest": dist}
         if how.score == "lane" or "lane" in also:
-            parts["lane"], profiles = self.lane_scores(positions, how.near_km, how.lane_course_km)
+            parts["lane"], profiles = self.lane_scores(positions, how)
         if how.score != "lane":
             profiles = [matched_distances(p, e) for p, e in zip(positions, evidence, strict=True)]
         return Scores(parts[self.calibration_key(how)], profiles, evidence, parts)
