@@ -239,13 +239,17 @@ def detect(settings: DetectSettings) -> Detection:
     evidence: list[np.ndarray] = [np.empty((0, 2))] * n
     profiles: list[np.ndarray] = [np.empty(0)] * n
     t1 = time.perf_counter()
+    cut: dict[int, float] = {}  # calibrated thresholds, before any scoring: fail fast
+    if settings.contamination is not None:
+        for m in sorted({int(o) for o in owner}):
+            cut[m] = models[m].threshold(settings.how, settings.contamination)
     for m, model in enumerate(models):
         idx = [i for i in range(n) if owner[i] == m]
         if not idx:
             continue
         scored = model.score([tracks[i] for i in idx], settings.how)
         if settings.contamination is not None:
-            threshold[idx] = model.threshold(settings.how, settings.contamination)
+            threshold[idx] = cut[m]
         for j, i in enumerate(idx):
             raw[i] = scored.score_m[j]
             evidence[i] = scored.evidence[j]

@@ -205,6 +205,13 @@ def test_detect_float_options(trained, tmp_path, extra, needle):
     assert not (tmp_path / "r").exists()
 
 
+def test_detect_refuses_a_course_weight_the_model_was_not_calibrated_with(trained, tmp_path):
+    result = detect(trained, trained["models"], tmp_path / "r", "--contamination", "0.05",
+                    "--lane-course-km", "1")  # fmt: skip
+    one_line_error(result, "lane scores were calibrated with --lane-course-km 4, not 1")
+    assert not list((tmp_path / "r").iterdir())  # refused before scoring: nothing written
+
+
 def test_train_seed_out_of_range(trained, tmp_path):
     result = run("train", "--cluster", "down", "--data", trained["proc"], "--out", tmp_path / "m",
                  "--seed", -1)  # fmt: skip
