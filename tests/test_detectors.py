@@ -388,6 +388,15 @@ def test_a_threshold_needs_the_course_weight_the_model_was_calibrated_with(track
     assert det.threshold(replace(how, lane_course_km=0.0), 0.05) > 0
 
 
+def test_nearest_calibrates_a_route_sailed_by_one_vessel_on_its_other_tracks(tracks):
+    ferry = [replace(t, mmsi=100000001) for t in tracks[:6]]  # one boat runs the whole line
+    det = NearestDetector.fit("ferry", ferry, {})
+    for key in ("nearest", "lane"):
+        cal = np.asarray(det.card["calibration"][key])
+        assert len(cal) == 6 and np.all(np.isfinite(cal)) and np.all(cal > 0)
+    assert det.threshold(ScoreSettings(score="lane"), 0.05) > 0
+
+
 def test_nearest_lane_score_sees_a_jump_and_is_calibrated_per_vessel(kitimat):
     table = read_track_table(kitimat)
     held, *lane = load_tracks(kitimat, table.loc[table["route"] == "route-1", "track_id"][:20])

@@ -8,7 +8,8 @@ those training tracks: the lane that remembered traffic covers. It is the bar ev
 detector has to clear: if imitating the traffic does not beat remembering it, the imitation adds
 nothing to detection. The DTW search is exact (see `aisdati.dtw.nearest_mean_dtw_m` for the
 pruning). Its calibration scores are leave-one-vessel-out: each training track against the
-training tracks of other vessels.
+training tracks of other vessels, or, where one vessel sailed every training track (a ferry
+line run by one boat), against the vessel's other tracks.
 """
 
 from __future__ import annotations
@@ -62,7 +63,10 @@ class NearestDetector(Detector):
         return "lane" if how.score == "lane" else "nearest"
 
     def _candidates(self, queries: list[np.ndarray], near_km: float, exclude: np.ndarray | None):
-        """Per query, the training tracks it is compared with (see the module docstring)."""
+        """Per query, the training tracks it is compared with (see the module docstring).
+        `exclude` (calibration) gives each query's vessel, to leave out; the queries are then
+        the training tracks themselves, so with no other vessel only the query's own track is
+        left out."""
         starts = np.array([q[0] for q in queries])
         own = np.array([t[0] for t in self.tracks])
         d = haversine_m(starts[:, None, 0], starts[:, None, 1], own[None, :, 0], own[None, :, 1])
@@ -71,6 +75,8 @@ class NearestDetector(Detector):
             ok = np.ones(len(self.tracks), dtype=bool)
             if exclude is not None:
                 ok &= self.mmsi != exclude[k]
+                if not ok.any():
+                    ok = np.arange(len(self.tracks)) != k
             near = np.nonzero(ok & (d[k] <= near_km * 1000.0))[0]
             out.append(near if len(near) else np.nonzero(ok)[0])
         return out
