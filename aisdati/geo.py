@@ -76,12 +76,16 @@ def unit_vectors(lonlat: np.ndarray) -> np.ndarray:
     )
 
 
+def _neighbours(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of each point's previous and next point (the ends stand in for the missing)."""
+    return np.r_[0, np.arange(n - 1)], np.r_[np.arange(1, n), n - 1]
+
+
 def courses_deg(polyline: np.ndarray) -> np.ndarray:
     """Course at each point of a polyline (lon, lat) [n, 2], from its neighbours (the
     previous point to the next; the ends use the one neighbour they have)."""
     p = np.asarray(polyline, np.float64)
-    nxt = np.r_[np.arange(1, len(p)), len(p) - 1]
-    prv = np.r_[0, np.arange(len(p) - 1)]
+    prv, nxt = _neighbours(len(p))
     return initial_bearing_deg(p[prv, 0], p[prv, 1], p[nxt, 0], p[nxt, 1])
 
 
@@ -90,8 +94,7 @@ def _course_vectors(polyline: np.ndarray) -> np.ndarray:
     (a stuck rollout has no course, so it is equally near every heading)."""
     p = np.asarray(polyline, np.float64)
     theta = np.radians(courses_deg(p))
-    nxt = np.r_[np.arange(1, len(p)), len(p) - 1]
-    prv = np.r_[0, np.arange(len(p) - 1)]
+    prv, nxt = _neighbours(len(p))
     moves = np.any(p[nxt] != p[prv], axis=1)
     return np.column_stack([np.cos(theta), np.sin(theta)]) * moves[:, None]
 
