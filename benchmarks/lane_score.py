@@ -113,11 +113,13 @@ def main() -> None:
             rows.append((detector, lane or "-", f"{course:g}", pd.DataFrame(details).mean()))
     print("\nMean over seeds and draws, per route and per anomaly kind (each kind against all")
     print("normal tracks):")
-    names = list(rows[0][3].index)
+    every = list(dict.fromkeys(n for row in rows for n in row[3].index))
+    routes = sorted((n for n in every if n.startswith("route-")), key=lambda n: int(n[6:]))
+    names = ["pooled", *routes, *(n for n in every if n != "pooled" and n not in routes)]
     print("| detector | lane rollouts | course km | " + " | ".join(names) + " |")
     print("|---|---|---|" + "---|" * len(names))
     for detector, lane, course, mean in rows:
-        cells = " | ".join(f"{mean[n]:.3f}" for n in names)
+        cells = " | ".join(f"{mean[n]:.3f}" if n in mean else "-" for n in names)
         print(f"| {detector} | {lane} | {course} | {cells} |")
 
 
