@@ -58,7 +58,7 @@ SELFTEST_PRESET_OPTION = typer.Option(
     "family's dt but Gaussian for Ribbons, exact region and speeds, references per seed).",
 )
 LANE_COURSE_OPTION = typer.Option(
-    4.0,
+    2.0,
     "--lane-course-km",
     help="Lane score: what sailing against the lane's course costs, in km (across it: 0.7 x "
     "as much; 0: position only). As the models were calibrated (training uses the default).",

@@ -43,6 +43,10 @@ echo "== 3/3 detect: the held-out tracks of $ROUTE, judged by DATI"
   --out "$OUT/report"
 
 echo "== done in $(( $(date +%s) - start )) s"
+echo "   routes:     $OUT/processed/routes.png"
+echo "   evaluation: $OUT/evaluate/evaluation.json, roc_pr.png, examples.png"
+echo "   detection:  $OUT/report/map.png (zoomable: map.html), evidence/, scores.parquet"
+echo "== what it found"
 python3 - "$OUT" <<'PY'
 import json, sys
 from pathlib import Path
@@ -57,6 +61,3 @@ print(f"   flagged {m['flagged']} of {m['labelled_tracks']} held-out tracks: {fo
       f"{m['anomalies_labelled']} injected anomalies (precision {m['precision']:.2f}, recall "
       f"{m['recall']:.2f}), ROC AUC {m['roc_auc']:.3f}")
 PY
-echo "   routes:     $OUT/processed/routes.png"
-echo "   evaluation: $OUT/evaluate/evaluation.json, roc_pr.png, examples.png"
-echo "   detection:  $OUT/report/map.png (zoomable: map.html), evidence/, scores.parquet"

@@ -208,7 +208,7 @@ def test_detect_float_options(trained, tmp_path, extra, needle):
 def test_detect_refuses_a_course_weight_the_model_was_not_calibrated_with(trained, tmp_path):
     result = detect(trained, trained["models"], tmp_path / "r", "--contamination", "0.05",
                     "--lane-course-km", "1")  # fmt: skip
-    one_line_error(result, "lane scores were calibrated with --lane-course-km 4, not 1")
+    one_line_error(result, "lane scores were calibrated with --lane-course-km 2, not 1")
     assert not list((tmp_path / "r").iterdir())  # refused before scoring: nothing written
 
 

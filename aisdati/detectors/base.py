@@ -50,9 +50,11 @@ class ScoreSettings:
     the real pace (SOG x dt), so over the track's number of steps a slow one stopped half-way
     and every later report was "far from the lane"; twice as many steps cover a model at half
     pace, and a fast one just goes on along the corridor."""
-    lane_course_km: float = 4.0
+    lane_course_km: float = 2.0
     """Lane score: what sailing against the lane's course costs, km (across it: 0.7 x as
-    much); 0 judges position only. See `aisdati.geo.lane_distances`."""
+    much); 0 judges position only. See `aisdati.geo.lane_distances`. 2 km gave DATI the best
+    pooled lane AUC averaged over two areas (Kitimat's fjord lanes, where 4 km was better, and
+    NY Harbor's ferry crossings, where 4 km was worse than none; README, "every route")."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0
