@@ -224,6 +224,19 @@ def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
     assert not (out / "evaluation.json").exists()
 
 
+def test_evaluate_refuses_models_calibrated_with_another_course_weight(cli, kitimat, tmp_path):
+    models = tmp_path / "models"
+    r = cli("train", "--cluster", "other", "--method", "nearest", "--data", kitimat, "--out",
+            models, "-q")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    out = tmp_path / "ev"
+    r = cli("evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest",
+            "--models", models, "--lane-course-km", "0", "--out", out, "-q")  # fmt: skip
+    assert r.exit_code == 2, r.output
+    assert "calibrated with --lane-course-km 2, not 0" in " ".join(r.output.split())
+    assert not (out / "evaluation.json").exists() and not (out / "data").exists()
+
+
 def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat, tmp_path):
     out = tmp_path / "routes"
     r = cli("evaluate", "--data", kitimat, "--cluster", "routes", "--detectors", "nearest",

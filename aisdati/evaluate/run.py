@@ -161,6 +161,8 @@ def _prepare(settings: EvaluateSettings) -> _Prepared:
     if existing:
         train_ids = [int(i) for i in next(iter(existing.values())).card["data"]["track_ids"]]
         _same_region(settings, existing)
+        for det in existing.values():  # calibrated as this run scores, before any work
+            det.threshold(replace(_how(settings), score="lane"), settings.contamination)
     split = dataset.build(
         settings.data_dir,
         settings.cluster,
