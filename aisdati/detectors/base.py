@@ -41,9 +41,10 @@ class ScoreSettings:
     lane_rollouts: int = 30
     """Lane score: free rollouts per track that make up its lane (the K of the rollout score
     and L - K more). A lane is where the policy goes, estimated from samples: on the Kitimat
-    routes over three seeds and several noise draws, DATI's pooled lane AUC averaged 0.879 with
-    10, 0.892 with 30 and 0.904 with 100 rollouts (README, "every route of an area"); 30 keeps
-    scoring and calibration affordable."""
+    routes over three seeds and several noise draws, DATI's pooled lane AUC (by position only)
+    averaged 0.879 with 10, 0.892 with 30 and 0.904 with 100 rollouts (README, "every route of
+    an area"); with the course weighed, 100 add little. 30 keeps scoring and calibration
+    affordable."""
     lane_reach: float = 2.0
     """Lane score: the rollouts run this many times the track's number of steps (the rollout
     score always uses the track's own number). DATI's rollouts on Kitimat ran at half to twice
