@@ -113,9 +113,10 @@ class Detection:
 SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
-    "lane": "mean of the largest 10% of each report's distance to the nearest point of the K "
-    "free rollouts of twice the track's steps (nearest: of the training tracks starting within "
-    "near_km) (m)",
+    "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
+    "lane_rollouts free rollouts of twice the track's steps (nearest: of the training tracks "
+    "starting within near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
+    "distance d and course difference dcourse (m)",
     "both": "rollout / median training rollout score + step / median training step score",
     "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
     "track starting within near_km",
