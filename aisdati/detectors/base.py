@@ -60,6 +60,11 @@ class ScoreSettings:
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0
 
+    def calibrated_with(self) -> dict[str, float]:
+        """What a card records of the settings its calibration scores were computed with:
+        `Detector.threshold` refuses to flag with others."""
+        return {"lane_course_km": self.lane_course_km}
+
 
 @dataclass
 class Scores:

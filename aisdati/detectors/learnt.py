@@ -99,7 +99,7 @@ class PolicyDetector(Detector):
         cal = {k: [round(float(v), 2) for v in parts[k]] for k in ("rollout", "step", "lane")}
         both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
         self.card["calibration"] = {**cal, "both": [round(float(v), 4) for v in both]}
-        self.card["calibrated_with"] = {"lane_course_km": how.lane_course_km}
+        self.card["calibrated_with"] = how.calibrated_with()
 
 
 # ----------------------------------------------------------------------------------- DATI

@@ -56,7 +56,7 @@ class NearestDetector(Detector):
         card["calibration"] = {
             k: [round(float(s), 2) for s in v] for k, v in (("nearest", own), ("lane", lane))
         }
-        card["calibrated_with"] = {"lane_course_km": how.lane_course_km}
+        card["calibrated_with"] = how.calibrated_with()
         return det
 
     def calibration_key(self, how: ScoreSettings) -> str:
