@@ -1,8 +1,8 @@
 """Speed of the self-test: what the full Tables 1 and 2 cost, and where the time goes.
 
 The self-test shares its members out round-robin over one worker per core; inside a worker the
-DATI members of a variant train as one ensemble (all repeats together), the BC members of a
-variant as one ensemble, and DDPG-TI (SB3) one model after another. This script measures, with
+DATI members of a variant train as one ensemble (all repeats together), and so do the BC members
+of a variant and the DDPG-TI members. This script measures, with
 one torch thread, the cost of one training step of each of those pieces *at the size it has in
 a worker* of the full protocol, and projects the wall time of
 
@@ -31,8 +31,9 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from aisdati.model.baselines import BC_PAPER, BCConfig, BCTrainer, DDPGTIConfig, make_ddpg_ti
+from aisdati.model.baselines import BC_PAPER, BCConfig, BCTrainer
 from aisdati.model.dati import DATITrainer
+from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer
 from aisdati.model.env import FamilySource, TrajectoryImitationEnv
 from aisdati.model.selftest import (
     PAPER_FAMILIES,
@@ -74,13 +75,15 @@ def bc_ms(settings: SelftestSettings, cfg: BCConfig, names: list[str], updates: 
     return (time.perf_counter() - start) / updates * 1e3
 
 
-def ddpg_ms(settings: SelftestSettings, steps: int) -> float:
-    """ms per environment step (with its gradient step) of one SB3 DDPG-TI model."""
+def ddpg_ms(settings: SelftestSettings, names: list[str], steps: int) -> float:
+    """ms per environment step (with its gradient step) of one DDPG-TI ensemble."""
     cfg = DDPGTIConfig()
-    model = make_ddpg_ti(_envs(settings, ["circles"])[0], 0, cfg)
-    model.learn(cfg.learning_starts + 200)  # past the random warm-up and the DTW's compilation
+    trainer = DDPGTITrainer(_envs(settings, names), list(range(len(names))), cfg)
+    for _ in range(cfg.learning_starts + 3):  # past the random warm-up and the DTW's compilation
+        trainer.step()
     start = time.perf_counter()
-    model.learn(steps, reset_num_timesteps=False)
+    for _ in range(steps):
+        trainer.step()
     return (time.perf_counter() - start) / steps * 1e3
 
 
@@ -110,8 +113,8 @@ def main() -> None:
     pieces.append(("Table 1", f"BC, one ensemble of E={t1}", ms, EPISODES * STEPS, t1))
     ms = bc_ms(settings, BC_PAPER, names1, 5 * args.steps)
     pieces.append(("Table 1", f"BC-paper, E={t1}", ms, bc_paper_updates, t1))
-    ms = ddpg_ms(settings, 100 * args.steps)  # SB3's per-learn() set-up amortised
-    pieces.append(("Table 1", f"DDPG-TI, {t1} SB3 models in turn", ms, EPISODES * STEPS * t1, 1))
+    ms = ddpg_ms(settings, names1, 5 * args.steps)
+    pieces.append(("Table 1", f"DDPG-TI, one ensemble of E={t1}", ms, EPISODES * STEPS, t1))
     for method in ("dati", "dati-no-time-embedding", "dati-no-reward-input"):
         ms = dati_ms(settings, method, names2, args.steps)
         pieces.append(("Table 2", f"{method}, E={t2}", ms, EPISODES * STEPS, t2))

@@ -10,14 +10,7 @@ import pytest
 import torch
 
 from aisdati.errors import UserError
-from aisdati.model.baselines import (
-    BCConfig,
-    BCTrainer,
-    DDPGTIConfig,
-    bc_act,
-    ddpg_ti_act,
-    train_ddpg_ti,
-)
+from aisdati.model.baselines import BCConfig, BCTrainer, bc_act
 from aisdati.model.env import make_family_env
 from aisdati.model.evaluate import rollout_policy
 from aisdati.model.families import Family
@@ -82,28 +75,6 @@ def test_environment_passes_sb3_check_env():
 
     check_env(make_family_env(LINE), warn=False)
     check_env(make_family_env("circles"), warn=False)
-
-
-def test_ddpg_ti_is_sb3_ddpg_with_shared_time2vec_and_two_learning_rates():
-    from stable_baselines3 import DDPG
-
-    env = make_family_env(LINE)
-    cfg = DDPGTIConfig(episodes=4)  # 80 steps: trains from step 64 on
-    episodes = []
-    model = train_ddpg_ti(env, 0, cfg, episodes.append)
-    assert isinstance(model, DDPG) and episodes == [1, 2, 3, 4]
-    assert model._n_updates > 0
-    assert model.actor.features_extractor is model.critic.features_extractor
-    assert model.actor.features_extractor.features_dim == 156
-    assert model.actor.optimizer.param_groups[0]["lr"] == pytest.approx(1e-4)
-    assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(2e-4)
-    assert (model.gamma, model.tau) == (0.9, 1e-3)
-    refs = evaluation_references(LINE, 2, 0)
-    grid = [[make_family_env(LINE) for _ in refs]]
-    paths, scores = rollout_policy(ddpg_ti_act([model], [0], 2, cfg, seed=0), grid, [refs])
-    again = rollout_policy(ddpg_ti_act([model], [0], 2, cfg, seed=0), grid, [refs])[1]
-    assert np.isfinite(scores).all() and np.array_equal(scores, again)
-    assert len(paths[0][0]) == LINE.steps + 1
 
 
 def _count(module: torch.nn.Module) -> int:

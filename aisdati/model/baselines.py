@@ -1,4 +1,4 @@
-"""The paper's two baselines (section 3.3-3.4, 5.1 and appendix A.2): BC and DDPG-TI.
+"""The paper's BC baseline (section 3.3, 5.1 and appendix A.2), and BC as the paper ran it.
 
 Both are trained on the same budget as DATI (episodes of τ steps, one reference drawn from the
 family per episode) and rolled out like it: from an unseen reference's first point, on their own
@@ -27,19 +27,7 @@ entropy weight 10⁻³, Adam 10⁻³, and its schedule: the demonstrations of al
 not in DLR-MI/dati, so the number of epochs is ours: 1, the value of `imitation`'s BC tutorial
 (625 updates for 100 x 200 pairs; our BC makes 20,000).
 
-**DDPG-TI**: Stable-Baselines3's own `DDPG` on `TrajectoryImitationEnv` (it observes the agent's
-ŝ_t and t, and is rewarded ±1 by the smoothed normalised DTW), with `Time2VecExtractor` (80 tanh
-state features + Time2Vec(76) = 156) shared by actor and critic, 4 x 32 hidden layers, γ = 0.9,
-τ = 10⁻³, Adam 10⁻⁴ (actor) and 2·10⁻⁴ (critic), Ornstein-Uhlenbeck action noise (σ = 0.3,
-θ = 0.15, dt = 10⁻², SB3's; reset each episode). SB3 uses one learning-rate schedule for both
-optimisers, so `DDPGTI` (a subclass that changes nothing else) overrides the schedule update to
-give the critic its own rate. Choices where the paper is silent: batch 64, replay 50 000, one
-gradient step per environment step after 64 random-policy steps, tanh hidden units (as DATI's
-actors), no early stopping; Adam runs fused (the same update; SB3's default loops over the
-parameters in Python, 14 % of a DDPG-TI step when profiled). At inference the actor's decision
-plus the OU noise is rolled out, as the paper writes it (ŝ_{t+1} = g(ŝ_t, π(ŝ_t, t) + η_t));
-`DDPGTIConfig.inference_noise=False` rolls out the bare actor. One SB3 model per seed;
-`aisdati selftest` spreads them over processes.
+**DDPG-TI** lives in `aisdati.model.ddpg_ti`: SB3's DDPG as a batched ensemble.
 """
 
 from __future__ import annotations
@@ -48,7 +36,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 from torch import Tensor, nn
@@ -272,195 +259,5 @@ def bc_act(policy: BCPolicy, refs: int, seed: int = 0) -> Act:
             [torch.stack([torch.randn(mean.shape[-1], generator=g) for g in row]) for row in gens]
         )
         return (mean + log_std.exp() * eps).numpy()
-
-    return act
-
-
-# ------------------------------------------------------------------------------------- DDPG-TI
-@dataclass(frozen=True)
-class DDPGTIConfig:
-    """Hyperparameters of DDPG-TI; the paper's where it gives them (appendix A.2)."""
-
-    episodes: int = 100
-    state_features: int = 80
-    time_embedding_dim: int = 76
-    hidden_units: int = 32
-    hidden_layers: int = 4
-    gamma: float = 0.9
-    tau: float = 1e-3
-    lr_actor: float = 1e-4
-    lr_critic: float = 2e-4
-    noise_sigma: float = 0.3
-    noise_theta: float = 0.15
-    noise_dt: float = 1e-2
-    batch_size: int = 64
-    buffer_size: int = 50_000
-    learning_starts: int = 64
-    inference_noise: bool = True
-    """Add the OU noise to the actor's decisions at inference, as the paper writes it."""
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-def _sb3() -> Any:
-    """Stable-Baselines3 is imported lazily: only DDPG-TI needs it."""
-    import stable_baselines3
-
-    return stable_baselines3
-
-
-def _extractor_class() -> type:
-    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-
-    class Time2VecExtractor(BaseFeaturesExtractor):
-        """(ŝ_t, t) -> [tanh(W ŝ_t + b) (80), Time2Vec(t) (76)]: DDPG-TI's 156 shared features.
-
-        Time2Vec starts uniformly in [−0.05, 0.05] like DATI's (slow periodic features)."""
-
-        def __init__(
-            self,
-            observation_space: gym.spaces.Box,
-            state_features: int = 80,
-            time_embedding_dim: int = 76,
-        ):
-            super().__init__(observation_space, state_features + time_embedding_dim)
-            state_dim = observation_space.shape[0] - 1
-            self.state = nn.Linear(state_dim, state_features)
-            self.freq = nn.Parameter(torch.empty(time_embedding_dim).uniform_(-0.05, 0.05))
-            self.phase = nn.Parameter(torch.empty(time_embedding_dim).uniform_(-0.05, 0.05))
-
-        def forward(self, obs: Tensor) -> Tensor:
-            z = obs[:, -1:] * self.freq + self.phase
-            return torch.cat(
-                [torch.tanh(self.state(obs[:, :-1])), z[:, :1], torch.sin(z[:, 1:])], dim=1
-            )
-
-    return Time2VecExtractor
-
-
-_CLASSES: dict[str, type] = {}
-
-
-def time2vec_extractor_class() -> type:
-    """The `BaseFeaturesExtractor` subclass of DDPG-TI (built on first use, then cached)."""
-    if "extractor" not in _CLASSES:
-        _CLASSES["extractor"] = _extractor_class()
-    return _CLASSES["extractor"]
-
-
-def ddpg_ti_class() -> type:
-    """`DDPGTI`: SB3's DDPG with separate actor and critic learning rates (nothing else differs)."""
-    if "ddpg" not in _CLASSES:
-        sb3 = _sb3()
-        from stable_baselines3.common.utils import update_learning_rate
-
-        class DDPGTI(sb3.DDPG):
-            critic_learning_rate: float = 2e-4
-
-            def _update_learning_rate(self, optimizers: Any) -> None:
-                super()._update_learning_rate(self.actor.optimizer)
-                update_learning_rate(self.critic.optimizer, self.critic_learning_rate)
-
-        _CLASSES["ddpg"] = DDPGTI
-    return _CLASSES["ddpg"]
-
-
-def make_ddpg_ti(env: TrajectoryImitationEnv, seed: int, cfg: DDPGTIConfig | None = None) -> Any:
-    """An untrained DDPG-TI model on `env` (one seed)."""
-    from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
-
-    cfg = cfg or DDPGTIConfig()
-    k = env.action_space.shape[0]
-    noise = OrnsteinUhlenbeckActionNoise(
-        np.zeros(k), cfg.noise_sigma * np.ones(k), theta=cfg.noise_theta, dt=cfg.noise_dt
-    )
-    policy_kwargs = {
-        "features_extractor_class": time2vec_extractor_class(),
-        "features_extractor_kwargs": {
-            "state_features": cfg.state_features,
-            "time_embedding_dim": cfg.time_embedding_dim,
-        },
-        "share_features_extractor": True,
-        "net_arch": [cfg.hidden_units] * cfg.hidden_layers,
-        "activation_fn": nn.Tanh,
-        "optimizer_kwargs": {"fused": True},  # SB3's Adam, one kernel instead of a Python loop
-    }
-    model = ddpg_ti_class()(
-        "MlpPolicy",
-        env,
-        learning_rate=cfg.lr_actor,
-        buffer_size=cfg.buffer_size,
-        learning_starts=cfg.learning_starts,
-        batch_size=cfg.batch_size,
-        tau=cfg.tau,
-        gamma=cfg.gamma,
-        train_freq=1,
-        gradient_steps=1,
-        action_noise=noise,
-        policy_kwargs=policy_kwargs,
-        seed=int(seed),
-        device="cpu",
-        verbose=0,
-    )
-    model.critic_learning_rate = cfg.lr_critic
-    model.critic.optimizer.param_groups[0]["lr"] = cfg.lr_critic
-    return model
-
-
-def train_ddpg_ti(
-    env: TrajectoryImitationEnv,
-    seed: int,
-    cfg: DDPGTIConfig | None = None,
-    on_episode: Callable[[int], None] | None = None,
-) -> Any:
-    """Train one DDPG-TI model for `cfg.episodes` episodes of the env's horizon."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    cfg = cfg or DDPGTIConfig()
-    model = make_ddpg_ti(env, seed, cfg)
-
-    class Episodes(BaseCallback):
-        def __init__(self) -> None:
-            super().__init__()
-            self.count = 0
-
-        def _on_step(self) -> bool:
-            for done in self.locals["dones"]:
-                if done:
-                    self.count += 1
-                    if on_episode is not None:
-                        on_episode(self.count)
-            return True
-
-    model.learn(cfg.episodes * env.source.max_steps, callback=Episodes())
-    return model
-
-
-def ddpg_ti_act(
-    models: Sequence[Any], seeds: Sequence[int], refs: int, cfg: DDPGTIConfig, seed: int = 0
-) -> Act:
-    """E trained DDPG-TI models as a batched policy over [E, R] observations: the actor's decision
-    plus, with `cfg.inference_noise`, an OU process per (member, reference) keyed by the seeds."""
-    k = models[0].action_space.shape[0]
-    gens = [[seed_generator(seed, s, r) for r in range(refs)] for s in seeds]
-    state = np.zeros((len(models), refs, k))
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            out = np.stack(
-                [
-                    m.actor(torch.as_tensor(o, dtype=torch.float32)).numpy()
-                    for m, o in zip(models, obs, strict=True)
-                ]
-            )
-        if not cfg.inference_noise:
-            return out
-        draws = np.stack([[torch.randn(k, generator=g).numpy() for g in row] for row in gens])
-        state[:] += (
-            cfg.noise_theta * -state * cfg.noise_dt
-            + cfg.noise_sigma * np.sqrt(cfg.noise_dt) * draws
-        )
-        return np.clip(out + state, -1.0, 1.0)
 
     return act

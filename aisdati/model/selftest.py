@@ -2,11 +2,11 @@
 
 Every (method, family, seed) triple is one member. The members are shared out over `workers`
 processes (one per core); inside a process the DATI members of one variant train as one batched
-ensemble, the BC members of one variant as one ensemble, and the DDPG-TI members one SB3 model
-after another. Then each member's policy is rolled out from the first point of unseen references
-of its family. The paper's metric is the lowest normalised smoothed DTW over seeds x references
-(Table 2 adds the second lowest). `repeats` runs the whole protocol again on further blocks of
-seeds, so that the metric's own spread over repeats can be read beside it.
+ensemble, the BC members of one variant as one ensemble, and the DDPG-TI members as one ensemble
+per episode length. Then each member's policy is rolled out from the first point of unseen
+references of its family. The paper's metric is the lowest normalised smoothed DTW over seeds x
+references (Table 2 adds the second lowest). `repeats` runs the whole protocol again on further
+blocks of seeds, so that the metric's own spread over repeats can be read beside it.
 
 Methods: `dati`, `bc`, `bc-paper`, `ddpg-ti` (Table 1) and the ablated DATI variants
 `dati-no-time-embedding`, `dati-no-reward-input` (Table 2, with `dati`: `ABLATION`).
@@ -41,17 +41,10 @@ import torch
 
 from aisdati import __version__
 from aisdati.errors import UserError
-from aisdati.model.baselines import (
-    BC_PAPER,
-    BCConfig,
-    BCTrainer,
-    DDPGTIConfig,
-    bc_act,
-    ddpg_ti_act,
-    train_ddpg_ti,
-)
+from aisdati.model.baselines import BC_PAPER, BCConfig, BCTrainer, bc_act
 from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.model.dati import DATIConfig, DATITrainer, NoiseProcess
+from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer, ddpg_ti_act
 from aisdati.model.env import FamilySource, Reference, TrajectoryImitationEnv
 from aisdati.model.evaluate import Summary, rollout, rollout_policy, summarize
 from aisdati.model.families import PAPER_DATI, Family, get_family
@@ -299,7 +292,7 @@ def _run_members(
     report: Callable[[int, int, bool], None],
 ) -> list[MemberResult]:
     """Train and evaluate a group of members: one ensemble per DATI variant, one per BC variant,
-    one SB3 model per DDPG-TI member."""
+    one DDPG-TI ensemble per episode length."""
     torch.set_num_threads(1)
     results: list[MemberResult] = []
     for method in dict.fromkeys(m for _, m, _, _ in members):
@@ -387,14 +380,17 @@ def _run_bc(method, group, settings, report) -> list[MemberResult]:
 def _run_ddpg_ti(method, group, settings, report) -> list[MemberResult]:
     cfg = settings.ddpg
     fams = _families(group, settings)
-    refs, grid = _grid(group, settings, fams)
     results = []
-    for k, (i, name, seed) in enumerate(group):
-        env = TrajectoryImitationEnv(FamilySource(fams[name]))
-        model = train_ddpg_ti(env, seed, cfg, lambda ep, i=i: report(i, ep, ep >= cfg.episodes))
-        act = ddpg_ti_act([model], [seed], settings.references, cfg, settings.eval_seed)
-        paths, scores = rollout_policy(act, [grid[k]], [refs[k]])
-        results += _results([(i, name, seed)], [refs[k]], [cfg.episodes], scores, paths)
+    for steps in dict.fromkeys(fams[name].steps for _, name, _ in group):
+        part = [m for m in group if fams[m[1]].steps == steps]
+        envs = [TrajectoryImitationEnv(FamilySource(fams[name])) for _, name, _ in part]
+        seeds = [seed for _, _, seed in part]
+        trainer = DDPGTITrainer(envs, seeds, cfg)
+        actor = trainer.train(lambda k, ep, part=part: report(part[k][0], ep, ep >= cfg.episodes))
+        refs, grid = _grid(part, settings, fams)
+        act = ddpg_ti_act(actor, seeds, settings.references, cfg, settings.eval_seed)
+        paths, scores = rollout_policy(act, grid, refs)
+        results += _results(part, refs, [cfg.episodes] * len(part), scores, paths)
     return results
 
 
