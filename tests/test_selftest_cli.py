@@ -150,3 +150,22 @@ def test_unwritable_out_is_a_one_line_error(cli, tmp_path):
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "cannot write to output folder" in lines[0], result.stderr
     assert blocker.read_text() == "not a folder"
+
+
+def test_two_workers_end_without_a_traceback(tmp_path):
+    """Run as a user runs it (a real process, its workers forked): finished workers are joined,
+    not terminated, so no worker prints a traceback when it is stopped."""
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [
+            sys.executable, "-c", "from aisdati.cli import app; app()", "selftest",
+            "--family", "circles,ushaped", "--seeds", "1", "--episodes", "1", "--steps", "10",
+            "--references", "2", "--workers", "2", "--out", str(tmp_path / "run"),
+        ],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "Traceback" not in run.stderr + run.stdout
+    assert (tmp_path / "run" / "results.csv").exists()

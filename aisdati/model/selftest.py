@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import signal
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -395,6 +396,9 @@ def _run_ddpg_ti(method, group, settings, report) -> list[MemberResult]:
 
 
 def _worker(members, settings, queue) -> None:  # pragma: no cover - runs in a child process
+    # the parent's SIGTERM handler (clean-up of a command's outputs) is not the child's: a
+    # worker stopped by its parent just ends, without a traceback
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
         results = _run_members(
             members, settings, lambda i, ep, stop: queue.put(("ep", i, ep, stop))
@@ -456,6 +460,8 @@ def _run_in_processes(members, settings, workers, report) -> list[MemberResult]:
                 finished += 1
             else:
                 raise RuntimeError(f"selftest worker failed: {msg[1]}")
+        for p in procs:  # each has sent its results: let it flush its queue and exit
+            p.join()
     finally:
         for p in procs:
             if p.is_alive():
