@@ -8,12 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from line_family import LINE
 
 from aisdati.errors import UserError
 from aisdati.model.baselines import BCConfig, BCTrainer, bc_act
 from aisdati.model.env import make_family_env
 from aisdati.model.evaluate import rollout_policy
-from aisdati.model.families import Family
 from aisdati.model.networks import DATINetworks
 from aisdati.model.selftest import (
     ABLATION,
@@ -22,16 +22,6 @@ from aisdati.model.selftest import (
     evaluation_references,
     parse_methods,
 )
-
-LINE = Family(
-    name="line",
-    x=lambda t, a: t,
-    y=lambda t, a: a * (1 + t),
-    alpha_range=(0.5, 1.0),
-    omega=2 * np.pi,
-    steps=20,
-)
-"""Straight lines from (0, α) with slope α: heading and speed depend on α, which the state shows."""
 
 
 def _bc_scores(trainer: BCTrainer, refs: int = 5) -> np.ndarray:

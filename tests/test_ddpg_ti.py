@@ -6,23 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from line_family import LINE
 from torch import nn
 
 from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer, ddpg_ti_act
 from aisdati.model.env import make_family_env
 from aisdati.model.evaluate import rollout_policy
-from aisdati.model.families import Family
 from aisdati.model.networks import EnsembleLinear
 from aisdati.model.selftest import evaluation_references
-
-LINE = Family(
-    name="line",
-    x=lambda t, a: t,
-    y=lambda t, a: a * (1 + t),
-    alpha_range=(0.5, 1.0),
-    omega=2 * np.pi,
-    steps=20,
-)
 
 
 def _sb3_ddpg_ti(env, cfg: DDPGTIConfig):

@@ -142,20 +142,23 @@ class DDPGTIActor(nn.Module):
         return self.head(self.features(obs))
 
 
+def ou_step(cfg: DDPGTIConfig, x: Any, draws: Any) -> Any:
+    """One step of the Ornstein-Uhlenbeck process with mean 0 (SB3's
+    `OrnsteinUhlenbeckActionNoise`) from x, given standard normal draws of its shape."""
+    return x + cfg.noise_theta * -x * cfg.noise_dt + cfg.noise_sigma * np.sqrt(cfg.noise_dt) * draws
+
+
 class OUNoise:
-    """Ornstein-Uhlenbeck noise per member (SB3's `OrnsteinUhlenbeckActionNoise`, mean 0, started
-    and reset at 0), each member drawing from its own generator."""
+    """Ornstein-Uhlenbeck noise per member (`ou_step`, started and reset at 0), each member
+    drawing from its own generator."""
 
     def __init__(self, cfg: DDPGTIConfig, members: int, dim: int):
         self.cfg = cfg
         self.state = torch.zeros(members, dim)
 
     def sample(self, generators: Sequence[torch.Generator]) -> Tensor:
-        c, x = self.cfg, self.state
-        draws = torch.stack([torch.randn(x.shape[1], generator=g) for g in generators])
-        self.state = (
-            x + c.noise_theta * -x * c.noise_dt + c.noise_sigma * np.sqrt(c.noise_dt) * draws
-        )
+        draws = torch.stack([torch.randn(self.state.shape[1], generator=g) for g in generators])
+        self.state = ou_step(self.cfg, self.state, draws)
         return self.state
 
     def reset(self, k: int) -> None:
@@ -280,10 +283,11 @@ class DDPGTITrainer:
         (it belongs to both networks there)."""
         tau = self.cfg.tau
         features = list(self.actor.features.parameters())
+        target_features = list(self.target_actor.features.parameters())
         pairs = [
-            (features, list(self.target_actor.features.parameters())),
+            (features, target_features),
             (list(self.critic.parameters()), list(self.target_critic.parameters())),
-            (features, list(self.target_actor.features.parameters())),
+            (features, target_features),
             (list(self.actor.head.parameters()), list(self.target_actor.head.parameters())),
         ]
         with torch.no_grad():
@@ -316,10 +320,7 @@ def ddpg_ti_act(
         if not cfg.inference_noise:
             return out
         draws = np.stack([[torch.randn(k, generator=g).numpy() for g in row] for row in gens])
-        state[:] += (
-            cfg.noise_theta * -state * cfg.noise_dt
-            + cfg.noise_sigma * np.sqrt(cfg.noise_dt) * draws
-        )
+        state[:] = ou_step(cfg, state, draws)
         return np.clip(out + state, -1.0, 1.0)
 
     return act
