@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 import torch
 
+from aisdati.cli import SELFTEST_PRESET_OPTION
 from aisdati.errors import UserError
 from aisdati.model.baselines import BC_PAPER, BCPolicy, BCTrainer
 from aisdati.model.dati import DATIConfig, DATITrainer, LatentNoise, NoiseProcess
@@ -19,6 +20,7 @@ from aisdati.model.env import FamilySource, TrajectoryImitationEnv
 from aisdati.model.families import get_family
 from aisdati.model.selftest import (
     SELFTEST_PRESETS,
+    SelftestSettings,
     _grid,
     family_for,
     preset_settings,
@@ -73,7 +75,9 @@ def test_presets_record_the_authors_choices():
         True,
     )
     assert not ours.exact_region and not ours.distinct_references
-    assert next(iter(SELFTEST_PRESETS)) == "ours"
+    assert next(iter(SELFTEST_PRESETS)) == "paper"
+    assert SELFTEST_PRESET_OPTION.default == "paper"
+    assert SelftestSettings() == preset_settings()  # the dataclass defaults are the default preset
     with pytest.raises(UserError, match="unknown self-test preset"):
         preset_settings("nosuch")
 
