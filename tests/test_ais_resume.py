@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 
 from aisdati.cli import app
 from aisdati.model.ais import TrainSettings, train_ais
+from aisdati.model.ais_space import DEFAULT_PRESET, lane_config
 
 DATA = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 
@@ -24,10 +25,18 @@ def processed(tmp_path_factory):
     return out
 
 
-def test_resume_equals_uninterrupted(processed, tmp_path):
+@pytest.mark.parametrize("lane", [(), ("average=0.9",)], ids=["live-actor", "averaged-actor"])
+def test_resume_equals_uninterrupted(processed, tmp_path, lane):
     def settings(out: str, resume: bool = False) -> TrainSettings:
         return TrainSettings(
-            processed, "down", tmp_path / out, episodes=3, max_tracks=2, seed=4, resume=resume
+            processed,
+            "down",
+            tmp_path / out,
+            episodes=3,
+            max_tracks=2,
+            seed=4,
+            resume=resume,
+            lane=lane_config(DEFAULT_PRESET, lane),
         )
 
     full = train_ais(settings("a"))

@@ -29,7 +29,11 @@ SMALL = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1)
 def _train(kitimat, tmp_path, lane, episodes=1):
     ids = tuple(int(i) for i in read_track_table(kitimat)["track_id"][:5])
     settings = TrainSettings(
-        data_dir=kitimat, cluster="other", out_dir=tmp_path, episodes=episodes, track_ids=ids,
+        data_dir=kitimat,
+        cluster="other",
+        out_dir=tmp_path,
+        episodes=episodes,
+        track_ids=ids,
         lane=lane,
     )
     trained = train_detector("dati", settings, ScoreSettings(rollouts=4))
@@ -73,9 +77,26 @@ def test_members_option_is_checked():
 
 def test_routes_train_their_seed_ensembles_together(cli, kitimat, tmp_path):
     models = tmp_path / "models"
-    r = cli("train", "--cluster", "routes", "--data", kitimat, "--out", models, "--episodes", "1",
-            "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
-            "validation_rollouts=1", "--lane", "members=2", "-q")
+    r = cli(
+        "train",
+        "--cluster",
+        "routes",
+        "--data",
+        kitimat,
+        "--out",
+        models,
+        "--episodes",
+        "1",
+        "--max-tracks",
+        "4",
+        "--lane",
+        "validation_tracks=2",
+        "--lane",
+        "validation_rollouts=1",
+        "--lane",
+        "members=2",
+        "-q",
+    )
     assert r.exit_code == 0, r.output
     seeds = []
     for path in sorted(models.glob("route-*.json")):
@@ -177,3 +198,55 @@ def test_the_pretrained_actor_is_kept_unless_an_episode_beats_it_on_validation()
     assert all(torch.equal(warm[k], kept[k]) for k in warm)
     assert _curves(trainer.history, True, 2, trainer.pretrained_metric[0])["best_episode"] == 0
     assert _curves(trainer.history, True, 2, 3.0)["best_episode"] == 1
+
+
+def test_the_averaged_actor_follows_the_live_one_and_is_what_is_validated_and_kept():
+    env = make_family_env(replace(get_family("circles"), steps=12))
+    env.reset(seed=0)
+    demo = env.demonstration(env.reference)
+    seen: list[dict[str, torch.Tensor]] = []
+
+    def validate(trainer: DATITrainer, k: int) -> float:
+        assert trainer.candidate is trainer.average
+        seen.append(
+            {n: p[k].clone() for n, p in trainer.candidate.forward_actor.state_dict().items()}
+        )
+        return 10.0 - len(seen)  # every episode improves: the last candidate is kept
+
+    cfg = DATIConfig(episodes=2, batch_size=16, patience=0, pretrain_epochs=2, actor_average=0.9)
+    trainer = DATITrainer([env], [0], cfg, validate)
+    trainer.pretrain([demo])
+    live = {n: p.clone() for n, p in trainer.nets.forward_actor.state_dict().items()}
+    assert all(torch.equal(seen[0][n], live[n][0]) for n in live)  # starts at the warm start
+    critic = trainer.average.forward_critic.out.weight.clone()
+    trainer.step()
+    now = trainer.nets.forward_actor.state_dict()
+    for n, p in trainer.average.forward_actor.state_dict().items():
+        torch.testing.assert_close(p, live[n] + 0.1 * (now[n] - live[n]), msg=n)
+    assert torch.equal(trainer.average.forward_critic.out.weight, critic)  # only the actor
+    final = trainer.train()
+    assert len(seen) == 3
+    kept = final.forward_actor.state_dict()
+    assert all(torch.equal(kept[n][0], seen[-1][n]) for n in kept)
+    moved = trainer.nets.forward_actor.state_dict()
+    assert any(not torch.equal(kept[n], moved[n]) for n in kept)  # the average, not the live one
+
+
+def test_a_member_leaving_takes_its_average_along():
+    envs = [make_family_env(replace(get_family("circles"), steps=12)) for _ in range(2)]
+    trainer = DATITrainer(envs, [0, 1], DATIConfig(batch_size=16, actor_average=0.5))
+    trainer.step()
+    second = {n: p[1].clone() for n, p in trainer.average.named_parameters()}
+    trainer._drop([0])
+    assert all(torch.equal(p[0], second[n]) for n, p in trainer.average.named_parameters())
+    trainer.step()  # the ensemble of one goes on
+    assert trainer.average.forward_actor.out.weight.shape[0] == 1
+
+
+def test_average_option_reaches_the_card_and_is_checked(kitimat, tmp_path):
+    with pytest.raises(UserError, match="average must be in"):
+        lane_config("lanes", ["average=1"])
+    assert PRESETS["paper"].average == 0.0
+    _, card = _train(kitimat, tmp_path, replace(SMALL, average=0.9))
+    assert card["lane_config"]["average"] == 0.9
+    assert card["config"]["actor_average"] == 0.9

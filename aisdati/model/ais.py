@@ -304,7 +304,9 @@ def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
         config = replace(config, noise="ou", ou_dt=dt)
     if settings.lane.critic == "state":
         config = config.with_network(conditional_critic=True)
-    return replace(config, pretrain_epochs=settings.lane.pretrain)
+    return replace(
+        config, pretrain_epochs=settings.lane.pretrain, actor_average=settings.lane.average
+    )
 
 
 def demonstrations(envs: Sequence[TrajectoryImitationEnv]) -> list[tuple[np.ndarray, ...]]:
@@ -337,7 +339,7 @@ class Validator:
         self.rollouts, self.seed = lane.validation_rollouts, seed
 
     def __call__(self, trainer: DATITrainer, k: int) -> float:
-        policy = AISPolicy(self.space, dati_act(trainer.nets, self.config, member=k))
+        policy = AISPolicy(self.space, dati_act(trainer.candidate, self.config, member=k))
         scores = policy.rollout_scores(self.tracks, self.rollouts, self.seed)[0]
         return float(np.median(scores))
 

@@ -38,8 +38,11 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
   the training tracks as demonstrated (each report's state and perfect decision): behaviour
   cloning as a warm start, as GAIL is often started. From the first episode the agent then stays
   near its reference, so the pull pairs the reference's decisions with states near the
-  reference's own. The paper starts from random actors; the episodes (and the actor kept) are
-  the adversarial training's, as without it: the pretrained actor itself is never kept.
+  reference's own. The paper starts from random actors. With validation the pretrained actor is
+  a candidate for the kept one (episode 0), which an episode's actor must beat.
+- `average=B`: validate and keep an exponential moving average (decay B per training batch) of
+  the forward actor instead of the live one (`DATIConfig.actor_average`): the validation DTW of
+  the live actor jumps by km from one episode to the next, so the kept one was the best of noise.
 """
 
 from __future__ import annotations
@@ -83,6 +86,7 @@ class LaneConfig:
     critic: str = "decision"
     pretrain: int = 0
     fourier: int = 0
+    average: float = 0.0
 
     def __post_init__(self) -> None:
         choices = {
@@ -102,6 +106,8 @@ class LaneConfig:
             raise UserError(f"fourier must be in [0, {MAX_FOURIER}] octaves, got {self.fourier}")
         if not 0 <= self.pretrain <= MAX_PRETRAIN:
             raise UserError(f"pretrain must be in [0, {MAX_PRETRAIN}] epochs, got {self.pretrain}")
+        if not 0.0 <= self.average < 1.0:
+            raise UserError(f"average must be in [0, 1), got {self.average}")
         if not 1 <= self.members <= MAX_MEMBERS:
             raise UserError(f"members must be in [1, {MAX_MEMBERS}], got {self.members}")
 

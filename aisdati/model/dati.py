@@ -40,6 +40,8 @@ from torch import Tensor
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig
 
+KEPT_PARAMETERS = ("forward_actor.", "time2vec.")
+"""What a member ends with (and what `DATIConfig.actor_average` averages)."""
 WARMUP_SPREAD = 5.0 / 180.0
 """Spread of the warm-up decisions around the perfect ones, in scaled units (5° of heading)."""
 
@@ -79,10 +81,17 @@ class DATIConfig:
     """Whether the actors' adversarial loss also updates the shared Time2Vec (through the
     critics' time features). The paper's code freezes it there (critic.trainable = False when
     compiling the GAN); the critic and L1 losses update it either way."""
+    actor_average: float = 0.0
+    """Decay of an exponential moving average of the forward actor (and Time2Vec), updated after
+    every training batch; when above 0 the average, not the live actor, is validated and kept.
+    Averaging a GAN's generator over its iterates damps the oscillation of adversarial training
+    (Yazici et al. 2019). 0 is the paper's way: the live actor."""
 
     def __post_init__(self) -> None:
         if self.keep not in ("best", "final"):
             raise ValueError(f"keep must be 'best' or 'final', got {self.keep!r}")
+        if not 0.0 <= self.actor_average < 1.0:
+            raise ValueError(f"actor_average must be in [0, 1), got {self.actor_average}")
 
     @property
     def noise_process(self) -> NoiseProcess:
@@ -237,6 +246,8 @@ class DATITrainer:
         self.decision_dim = envs[0].action_space.shape[0]
         self.nets = DATINetworks(self.state_dim, self.decision_dim, self.cfg.network, self.seeds)
         self.final = copy.deepcopy(self.nets)  # receives each member's best forward actor
+        self.average = copy.deepcopy(self.nets) if self.cfg.actor_average else None
+        """The moving average of the live forward actors (`DATIConfig.actor_average`)."""
         self._build_optimizers()
         # member-indexed state, compacted together when members leave the ensemble
         self.active = list(range(len(seeds)))
@@ -405,6 +416,7 @@ class DATITrainer:
             self.opt_l1.zero_grad(set_to_none=True)
             (pull.sum() * c.l1_weight).backward()
             self.opt_l1.step()
+        self._update_average(0.0)  # the average starts from the warm start
         if self.validate is not None:
             # the warm start is a candidate like any episode's actor (episode 0): the
             # adversarial training must beat it on validation to replace it
@@ -412,6 +424,22 @@ class DATITrainer:
                 metric = self.validate(self, k)
                 self.pretrained_metric[k] = self.best_loss[k] = metric
                 self._save_best(k)
+
+    @property
+    def candidate(self) -> DATINetworks:
+        """The networks whose forward actors are validated and kept: the moving average where
+        the configuration keeps one, else the live networks."""
+        return self.nets if self.average is None else self.average
+
+    def _update_average(self, decay: float) -> None:
+        """Move the average's forward actors and Time2Vec towards the live ones (decay 0: copy)."""
+        if self.average is None:
+            return
+        live = dict(self.nets.named_parameters())
+        with torch.no_grad():
+            for name, p in self.average.named_parameters():
+                if name.startswith(KEPT_PARAMETERS):
+                    p.lerp_(live[name], 1.0 - decay)
 
     def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         obs = torch.as_tensor(np.stack(self._obs), dtype=torch.float32)[:, None, :]
@@ -424,6 +452,7 @@ class DATITrainer:
     def step(self) -> list[EpisodeLog]:
         """One environment step of every active member (with its training batch first)."""
         losses = self._train_batch()
+        self._update_average(self.cfg.actor_average)
         state, action, eta, t = self._act()
         rewards, perfect, ended = [], [], []
         for k, env in enumerate(self.envs):
@@ -484,12 +513,13 @@ class DATITrainer:
         return log
 
     def _save_best(self, k: int) -> None:
-        """Copy member k's forward actor and Time2Vec into the final networks (the kept one)."""
+        """Copy member k's candidate forward actor and Time2Vec into the final networks (the
+        kept one)."""
         member = self.active[k]
-        live = dict(self.nets.named_parameters())
+        live = dict(self.candidate.named_parameters())
         with torch.no_grad():
             for name, p in self.final.named_parameters():
-                if name.startswith(("forward_actor.", "time2vec.")):
+                if name.startswith(KEPT_PARAMETERS):
                     p[member].copy_(live[name][k])
 
     def _drop(self, leaving: list[int]) -> None:
@@ -507,6 +537,8 @@ class DATITrainer:
                 if st:
                     for key in ("exp_avg", "exp_avg_sq"):
                         st[key] = st[key][keep].clone()
+        if self.average is not None:
+            params += list(self.average.parameters())
         with torch.no_grad():
             for p in params:
                 p.data = p.data[keep].clone()

@@ -1,8 +1,9 @@
 """Exact resume of a `DATITrainer` at an episode boundary.
 
-`trainer_state` captures everything that the next steps depend on: the live and final networks,
-the three Adam optimisers, the replay buffer, every random stream (torch generators of the members,
-which also drive their latent noise; the environments' numpy generators), the latent noise state,
+`trainer_state` captures everything that the next steps depend on: the live, final and averaged
+networks, the three Adam optimisers, the replay buffer, every random stream (torch generators of
+the members, which also drive their latent noise; the environments' numpy generators), the latent
+noise state,
 the episode counters, the early-stopping state, the history and the current observations. The
 environments' episode state is restored by resetting them onto the reference they had drawn, which
 at an episode boundary reproduces it exactly (position = first point, t = 0, fresh DTW); the
@@ -41,6 +42,7 @@ def trainer_state(trainer: DATITrainer) -> dict[str, Any]:
         "format": FORMAT,
         "nets": trainer.nets.state_dict(),
         "final": trainer.final.state_dict(),
+        "average": None if trainer.average is None else trainer.average.state_dict(),
         "opt_critic": trainer.opt_critic.state_dict(),
         "opt_actor": trainer.opt_actor.state_dict(),
         "opt_l1": trainer.opt_l1.state_dict(),
@@ -74,6 +76,8 @@ def load_trainer_state(
         trainer._drop([k for k, m in enumerate(trainer.active) if m not in active])
     trainer.nets.load_state_dict(state["nets"])
     trainer.final.load_state_dict(state["final"])
+    if trainer.average is not None:
+        trainer.average.load_state_dict(state["average"])
     trainer.opt_critic.load_state_dict(state["opt_critic"])
     trainer.opt_actor.load_state_dict(state["opt_actor"])
     trainer.opt_l1.load_state_dict(state["opt_l1"])
