@@ -70,7 +70,8 @@ LANE_OPTION = typer.Option(
     help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
     "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
     "ranges=max|quantile, noise=gaussian|ou, fourier=6 (octaves of position features; 0 off), "
-    "pretrain=50 (epochs of cloning before the adversarial training; 0 off), members=1, "
+    "pretrain=50 (epochs of cloning before the adversarial training; 0 off), members=3 (seeds "
+    "trained as one lane model), average=0 (decay of a moving-average actor; 0 off), "
     "critic=decision|state, validation_tracks=8, validation_rollouts=3.",
 )
 

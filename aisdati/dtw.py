@@ -21,6 +21,7 @@ great-circle distance in metres on a sphere of radius `EARTH_RADIUS_M`, as the `
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit, prange
@@ -340,6 +341,24 @@ class IncrementalDTW:
         )
         self._n = t + 1
         return float(self._row_d[t])
+
+    def state_dict(self) -> dict[str, Any]:
+        """The pushed points and the last row and column of the cost matrix, so that a restored
+        instance continues exactly (a training checkpoint taken mid-episode)."""
+        n = self._n
+        arrays = ("_a", "_b", "_row_d", "_col_d", "_row_l", "_col_l")
+        return {"n": n, "dim": self._dim, **{k: getattr(self, k)[:n].copy() for k in arrays}}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.reset()
+        n = int(state["n"])
+        self._n, self._dim = n, int(state["dim"])
+        size = max(self._capacity, n)
+        for key in ("_a", "_b", "_row_d", "_col_d", "_row_l", "_col_l"):
+            saved = np.asarray(state[key])
+            arr = np.empty((size, *saved.shape[1:]), dtype=getattr(self, key).dtype)
+            arr[:n] = saved
+            setattr(self, key, arr)
 
     @property
     def n(self) -> int:

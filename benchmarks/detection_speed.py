@@ -7,7 +7,7 @@ test tracks among 1,000 training tracks of 500 points (target <= 60 s on 2 cores
 The tracks are synthetic lanes (a few shared routes, each track jittered around its route, ~12 kn,
 3-minute reports), so that many training tracks start near every test track, as in real traffic;
 speed does not depend on where the ships are. Step scoring uses an untrained DATI actor (its cost
-does not depend on the weights).
+does not depend on the weights), with the default lane model's number of members.
 
 Run: python benchmarks/detection_speed.py [--tracks 1000] [--points 500] [--draws 10]
 (not part of the test suite; prints a markdown table).
@@ -27,7 +27,7 @@ from aisdati.detectors.nearest import NearestDetector
 from aisdati.geo import lane_distances
 from aisdati.model.ais import build_source
 from aisdati.model.ais_policy import AISPolicy, dati_act
-from aisdati.model.ais_space import LaneConfig
+from aisdati.model.ais_space import DEFAULT_PRESET, PRESETS, LaneConfig
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
 from aisdati.trackdata import Track
@@ -49,9 +49,12 @@ def lanes(rng: np.random.Generator, n_tracks: int, points: int, routes: int = 5)
 
 
 def untrained_policy(tracks: list[Track]) -> AISPolicy:
+    """An untrained actor with as many members as the default lane model (its draws spread over
+    them, each member computing its own rows)."""
     source = build_source(tracks[:50], LaneConfig())
     cfg = DATIConfig()
-    return AISPolicy(source.space, dati_act(DATINetworks(2, 3, cfg.network, [0]), cfg))
+    seeds = list(range(PRESETS[DEFAULT_PRESET].members))
+    return AISPolicy(source.space, dati_act(DATINetworks(2, 3, cfg.network, seeds), cfg))
 
 
 def bench_lane(tracks: list[Track], rollouts: int) -> float:

@@ -8,6 +8,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from aisdati.detect import SCORES_SCHEMA
+from aisdati.model.ais_space import DEFAULT_PRESET, PRESETS
 
 
 @pytest.fixture(scope="module")
@@ -90,8 +91,13 @@ def test_train_writes_model_card_and_log(run):
     assert card["epsilon_m"] == 500.0 and "warping path" in card["epsilon_interpretation"]
     assert card["training"]["episodes_run"] == 2
     assert card["decision_dim"] == 3
-    lines = (models / "down.log.jsonl").read_text().splitlines()
-    assert [json.loads(x)["episode"] for x in lines] == [1, 2]
+    lines = [json.loads(x) for x in (models / "down.log.jsonl").read_text().splitlines()]
+    members = PRESETS[DEFAULT_PRESET].members  # the default lane model is a seed ensemble
+    assert len(card["training"]["members"]) == len(card["seeds"]) == members > 1
+    episodes: dict[int, list[int]] = {}
+    for x in lines:
+        episodes.setdefault(x["member"], []).append(x["episode"])
+    assert list(episodes.values()) == [[1, 2]] * members
     assert run["train"]["card"]["cluster"] == "down"
 
 

@@ -266,7 +266,8 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
 
     table = read_track_table(kitimat)
     ids = tuple(int(i) for i in table["track_id"][:5])
-    lane = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1)
+    # one member: the cards below stand for cards from before lane configurations (one seed)
+    lane = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1, members=1)
     settings = TrainSettings(
         data_dir=kitimat, cluster="other", out_dir=tmp_path, episodes=1, track_ids=ids,
         preset="lanes", lane=lane,

@@ -148,3 +148,22 @@ def test_unknown_metric_raises():
         dtw([[0.0, 0.0]], [[1.0, 1.0]], metric="manhattan")
     with pytest.raises(ValueError, match="haversine"):
         IncrementalDTW(metric="cosine")
+
+
+def test_incremental_dtw_continues_exactly_from_its_state():
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-1, 1, (12, 2)) + np.array([-129.0, 53.0])
+    b = rng.uniform(-1, 1, (12, 2)) + np.array([-129.0, 53.0])
+    whole = IncrementalDTW(metric="haversine", capacity=4)  # grows past its capacity
+    half = IncrementalDTW(metric="haversine", capacity=4)
+    for i in range(6):
+        whole.push(a[i], b[i])
+        half.push(a[i], b[i])
+    restored = IncrementalDTW(metric="haversine", capacity=4)
+    restored.load_state_dict(half.state_dict())
+    for i in range(6, 12):
+        assert restored.push(a[i], b[i]) == whole.push(a[i], b[i])
+        assert restored.path_length == whole.path_length
+    empty = IncrementalDTW()
+    empty.load_state_dict(IncrementalDTW().state_dict())
+    assert empty.n == 0 and empty.push([0.0, 0.0], [3.0, 4.0]) == 5.0

@@ -40,7 +40,6 @@ from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
 from aisdati.model.env import Reference, ReferenceSource, TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks
 from aisdati.model.resume import (
-    at_episode_boundary,
     load_trainer_state,
     read_checkpoint,
     save_checkpoint,
@@ -389,9 +388,12 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
                 f"{ckpt_path} belongs to another run (cluster, seed or training tracks differ); "
                 "use the same --seed/--max-tracks/--data, or train without --resume"
             )
-        source.load_state_dict(doc["source"])
         by_id = {r.label["track_id"]: r for r in source.references}
         load_trainer_state(trainer, doc["trainer"], [by_id[int(i)] for i in doc["current"]])
+        orders = doc["source"]  # each live member's episode order (one dict before ensembles)
+        orders = orders if isinstance(orders, list) else [orders] * len(trainer.envs)
+        for env, order in zip(trainer.envs, orders, strict=True):
+            env.source.load_state_dict(order)
         log_lines = list(doc["log_lines"])
         steps, wall_before = int(doc["steps"]), float(doc["wall_seconds"])
         resumed_from = len(trainer.history)  # >= 1: checkpoints are written after episodes
@@ -429,10 +431,10 @@ def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> T
         atomic_write_bytes(log_path, "".join(log_lines).encode())
         if trainer.done:
             ckpt_path.unlink(missing_ok=True)
-        elif at_episode_boundary(trainer):
+        else:
             extra = {
                 "identity": identity,
-                "source": source.state_dict(),
+                "source": [env.source.state_dict() for env in trainer.envs],
                 "current": [int(e.reference.label["track_id"]) for e in trainer.envs],
                 "log_lines": log_lines,
                 "steps": steps,

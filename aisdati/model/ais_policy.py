@@ -193,32 +193,40 @@ class AISPolicy:
 def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) -> MakeAct:
     """DATI's forward actor as a batched policy: member `member` of the ensemble, or with None
     every member in turn (row i acts with member i mod M: a seed ensemble's K draws spread
-    over its members). Each row draws its own latent noise, Gaussian or (with temporal noise)
-    Ornstein-Uhlenbeck."""
+    over its members; each member computes its own rows only). Each row draws its own latent
+    noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
     latent = config.network.latent_dim
     state_dim = nets.forward_actor.input_features.weight.shape[1]
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
 
     def make(n: int, seed: int, temporal: bool) -> Act:
         gen = torch.Generator().manual_seed(int(seed))
-        eta = torch.zeros(members, n, latent)
+        eta = torch.zeros(n, latent)
         ou = config.noise == "ou" and temporal
-        rows = torch.arange(n)
-        pick = rows % members if member is None else torch.full((n,), member)
+        if member is None:  # member m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid
+            width = -(-n // members)
+            grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
+        else:  # the ensemble's layers take every member; only `member`'s rows are kept
+            grid = torch.arange(n)[None].expand(members, n)
+        valid = grid < n
+        grid = grid.clamp(max=n - 1)
 
         def act(obs: np.ndarray) -> np.ndarray:
             nonlocal eta
-            draw = torch.randn((1, n, latent), generator=gen).expand(members, n, latent)
-            draw = draw * config.noise_sigma
+            draw = torch.randn((n, latent), generator=gen) * config.noise_sigma
             if ou:
                 eta = eta - config.ou_theta * eta * config.ou_dt + draw * math.sqrt(config.ou_dt)
             else:
                 eta = draw
-            x = torch.as_tensor(obs)[None].expand(members, *obs.shape)
+            x = torch.as_tensor(obs)[grid]
             with torch.no_grad():
                 time = nets.time_features(x[..., state_dim:].contiguous())
-                out = nets.forward_actor(x[..., :state_dim].contiguous(), eta, time)
-            return out[pick, rows].numpy()
+                out = nets.forward_actor(x[..., :state_dim].contiguous(), eta[grid], time)
+            if member is not None:
+                return out[member].numpy()
+            decided = torch.empty(n, out.shape[-1], dtype=out.dtype)
+            decided[grid[valid]] = out[valid]
+            return decided.numpy()
 
         return act
 

@@ -128,6 +128,7 @@ PRESETS: dict[str, LaneConfig] = {
         noise="ou",
         fourier=6,
         pretrain=50,
+        members=3,
     ),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the

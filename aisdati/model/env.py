@@ -172,6 +172,26 @@ class TrajectoryImitationEnv(gym.Env):
         self._dtw.push(self.position, ref.positions[0])
         return self._observation(), {"reference": ref}
 
+    def episode_state(self) -> dict[str, Any]:
+        """Where the current episode stands (the reference aside), so that a checkpoint taken
+        while it runs continues it exactly: see `load_episode_state`."""
+        return {
+            "position": self.position.copy(),
+            "previous": self.previous.copy(),
+            "last_dt": self.last_dt,
+            "t": self.t,
+            "smoothed": self.smoothed,
+            "dtw": self._dtw.state_dict(),
+        }
+
+    def load_episode_state(self, state: dict[str, Any]) -> None:
+        """Continue an episode of `episode_state`; call after `reset` onto its reference."""
+        self.position = np.array(state["position"], dtype=np.float64)
+        self.previous = np.array(state["previous"], dtype=np.float64)
+        self.last_dt, self.t = float(state["last_dt"]), int(state["t"])
+        self.smoothed = float(state["smoothed"])
+        self._dtw.load_state_dict(state["dtw"])
+
     def scaled_perfect(self, ref: Reference) -> np.ndarray:
         """The perfect decisions [n, k] of a reference (definition 3.2), scaled into [-1, 1]."""
         perfect = self.rule.perfect_decisions(ref.positions, ref.dts)

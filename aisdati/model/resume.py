@@ -1,13 +1,14 @@
-"""Exact resume of a `DATITrainer` at an episode boundary.
+"""Exact resume of a `DATITrainer` after any member's episode end.
 
 `trainer_state` captures everything that the next steps depend on: the live, final and averaged
 networks, the three Adam optimisers, the replay buffer, every random stream (torch generators of
 the members, which also drive their latent noise; the environments' numpy generators), the latent
 noise state,
-the episode counters, the early-stopping state, the history and the current observations. The
-environments' episode state is restored by resetting them onto the reference they had drawn, which
-at an episode boundary reproduces it exactly (position = first point, t = 0, fresh DTW); the
-reference source's shuffled order is saved by the caller (`AISTrackSource.state_dict`).
+the episode counters, the early-stopping state, the history and the current observations. Each
+environment is reset onto the reference it had drawn and then given its episode's state (position,
+step, smoothed DTW and the incremental DTW's rows): the members of a seed ensemble end their
+episodes at different steps, so a checkpoint finds most of them mid-episode. The reference
+source's shuffled order is saved by the caller (`AISTrackSource.state_dict`).
 
 Everything is tensors, lists, dicts and numbers, so the file loads with
 `torch.load(weights_only=True)`: no code runs from a checkpoint.
@@ -19,6 +20,7 @@ import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from aisdati.errors import UserError
@@ -29,14 +31,27 @@ from aisdati.model.env import Reference
 FORMAT = "aisdati-trainer/1"
 
 
-def at_episode_boundary(trainer: DATITrainer) -> bool:
-    return all(env.t == 0 for env in trainer.envs)
+def _tensors(state: dict[str, Any]) -> dict[str, Any]:
+    """numpy arrays as tensors, recursively (`weights_only` loads no numpy)."""
+    return {
+        k: _tensors(v)
+        if isinstance(v, dict)
+        else torch.as_tensor(v)
+        if isinstance(v, np.ndarray)
+        else v
+        for k, v in state.items()
+    }
+
+
+def _arrays(state: dict[str, Any]) -> dict[str, Any]:
+    return {
+        k: _arrays(v) if isinstance(v, dict) else v.numpy() if isinstance(v, torch.Tensor) else v
+        for k, v in state.items()
+    }
 
 
 def trainer_state(trainer: DATITrainer) -> dict[str, Any]:
-    """The trainer's state; only valid at an episode boundary (every env freshly reset)."""
-    if not at_episode_boundary(trainer):
-        raise ValueError("trainer state is only captured between episodes")
+    """The trainer's state between two steps."""
     buf = trainer.buffer
     return {
         "format": FORMAT,
@@ -51,6 +66,7 @@ def trainer_state(trainer: DATITrainer) -> dict[str, Any]:
         "buffer_ptr": buf.ptr,
         "generators": [g.get_state() for g in trainer.generators],
         "env_rng": [env.np_random.bit_generator.state for env in trainer.envs],
+        "env_episodes": [_tensors(env.episode_state()) for env in trainer.envs],
         "noise": trainer.noise.state.clone(),
         "active": list(trainer.active),
         "episode": list(trainer.episode),
@@ -89,9 +105,14 @@ def load_trainer_state(
     buf.size, buf.ptr = size, int(state["buffer_ptr"])
     for g, s in zip(trainer.generators, state["generators"], strict=True):
         g.set_state(s)
-    for env, ref, rng_state in zip(trainer.envs, references, state["env_rng"], strict=True):
+    episodes = state.get("env_episodes") or [None] * len(references)  # older: all at t = 0
+    for env, ref, rng_state, episode in zip(
+        trainer.envs, references, state["env_rng"], episodes, strict=True
+    ):
         env.reset(options={"reference": ref})
         env.np_random.bit_generator.state = rng_state
+        if episode is not None:
+            env.load_episode_state(_arrays(episode))
     trainer.noise.state = state["noise"].clone()
     trainer.episode = [int(x) for x in state["episode"]]
     trainer.best_loss = [float(x) for x in state["best_loss"]]
