@@ -33,21 +33,26 @@ FORMAT = "aisdati-trainer/1"
 
 def _tensors(state: dict[str, Any]) -> dict[str, Any]:
     """numpy arrays as tensors, recursively (`weights_only` loads no numpy)."""
-    return {
-        k: _tensors(v)
-        if isinstance(v, dict)
-        else torch.as_tensor(v)
-        if isinstance(v, np.ndarray)
-        else v
-        for k, v in state.items()
-    }
+    out: dict[str, Any] = {}
+    for key, value in state.items():
+        if isinstance(value, dict):
+            value = _tensors(value)
+        elif isinstance(value, np.ndarray):
+            value = torch.as_tensor(value)
+        out[key] = value
+    return out
 
 
 def _arrays(state: dict[str, Any]) -> dict[str, Any]:
-    return {
-        k: _arrays(v) if isinstance(v, dict) else v.numpy() if isinstance(v, torch.Tensor) else v
-        for k, v in state.items()
-    }
+    """The inverse of `_tensors`."""
+    out: dict[str, Any] = {}
+    for key, value in state.items():
+        if isinstance(value, dict):
+            value = _arrays(value)
+        elif isinstance(value, torch.Tensor):
+            value = value.numpy()
+        out[key] = value
+    return out
 
 
 def trainer_state(trainer: DATITrainer) -> dict[str, Any]:
