@@ -342,19 +342,22 @@ class IncrementalDTW:
         self._n = t + 1
         return float(self._row_d[t])
 
+    _STATE_ARRAYS = ("_a", "_b", "_row_d", "_col_d", "_row_l", "_col_l")
+    """The pushed points and the last row and column of the cost matrix: all a push reads."""
+
     def state_dict(self) -> dict[str, Any]:
-        """The pushed points and the last row and column of the cost matrix, so that a restored
-        instance continues exactly (a training checkpoint taken mid-episode)."""
+        """What a restored instance needs to continue exactly (a training checkpoint taken
+        mid-episode)."""
         n = self._n
-        arrays = ("_a", "_b", "_row_d", "_col_d", "_row_l", "_col_l")
-        return {"n": n, "dim": self._dim, **{k: getattr(self, k)[:n].copy() for k in arrays}}
+        arrays = {k: getattr(self, k)[:n].copy() for k in self._STATE_ARRAYS}
+        return {"n": n, "dim": self._dim, **arrays}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.reset()
         n = int(state["n"])
         self._n, self._dim = n, int(state["dim"])
         size = max(self._capacity, n)
-        for key in ("_a", "_b", "_row_d", "_col_d", "_row_l", "_col_l"):
+        for key in self._STATE_ARRAYS:
             saved = np.asarray(state[key])
             arr = np.empty((size, *saved.shape[1:]), dtype=getattr(self, key).dtype)
             arr[:n] = saved

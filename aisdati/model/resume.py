@@ -3,12 +3,12 @@
 `trainer_state` captures everything that the next steps depend on: the live, final and averaged
 networks, the three Adam optimisers, the replay buffer, every random stream (torch generators of
 the members, which also drive their latent noise; the environments' numpy generators), the latent
-noise state,
-the episode counters, the early-stopping state, the history and the current observations. Each
-environment is reset onto the reference it had drawn and then given its episode's state (position,
-step, smoothed DTW and the incremental DTW's rows): the members of a seed ensemble end their
-episodes at different steps, so a checkpoint finds most of them mid-episode. The reference
-source's shuffled order is saved by the caller (`AISTrackSource.state_dict`).
+noise state, the episode counters, the early-stopping state, the history and the current
+observations. Each environment is reset onto the reference it had drawn and then given its
+episode's state (position, step, smoothed DTW and the incremental DTW's rows): the members of a
+seed ensemble end their episodes at different steps, so a checkpoint finds most of them
+mid-episode. Each member's shuffled episode order is saved by the caller
+(`AISTrackSource.state_dict`).
 
 Everything is tensors, lists, dicts and numbers, so the file loads with
 `torch.load(weights_only=True)`: no code runs from a checkpoint.
@@ -17,6 +17,7 @@ Everything is tensors, lists, dicts and numbers, so the file loads with
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,26 +32,15 @@ from aisdati.model.env import Reference
 FORMAT = "aisdati-trainer/1"
 
 
-def _tensors(state: dict[str, Any]) -> dict[str, Any]:
-    """numpy arrays as tensors, recursively (`weights_only` loads no numpy)."""
+def _convert(state: dict[str, Any], kind: type, to: Callable[[Any], Any]) -> dict[str, Any]:
+    """`state` with every `kind` leaf (nested dicts included) passed through `to`: numpy arrays
+    become tensors for saving (`weights_only` loads no numpy) and back for loading."""
     out: dict[str, Any] = {}
     for key, value in state.items():
         if isinstance(value, dict):
-            value = _tensors(value)
-        elif isinstance(value, np.ndarray):
-            value = torch.as_tensor(value)
-        out[key] = value
-    return out
-
-
-def _arrays(state: dict[str, Any]) -> dict[str, Any]:
-    """The inverse of `_tensors`."""
-    out: dict[str, Any] = {}
-    for key, value in state.items():
-        if isinstance(value, dict):
-            value = _arrays(value)
-        elif isinstance(value, torch.Tensor):
-            value = value.numpy()
+            value = _convert(value, kind, to)
+        elif isinstance(value, kind):
+            value = to(value)
         out[key] = value
     return out
 
@@ -71,7 +61,9 @@ def trainer_state(trainer: DATITrainer) -> dict[str, Any]:
         "buffer_ptr": buf.ptr,
         "generators": [g.get_state() for g in trainer.generators],
         "env_rng": [env.np_random.bit_generator.state for env in trainer.envs],
-        "env_episodes": [_tensors(env.episode_state()) for env in trainer.envs],
+        "env_episodes": [
+            _convert(env.episode_state(), np.ndarray, torch.as_tensor) for env in trainer.envs
+        ],
         "noise": trainer.noise.state.clone(),
         "active": list(trainer.active),
         "episode": list(trainer.episode),
@@ -117,7 +109,7 @@ def load_trainer_state(
         env.reset(options={"reference": ref})
         env.np_random.bit_generator.state = rng_state
         if episode is not None:
-            env.load_episode_state(_arrays(episode))
+            env.load_episode_state(_convert(episode, torch.Tensor, torch.Tensor.numpy))
     trainer.noise.state = state["noise"].clone()
     trainer.episode = [int(x) for x in state["episode"]]
     trainer.best_loss = [float(x) for x in state["best_loss"]]
