@@ -65,7 +65,7 @@ def bench_lane(tracks: list[Track], rollouts: int) -> float:
     t0 = time.perf_counter()
     _, _, every = policy.rollout_scores(positions, rollouts, 0, how.lane_reach, how.lane_rollouts)
     [
-        tail_mean(lane_distances(p, list(e), how.lane_course_km * 1000.0))
+        tail_mean(lane_distances(p, list(e), how.lane_course_km * 1000.0), how.tail)
         for p, e in zip(positions, every, strict=True)
     ]
     return time.perf_counter() - t0
@@ -76,7 +76,7 @@ def bench_step(tracks: list[Track], draws: int) -> float:
     policy.step_errors([t.positions for t in tracks[:2]], [t.dts for t in tracks[:2]], draws)
     t0 = time.perf_counter()
     errors, _ = policy.step_errors([t.positions for t in tracks], [t.dts for t in tracks], draws)
-    [tail_mean(e) for e in errors]
+    [tail_mean(e, ScoreSettings().tail) for e in errors]
     return time.perf_counter() - t0
 
 

@@ -419,3 +419,20 @@ def test_detect_and_evaluate_default_to_the_score_settings_course_weight():
     from aisdati.cli import LANE_COURSE_OPTION
 
     assert LANE_COURSE_OPTION.default == ScoreSettings().lane_course_km
+
+
+def test_the_tail_fraction_runs_from_the_largest_deviation_to_the_mean(tracks):
+    det = NearestDetector.fit("n", tracks[3:], {})
+    times = np.r_[0.0, np.cumsum(tracks[0].dts)] * 3600.0
+    jumped = inject("jump", tracks[0].positions, times, np.random.default_rng(1))
+    how = ScoreSettings(score="lane")
+    profile = det.lane_scores([jumped.positions], how)[1][0]
+    by_tail = {
+        f: det.lane_scores([jumped.positions], replace(how, tail=f))[0][0]
+        for f in (1e-9, 0.1, 0.5, 1.0)
+    }
+    assert by_tail[1e-9] == pytest.approx(profile.max())  # at least one report: the worst
+    assert by_tail[1.0] == pytest.approx(profile.mean())
+    k = int(np.ceil(0.1 * len(profile)))
+    assert by_tail[0.1] == pytest.approx(np.sort(profile)[-k:].mean())
+    assert by_tail[1e-9] > by_tail[0.1] > by_tail[0.5] > by_tail[1.0]

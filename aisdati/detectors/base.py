@@ -19,11 +19,9 @@ from aisdati.errors import UserError
 from aisdati.trackdata import Track
 
 SCORES = ("rollout", "step", "lane", "both")
-TAIL = 0.1
-"""Step and lane scores: the mean of the largest 10 % of a track's per-report distances."""
 
 
-def tail_mean(values: np.ndarray, fraction: float = TAIL) -> float:
+def tail_mean(values: np.ndarray, fraction: float) -> float:
     """Mean of the largest `fraction` of the values (at least one): a short stretch far off
     counts as much in a long track as in a short one."""
     k = max(1, math.ceil(len(values) * fraction))
@@ -56,6 +54,12 @@ class ScoreSettings:
     much); 0 judges position only. See `aisdati.geo.lane_distances`. 2 km gave DATI the best
     pooled lane AUC averaged over two areas (Kitimat's fjord lanes, where 4 km was better, and
     NY Harbor's ferry crossings, where 4 km was worse than none; README, "every route")."""
+    tail: float = 0.1
+    """Step and lane scores: the mean of the largest `tail` of a track's per-report distances.
+    Measured at 0.05-1 on both areas (`benchmarks/lane_score.py --tail`): 0.1 gave DATI the
+    best pooled lane AUC averaged over Kitimat and NY Harbor (0.15 was level; larger fractions
+    dilute a short jump or loiter on the ferry routes, smaller ones let a few stray reports
+    decide); README, "every route of an area"."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0

@@ -70,12 +70,12 @@ class PolicyDetector(Detector):
                 lane_distances(p, list(e), how.lane_course_km * 1000.0)
                 for p, e in zip(positions, every, strict=True)
             ]
-            parts["lane"] = np.array([tail_mean(d) for d in profiles["lane"]])
+            parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
         if "step" in wanted:
             errors, predicted = policy.step_errors(
                 positions, [t.dts for t in tracks], how.rollouts, how.seed
             )
-            parts["step"] = np.array([tail_mean(e) for e in errors])
+            parts["step"] = np.array([tail_mean(e, how.tail) for e in errors])
             profiles["step"] = [np.concatenate([[0.0], e]) for e in errors]
             evidence["step"] = [
                 np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)

@@ -92,7 +92,7 @@ class NearestDetector(Detector):
             lane_distances(q, [self.tracks[j] for j in c], how.lane_course_km * 1000.0)
             for q, c in zip(queries, cands, strict=True)
         ]
-        return np.array([tail_mean(d) for d in profiles]), profiles
+        return np.array([tail_mean(d, how.tail) for d in profiles]), profiles
 
     def score(
         self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str] = ()
