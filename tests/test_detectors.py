@@ -319,6 +319,22 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     assert np.isfinite(det.score(tracks, ScoreSettings(rollouts=2)).score_m).all()
 
 
+def test_the_baselines_train_one_model_under_the_lanes_seed_ensemble(cli, kitimat, tmp_path):
+    """The `lanes` preset trains DATI as three seeds; BC and `nearest` stay one model, their
+    cards say so, and they load and score (a BC card once claimed three members, one seed)."""
+    models = tmp_path / "models"
+    for method in ("bc", "nearest"):
+        r = cli("train", "--cluster", "route-2", "--data", kitimat, "--out", models,
+                "--method", method, "--episodes", "1", "--max-tracks", "4", "-q")  # fmt: skip
+        assert r.exit_code == 0, r.output
+        det = load_detector(models / f"route-2-{method}")
+        assert det.card["preset"] == "lanes" and det.card["lane_config"]["members"] == 1
+        held = load_tracks(kitimat, read_track_table(kitimat).query("route == 'route-2'")
+                           ["track_id"].tolist()[-2:])  # fmt: skip
+        assert np.isfinite(det.score(held, ScoreSettings(rollouts=2)).score_m).all()
+    assert len(load_detector(models / "route-2-bc").card["seeds"]) == 1
+
+
 def test_gym_space_of_the_paper_state_is_unchanged(tracks):
     env = make_env(build_source(tracks[:4], LaneConfig()))
     assert env.observation_space.shape == (3,)

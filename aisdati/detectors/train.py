@@ -90,7 +90,9 @@ def train_detector(
         raise UserError(f"--episodes must be at least 1, got {settings.episodes}")
     ids, total = choose_training_tracks(settings)
     tracks = load_tracks(settings.data_dir, ids)
-    source = build_source(tracks, settings.lane)
+    # a lane's seed ensemble (`members`) is DATI's: the baselines are one model, and their cards
+    # say so (a BC card's seeds must number its members)
+    source = build_source(tracks, replace(settings.lane, members=1))
     card = base_card(settings, source, data_card(settings, tracks, total))
     stem = model_stem(settings)
     if method == "nearest":
