@@ -64,6 +64,12 @@ LANE_COURSE_OPTION = typer.Option(
     help="Lane score: what sailing against the lane's course costs, in km (across it: 0.7 x "
     "as much; 0: position only). As the models were calibrated (training uses the default).",
 )
+LANE_TRAFFIC_OPTION = typer.Option(
+    True,
+    "--lane-traffic/--no-lane-traffic",
+    help="Lane score of dati and bc: the lane also holds one rollout from every training "
+    "track's start (where the model's traffic goes). As the models were calibrated.",
+)
 LANE_OPTION = typer.Option(
     None,
     "--lane",
@@ -676,6 +682,7 @@ def evaluate(
         30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
     ),
     lane_course_km: float = LANE_COURSE_OPTION,
+    lane_traffic: bool = LANE_TRAFFIC_OPTION,
     near_km: float = typer.Option(10.0, "--near-km", help="nearest: start-distance filter."),
     contamination: float = typer.Option(
         0.05, help="Calibrated flagging: share of training tracks a detector would flag."
@@ -732,6 +739,7 @@ def evaluate(
         rollouts=rollouts,
         lane_rollouts=lane_rollouts,
         lane_course_km=lane_course_km,
+        lane_traffic=lane_traffic,
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
@@ -926,6 +934,7 @@ def detect(
         30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
     ),
     lane_course_km: float = LANE_COURSE_OPTION,
+    lane_traffic: bool = LANE_TRAFFIC_OPTION,
     threshold: float = typer.Option(0.75, help="Flag normalised scores above this, in (0, 1]."),
     top_percent: float | None = typer.Option(
         None, "--top-percent", help="Flag this percentage of highest scores instead."
@@ -978,6 +987,7 @@ def detect(
         rollouts=rollouts,
         lane_rollouts=lane_rollouts,
         lane_course_km=lane_course_km,
+        lane_traffic=lane_traffic,
         threshold=threshold,
         top_percent=top_percent,
         contamination=contamination,

@@ -75,6 +75,7 @@ class DetectSettings:
     rollouts: int = 10
     lane_rollouts: int = ScoreSettings().lane_rollouts
     lane_course_km: float = ScoreSettings().lane_course_km
+    lane_traffic: bool = ScoreSettings().lane_traffic
     threshold: float = 0.75
     top_percent: float | None = None
     contamination: float | None = None
@@ -90,6 +91,7 @@ class DetectSettings:
             rollouts=self.rollouts,
             lane_rollouts=self.lane_rollouts,
             lane_course_km=self.lane_course_km,
+            lane_traffic=self.lane_traffic,
             near_km=self.near_km,
             seed=self.seed,
         )
@@ -114,8 +116,9 @@ SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
     "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
-    "lane_rollouts free rollouts of twice the track's steps (nearest: of the training tracks "
-    "starting within near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
+    "lane_rollouts free rollouts of twice the track's steps and, with lane_traffic, of one rollout "
+    "from each training track's start (nearest: of the training tracks starting within "
+    "near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
     "distance d and course difference dcourse (m)",
     "both": "rollout / median training rollout score + step / median training step score",
     "nearest": "great-circle DTW / warping-path length (m) to the nearest training "

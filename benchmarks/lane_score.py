@@ -1,14 +1,16 @@
 """How the lane score depends on its settings: rescores the models of a
 `detection_quality.py` run (every seed and route) with L lane rollouts, a course weight
-(`ScoreSettings.lane_course_km`), a tail fraction (`ScoreSettings.tail`) and several latent-noise
-draws, recalibrating each model on its own training tracks the same way, and prints one markdown
-table of the pooled ROC AUC (mean over the seeds) per draw. The lane is a sample of the policy's
-rollouts, so one draw's AUC carries sampling noise; this measures it, what more rollouts buy and
-what the course weight and the tail buy.
+(`ScoreSettings.lane_course_km`), a tail fraction (`ScoreSettings.tail`), with or without the
+shared traffic rollouts (`ScoreSettings.lane_traffic`) and several latent-noise draws,
+recalibrating each model on its own training tracks the same way, and prints one markdown
+table of the pooled ROC AUC (mean over the seeds) per draw. The lane is a sample of the
+policy's rollouts, so one draw's AUC carries sampling noise; this measures it, and what more
+rollouts, the course weight, the tail and the traffic rollouts buy.
 `nearest` has no draw (its lane is the training tracks) and no rollouts.
 
 Run: python benchmarks/lane_score.py [--run runs/quality-v7/kitimat] [--rollouts 10,30,100]
-     [--course-km 0,2] [--tail 0.1] [--draws 0,100,200] [--detectors dati,bc,nearest]
+     [--course-km 0,2] [--tail 0.1] [--traffic 0,1] [--draws 0,100,200]
+     [--detectors dati,bc,nearest]
 Needs a finished `python benchmarks/detection_quality.py --out runs/quality-v7` run (its
 models and injected data). About a minute per draw at 30 rollouts on 2 cores, three at 100.
 """
@@ -68,6 +70,7 @@ def main() -> None:
     ap.add_argument("--rollouts", default="10,30,100", help="lane rollouts L, comma-separated")
     ap.add_argument("--course-km", default="0", help="lane course weights, comma-separated")
     ap.add_argument("--tail", default="0.1", help="tail fractions, comma-separated")
+    ap.add_argument("--traffic", default="1", help="shared traffic rollouts off/on: 0,1")
     ap.add_argument("--draws", default="0,100,200", help="offsets to each seed's scoring seed")
     ap.add_argument("--detectors", default="dati,bc,nearest")
     args = ap.parse_args()
@@ -77,17 +80,18 @@ def main() -> None:
     draws = [int(d) for d in args.draws.split(",")]
     print(f"Pooled lane ROC AUC, mean over seeds {seeds}, per noise draw ({args.run})")
     print(
-        "| detector | lane rollouts | course km | tail | "
+        "| detector | lane rollouts | course km | tail | traffic | "
         + " | ".join(f"draw {d}" for d in draws)
         + " | mean |"
     )
-    print("|---|---|---|---|" + "---|" * (len(draws) + 1))
+    print("|---|---|---|---|---|" + "---|" * (len(draws) + 1))
     rows = []
     for detector in args.detectors.split(","):
         lanes = [0] if detector == "nearest" else [int(x) for x in args.rollouts.split(",")]
         courses = [float(x) for x in args.course_km.split(",")]
         tails = [float(x) for x in args.tail.split(",")]
-        for lane, course, tail in itertools.product(lanes, courses, tails):
+        traffics = [bool(int(x)) for x in args.traffic.split(",")]
+        for lane, course, tail, traffic in itertools.product(lanes, courses, tails, traffics):
             means, details = [], []
             for draw in [0] if detector == "nearest" else draws:
                 per_seed = [
@@ -101,6 +105,7 @@ def main() -> None:
                                 lane_rollouts=max(1, lane),
                                 lane_course_km=course,
                                 tail=tail,
+                                lane_traffic=traffic,
                                 seed=s + draw,
                             ),
                         )
@@ -112,19 +117,19 @@ def main() -> None:
             means += means[-1:] * (len(draws) - len(means))  # nearest: the same every draw
             cells = " | ".join(f"{m:.3f}" for m in means)
             print(
-                f"| {detector} | {lane or '-'} | {course:g} | {tail:g} | {cells} "
+                f"| {detector} | {lane or '-'} | {course:g} | {tail:g} | {traffic:d} | {cells} "
                 f"| {np.mean(means):.3f} |",
                 flush=True,
             )
-            setting = f"{lane or '-'} | {course:g} | {tail:g}"
+            setting = f"{lane or '-'} | {course:g} | {tail:g} | {traffic:d}"
             rows.append((detector, setting, pd.DataFrame(details).mean()))
     print("\nMean over seeds and draws, per route and per anomaly kind (each kind against all")
     print("normal tracks):")
     every = list(dict.fromkeys(n for row in rows for n in row[2].index))
     routes = sorted((n for n in every if n.startswith("route-")), key=lambda n: int(n[6:]))
     names = ["pooled", *routes, *(n for n in every if n != "pooled" and n not in routes)]
-    print("| detector | lane rollouts | course km | tail | " + " | ".join(names) + " |")
-    print("|---|---|---|---|" + "---|" * len(names))
+    print("| detector | lane rollouts | course km | tail | traffic | " + " | ".join(names) + " |")
+    print("|---|---|---|---|---|" + "---|" * len(names))
     for detector, setting, mean in rows:
         cells = " | ".join(f"{mean[n]:.3f}" if n in mean else "-" for n in names)
         print(f"| {detector} | {setting} | {cells} |")

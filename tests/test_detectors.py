@@ -300,6 +300,22 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     short = det.score(few, replace(where, lane_reach=1.0))
     for a, b in zip(lane_s.profiles, short.profiles, strict=True):
         assert np.all(a <= b + 1e-6)
+    # the traffic rollouts: one from every training start, added to each track's own lane
+    traffic = det.traffic(policy, where)
+    assert len(traffic) == len(ids)
+    np.testing.assert_allclose([t[0] for t in traffic], det.start_points)
+    alone = det.score(few, replace(where, lane_traffic=False))
+    for a, b in zip(lane_s.profiles, alone.profiles, strict=True):
+        assert np.all(a <= b + 1e-6) and np.any(a < b - 1.0)
+    # thresholds need the traffic setting the model was calibrated with
+    lane_how = ScoreSettings(score="lane")
+    assert card["calibrated_with"]["lane_traffic"] is True and det.threshold(lane_how, 0.05) > 0
+    with pytest.raises(UserError, match="calibrated with --lane-traffic, not --no-lane-traffic"):
+        det.threshold(replace(lane_how, lane_traffic=False), 0.05)
+    del det.card["calibrated_with"]["lane_traffic"]  # a card from before the traffic rollouts
+    with pytest.raises(UserError, match="with --no-lane-traffic, not --lane-traffic: pass that"):
+        det.threshold(lane_how, 0.05)
+    assert det.threshold(replace(lane_how, lane_traffic=False), 0.05) > 0
     # a card from before lane configurations and calibration: the paper's set-up (the paper's
     # state, so a model of the position alone), step score; with a wider state it is refused
     wide = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
@@ -431,10 +447,11 @@ def test_nearest_lane_score_sees_a_jump_and_is_calibrated_per_vessel(kitimat):
     assert det.calibration_key(how) == "lane" and det.threshold(how, 0.05) > 0
 
 
-def test_detect_and_evaluate_default_to_the_score_settings_course_weight():
-    from aisdati.cli import LANE_COURSE_OPTION
+def test_detect_and_evaluate_default_to_the_score_settings_lane():
+    from aisdati.cli import LANE_COURSE_OPTION, LANE_TRAFFIC_OPTION
 
     assert LANE_COURSE_OPTION.default == ScoreSettings().lane_course_km
+    assert LANE_TRAFFIC_OPTION.default is ScoreSettings().lane_traffic is True
 
 
 def test_the_tail_fraction_runs_from_the_largest_deviation_to_the_mean(tracks):

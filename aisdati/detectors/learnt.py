@@ -36,6 +36,7 @@ class PolicyDetector(Detector):
     """A detector built on an `AISPolicy`; subclasses say how the policy acts."""
 
     corridor: Corridor | None = None
+    lane_settings = ("lane_course_km", "lane_traffic")
 
     def policy(self) -> AISPolicy:
         return AISPolicy(AISSpace.from_card(self.card, self.corridor), self.make_act)
@@ -66,8 +67,9 @@ class PolicyDetector(Detector):
                     matched_distances(p, b) for p, b in zip(positions, best, strict=True)
                 ]
         if "lane" in wanted:
+            traffic = self.traffic(policy, how) if how.lane_traffic else []
             profiles["lane"] = [
-                lane_distances(p, list(e), how.lane_course_km * 1000.0)
+                lane_distances(p, [*e, *traffic], how.lane_course_km * 1000.0)
                 for p, e in zip(positions, every, strict=True)
             ]
             parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
@@ -92,6 +94,17 @@ class PolicyDetector(Detector):
             evidence[how.score],
             parts,
         )
+
+    def traffic(self, policy: AISPolicy, how: ScoreSettings) -> list[np.ndarray]:
+        """One rollout from each training track's start, of the training tracks' mean number
+        of steps times the lane's reach: where the model's traffic goes, shared by every
+        track's lane, so a track that starts off the lane and joins it is judged against the
+        lane it joins, not only against where the policy goes from its odd start."""
+        starts = self.start_points
+        steps = max(1, round(self.card["data"]["points"] / len(starts)) - 1)
+        stream = int(np.random.SeedSequence([how.seed, 2]).generate_state(1)[0])
+        paths = policy.generate(starts, np.full(len(starts), steps), 1, stream, how.lane_reach)
+        return list(paths)
 
     def calibrate(self, tracks: Sequence[Track], how: ScoreSettings) -> None:
         """Score the training tracks every way; `threshold` and `both` read these."""

@@ -52,6 +52,7 @@ class EvaluateSettings:
     rollouts: int = 10
     lane_rollouts: int = ScoreSettings().lane_rollouts
     lane_course_km: float = ScoreSettings().lane_course_km
+    lane_traffic: bool = ScoreSettings().lane_traffic
     near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
@@ -150,6 +151,7 @@ def _how(settings: EvaluateSettings) -> ScoreSettings:
         rollouts=settings.rollouts,
         lane_rollouts=settings.lane_rollouts,
         lane_course_km=settings.lane_course_km,
+        lane_traffic=settings.lane_traffic,
         near_km=settings.near_km,
         seed=settings.seed,
     )

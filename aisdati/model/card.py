@@ -233,6 +233,8 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
             raise card.fail("calibrated_with", "an object", calibrated_with)
         if "lane_course_km" in calibrated_with:  # older cards: position only
             card.number("calibrated_with.lane_course_km", 0.0, 1000.0)
+        if "lane_traffic" in calibrated_with:  # older cards: without the traffic rollouts
+            card.boolean("calibrated_with.lane_traffic", None)
 
     # training state: `detect` warns about a model whose training did not finish
     card.boolean("training.finished", None)
