@@ -206,6 +206,7 @@ def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
     ids = card.array("data.track_ids", min_length=1)
     for i, v in enumerate(ids):
         card.integer(f"data.track_ids[{i}]", 0, value=v)
+    card.integer("data.points", len(ids))  # the traffic's rollouts run their mean length
     starts = card.array("data.start_points", length=len(ids))
     for i, point in enumerate(starts):
         field = f"data.start_points[{i}]"
