@@ -27,6 +27,7 @@ from aisdati.options import (
     check_options,
     handle_termination,
     prepare_output_dir,
+    raise_if_interrupted,
 )
 
 app = typer.Typer(
@@ -99,7 +100,9 @@ def user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             with handle_termination():
-                return func(*args, **kwargs)
+                result = func(*args, **kwargs)
+                raise_if_interrupted()  # a Ctrl-C swallowed where nothing was left to commit
+                return result
         except UserError as exc:
             message = escape(str(exc))  # a message may hold [brackets]: not markup
             err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)

@@ -174,3 +174,40 @@ def test_stopping_the_first_training_episode_says_no_model_was_saved(
     assert f"{word}: stopped during the first episode, before any model was saved" in message
     assert "best episode so far" not in message and "Traceback" not in err
     assert sorted(p.name for p in models.iterdir()) == []
+
+
+def _interrupt_inside_a_c_callback() -> None:
+    """Ctrl-C arriving while C code calls back into Python (as numba's JIT does): the
+    KeyboardInterrupt is raised in the callback, printed as "Exception ignored" and lost."""
+    import ctypes
+
+    libc = ctypes.CDLL(None)
+    compare = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+
+    def cmp(a, b):
+        os.kill(os.getpid(), signal.SIGINT)
+        return 0
+
+    values = (ctypes.c_int * 2)(2, 1)
+    libc.qsort(values, 2, ctypes.sizeof(ctypes.c_int), compare(cmp))
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the swallowing
+def test_a_ctrl_c_swallowed_by_a_c_callback_still_stops_the_outputs(tmp_path):
+    from aisdati.model.checkpoint import atomic_write_bytes
+    from aisdati.options import handle_termination, raise_if_interrupted
+
+    # a test run started in the background may inherit an ignored SIGINT: give it the default
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with handle_termination():
+            _interrupt_inside_a_c_callback()  # returns: the exception did not propagate
+            with pytest.raises(KeyboardInterrupt):
+                atomic_write_bytes(tmp_path / "model.json", b"{}")
+            with pytest.raises(KeyboardInterrupt):
+                raise_if_interrupted()
+        assert list(tmp_path.iterdir()) == []  # nothing committed, no temporary left
+        raise_if_interrupted()  # outside the block the memory is cleared
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, inherited)

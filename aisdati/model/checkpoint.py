@@ -19,6 +19,7 @@ import torch
 from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
+from aisdati.options import raise_if_interrupted
 
 
 def _umask() -> int:
@@ -35,6 +36,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual permissions
+        raise_if_interrupted()
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -16,6 +16,7 @@ import shapely
 
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m
+from aisdati.options import raise_if_interrupted
 from aisdati.preprocess.cluster import cluster_tracks
 
 UTC_US = pa.timestamp("us", tz="UTC")
@@ -140,6 +141,7 @@ def commit_all(staged: list[StagedFile]) -> None:
     folder, the disk went read-only), the temporaries left are removed and the failure is one
     `UserError`. Renames are atomic one by one, not as a set: the output folder is checked
     beforehand (`prepare_output_dir`) so that this does not happen in practice."""
+    raise_if_interrupted()
     for i, f in enumerate(staged):
         try:
             f.commit()
