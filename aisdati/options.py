@@ -27,6 +27,7 @@ import os
 import re
 import shutil
 import signal
+import sys
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -340,9 +341,17 @@ def handle_termination() -> Iterator[None]:
     before = signal.getsignal(signal.SIGINT)
     if before is signal.default_int_handler:
         signal.signal(signal.SIGINT, on_int)
+    hook = sys.unraisablehook
+
+    def quiet(unraisable: Any) -> None:  # a swallowed signal: remembered, so no traceback
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            hook(unraisable)
+
+    sys.unraisablehook = quiet
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
         signal.signal(signal.SIGINT, before)
+        sys.unraisablehook = hook
         _PENDING.clear()
