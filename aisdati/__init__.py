@@ -16,7 +16,7 @@ def _register_envs() -> None:
     except ImportError:  # pragma: no cover - gymnasium is a dependency
         return
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point="aisdati.model.env:make_family_env")
+        gymnasium.register(id=ENV_ID, entry_point="aisdati.selftest.sources:make_family_env")
 
 
 _register_envs()

@@ -86,7 +86,7 @@ LANE_OPTION = typer.Option(
 def lane_settings(preset: str, lane: list[str] | None) -> dict[str, Any]:
     """The `preset` (its name and overrides, for the model card) and `lane` (the resolved
     LaneConfig) of the train and evaluate settings, from --preset and --lane."""
-    from aisdati.model.ais_space import lane_config
+    from aisdati.ais.space import lane_config
 
     name = preset if not lane else f"{preset} + {', '.join(lane)}"
     return {"preset": name, "lane": lane_config(preset, lane or ())}
@@ -150,7 +150,7 @@ def _paper(value: float | None) -> str:
 
 def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
     """Ours beside the paper's Table 1 (lower is better); one row per method x family."""
-    from aisdati.model.selftest import METHODS
+    from aisdati.selftest.protocol import METHODS
 
     methods = list(dict.fromkeys(r.get("method", "dati") for r in rows))
     name = "DATI" if methods == ["dati"] else "Table 1"
@@ -184,7 +184,7 @@ def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
 
 def ablation_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
     """Ours beside the paper's Table 2: top-1 and top-2 per DATI variant (lower is better)."""
-    from aisdati.model.selftest import METHODS
+    from aisdati.selftest.protocol import METHODS
 
     table = Table(
         title=f"DATI ablation: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
@@ -429,8 +429,9 @@ def selftest(
     from dataclasses import replace
     from datetime import datetime
 
-    from aisdati.model.families import FAMILIES
-    from aisdati.model.selftest import (
+    from aisdati.progress import EpisodeProgress
+    from aisdati.selftest.families import FAMILIES
+    from aisdati.selftest.protocol import (
         ABLATION,
         PAPER_FAMILIES,
         QUICK,
@@ -440,7 +441,6 @@ def selftest(
         run_selftest,
         write_outputs,
     )
-    from aisdati.progress import EpisodeProgress
 
     names = [n.strip().lower() for item in family for n in item.split(",") if n.strip()]
     default_families = ["circles"] if ablation else list(PAPER_FAMILIES)
@@ -534,11 +534,11 @@ def train(
     <cluster>-<method>.json beside their weights or tracks."""
     import json
 
+    from aisdati.ais.training import TrainSettings
     from aisdati.detectors import model_name, parse_detectors
     from aisdati.detectors.train import train_detector
-    from aisdati.model.ais import TrainSettings
     from aisdati.progress import TrainingProgress
-    from aisdati.trackdata import read_track_table, select_cluster
+    from aisdati.tracks.store import read_track_table, select_cluster
 
     check_options({"--seed": seed})
     (method,) = parse_detectors(method)[:1]
@@ -575,14 +575,8 @@ def train(
             if trainer.done:
                 return
             env = trainer.envs[0]
-            n = max(trainer._episode_steps[0], 1)
-            bar.step(
-                trainer.episode[0] + 1,
-                env.t,
-                env.horizon,
-                trainer._episode_reward[0] / n,
-                env.smoothed,
-            )
+            _, mean_reward = trainer.running_episode(0)
+            bar.step(trainer.episode[0] + 1, env.t, env.horizon, mean_reward, env.smoothed)
 
         try:
             result = train_detector(method, settings, on_step=on_step)
@@ -705,8 +699,8 @@ def evaluate(
 
     from aisdati.detectors import parse_detectors
     from aisdati.detectors.train import train_detector, train_routes
-    from aisdati.evaluate.inject import parse_kinds, parse_params
-    from aisdati.evaluate.outputs import (
+    from aisdati.evaluation.inject import parse_kinds, parse_params
+    from aisdati.evaluation.outputs import (
         pooled_table,
         report,
         results_table,
@@ -714,10 +708,10 @@ def evaluate(
         write,
         write_routes,
     )
-    from aisdati.evaluate.run import ALL_ROUTES, EvaluateSettings, check, evaluate_routes
-    from aisdati.evaluate.run import evaluate as run_evaluate
+    from aisdati.evaluation.run import ALL_ROUTES, EvaluateSettings, check, evaluate_routes
+    from aisdati.evaluation.run import evaluate as run_evaluate
     from aisdati.progress import EpisodeProgress, TrainingProgress
-    from aisdati.trackdata import read_track_table, select_cluster
+    from aisdati.tracks.store import read_track_table, select_cluster
 
     check_options(
         {
@@ -832,10 +826,10 @@ def _train_routes(
     quiet: bool,
 ) -> None:
     """`train --cluster routes`: every route with enough tracks, DATI as one batched ensemble."""
+    from aisdati.ais.training import TrainSettings
     from aisdati.detectors.train import train_routes
-    from aisdati.model.ais import TrainSettings
     from aisdati.progress import EpisodeProgress
-    from aisdati.trackdata import routes_with
+    from aisdati.tracks.store import routes_with
 
     routes = routes_with(data, "train")
     prepare_output_dir(out, "--out")
@@ -964,10 +958,10 @@ def detect(
     import json
     from datetime import datetime
 
-    from aisdati.detect import DetectSettings, check_settings, report_dict, write_outputs
-    from aisdati.detect import detect as run_detect
+    from aisdati.ais.card import unfinished_models
+    from aisdati.detection.run import DetectSettings, check_settings, report_dict, write_outputs
+    from aisdati.detection.run import detect as run_detect
     from aisdati.detectors import parse_detectors
-    from aisdati.model.card import unfinished_models
 
     check_options(
         {

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from aisdati.model.families import Family
+from aisdati.selftest.families import Family
 
 
 def _save(fig: plt.Figure, path: Path) -> None:

@@ -20,13 +20,13 @@ import time
 import numpy as np
 import torch
 
+from aisdati.ais.policy import AISPolicy, dati_act
+from aisdati.ais.space import LaneConfig
+from aisdati.ais.training import build_source, make_env
 from aisdati.dtw import batch_mean_dtw_m
-from aisdati.model.ais import build_source, make_env
-from aisdati.model.ais_policy import AISPolicy, dati_act
-from aisdati.model.ais_space import LaneConfig
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.networks import DATINetworks
-from aisdati.trackdata import Track
+from aisdati.tracks.store import Track
 
 
 def synthetic_track(rng: np.random.Generator, n: int, track_id: int) -> Track:

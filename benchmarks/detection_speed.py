@@ -22,15 +22,15 @@ import time
 import numpy as np
 import torch
 
+from aisdati.ais.policy import AISPolicy, dati_act
+from aisdati.ais.space import DEFAULT_PRESET, PRESETS, LaneConfig
+from aisdati.ais.training import build_source
 from aisdati.detectors.base import ScoreSettings, tail_mean
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.geo import lane_distances
-from aisdati.model.ais import build_source
-from aisdati.model.ais_policy import AISPolicy, dati_act
-from aisdati.model.ais_space import DEFAULT_PRESET, PRESETS, LaneConfig
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
-from aisdati.trackdata import Track
+from aisdati.tracks.store import Track
 
 
 def lanes(rng: np.random.Generator, n_tracks: int, points: int, routes: int = 5) -> list[Track]:

@@ -26,7 +26,7 @@ import pandas as pd
 from sklearn.metrics import roc_auc_score
 
 from aisdati.detectors import NearestDetector, ScoreSettings, load_detector
-from aisdati.trackdata import load_tracks
+from aisdati.tracks.store import load_tracks
 
 CONTAMINATION = 0.05
 """As `aisdati evaluate`'s default: the pooled ranking divides by this calibrated threshold."""

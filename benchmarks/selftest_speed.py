@@ -31,17 +31,18 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from aisdati.model.baselines import BC_PAPER, BCConfig, BCTrainer
+from aisdati.model.bc import BC_PAPER, BCConfig, BCTrainer
 from aisdati.model.dati import DATITrainer
 from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer
-from aisdati.model.env import FamilySource, TrajectoryImitationEnv
-from aisdati.model.selftest import (
+from aisdati.model.env import TrajectoryImitationEnv
+from aisdati.selftest.protocol import (
     PAPER_FAMILIES,
     SelftestSettings,
     preset_settings,
     run_selftest,
     settings_family,
 )
+from aisdati.selftest.sources import FamilySource
 
 EPISODES, STEPS = 100, 200
 """The paper's budget per member: 100 episodes of τ = 200 steps."""

@@ -25,7 +25,7 @@ from sklearn.metrics import roc_auc_score
 
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.plots import _draw_land, _save, _set_map_limits
-from aisdati.trackdata import load_tracks
+from aisdati.tracks.store import load_tracks
 
 COLORS = {
     "dati": "tab:blue",

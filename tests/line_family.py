@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aisdati.model.families import Family
+from aisdati.selftest.families import Family
 
 LINE = Family(
     name="line",

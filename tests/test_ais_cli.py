@@ -7,8 +7,8 @@ import json
 import pyarrow.parquet as pq
 import pytest
 
-from aisdati.detect import SCORES_SCHEMA
-from aisdati.model.ais_space import DEFAULT_PRESET, PRESETS
+from aisdati.ais.space import DEFAULT_PRESET, PRESETS
+from aisdati.detection.run import SCORES_SCHEMA
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,9 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from aisdati.ais.space import DEFAULT_PRESET, lane_config
+from aisdati.ais.training import TrainSettings, train_ais
 from aisdati.cli import app
-from aisdati.model.ais import TrainSettings, train_ais
-from aisdati.model.ais_space import DEFAULT_PRESET, lane_config
 
 DATA = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 

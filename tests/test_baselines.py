@@ -11,17 +11,17 @@ import torch
 from line_family import LINE
 
 from aisdati.errors import UserError
-from aisdati.model.baselines import BCConfig, BCTrainer, bc_act
-from aisdati.model.env import make_family_env
-from aisdati.model.evaluate import rollout_policy
+from aisdati.model.bc import BCConfig, BCTrainer, bc_act
 from aisdati.model.networks import DATINetworks
-from aisdati.model.selftest import (
+from aisdati.model.rollout import rollout_policy
+from aisdati.selftest.protocol import (
     ABLATION,
     PAPER_TABLE1,
     SelftestSettings,
     evaluation_references,
     parse_methods,
 )
+from aisdati.selftest.sources import make_family_env
 
 
 def _bc_scores(trainer: BCTrainer, refs: int = 5) -> np.ndarray:

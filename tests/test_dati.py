@@ -13,11 +13,12 @@ import torch
 from aisdati.errors import UserError
 from aisdati.model.checkpoint import load_networks, save_networks
 from aisdati.model.dati import WARMUP_SPREAD, DATIConfig, DATITrainer
-from aisdati.model.env import FamilySource, TrajectoryImitationEnv
-from aisdati.model.evaluate import interquartile_mean, rollout, summarize
-from aisdati.model.families import get_family
+from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig
-from aisdati.model.selftest import evaluation_references
+from aisdati.model.rollout import interquartile_mean, rollout, summarize
+from aisdati.selftest.families import get_family
+from aisdati.selftest.protocol import evaluation_references
+from aisdati.selftest.sources import FamilySource
 
 SMALL = DATIConfig(episodes=2, batch_size=16, patience=0)
 

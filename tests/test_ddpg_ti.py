@@ -10,10 +10,10 @@ from line_family import LINE
 from torch import nn
 
 from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer, ddpg_ti_act
-from aisdati.model.env import make_family_env
-from aisdati.model.evaluate import rollout_policy
 from aisdati.model.networks import EnsembleLinear
-from aisdati.model.selftest import evaluation_references
+from aisdati.model.rollout import rollout_policy
+from aisdati.selftest.protocol import evaluation_references
+from aisdati.selftest.sources import make_family_env
 
 
 def _sb3_ddpg_ti(env, cfg: DDPGTIConfig):

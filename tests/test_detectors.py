@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 import torch
 
+from aisdati.ais.corridor import Corridor
+from aisdati.ais.policy import AISPolicy
+from aisdati.ais.space import PRESETS, LaneConfig, lane_config
+from aisdati.ais.training import TrainSettings, build_source, make_env, track_reference
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.dtw import dtw_path_length, nearest_mean_dtw_m
 from aisdati.errors import UserError
-from aisdati.evaluate.inject import inject
-from aisdati.model.ais import TrainSettings, build_source, make_env, track_reference
-from aisdati.model.ais_policy import AISPolicy
-from aisdati.model.ais_space import PRESETS, LaneConfig, lane_config
-from aisdati.model.corridor import Corridor
-from aisdati.trackdata import load_tracks, read_track_table
+from aisdati.evaluation.inject import inject
+from aisdati.tracks.store import load_tracks, read_track_table
 
 
 @pytest.fixture(scope="module")
@@ -227,8 +227,8 @@ def test_fourier_state_encodes_the_position_at_each_octave(tracks):
 
 def test_validation_selects_the_actor_with_the_best_validation_score():
     from aisdati.model.dati import DATIConfig, DATITrainer
-    from aisdati.model.env import make_family_env
-    from aisdati.model.families import get_family
+    from aisdati.selftest.families import get_family
+    from aisdati.selftest.sources import make_family_env
 
     scores = iter([5.0, 3.0, 4.0, 6.0, 7.0])
     snapshots = []

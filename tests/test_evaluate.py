@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aisdati.evaluate.inject import DEFAULTS, inject, parse_params
+from aisdati.evaluation.inject import DEFAULTS, inject, parse_params
 from aisdati.geo import haversine_m
-from aisdati.trackdata import load_tracks, read_track_table
+from aisdati.tracks.store import load_tracks, read_track_table
 
 
 @pytest.fixture(scope="module")
@@ -173,11 +173,11 @@ def test_evaluate_bad_input_is_one_line_and_writes_nothing(cli, kitimat, tmp_pat
 
 
 def test_a_3_km_detour_scores_above_its_source_for_nearest_and_dati(kitimat, tmp_path):
+    from aisdati.ais.training import TrainSettings
     from aisdati.detectors import ScoreSettings
     from aisdati.detectors.nearest import NearestDetector
     from aisdati.detectors.train import train_detector
-    from aisdati.model.ais import TrainSettings
-    from aisdati.trackdata import Track
+    from aisdati.tracks.store import Track
 
     table = read_track_table(kitimat)
     lane = table[table["route"] == "route-2"].sort_values("track_id")

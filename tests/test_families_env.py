@@ -15,14 +15,13 @@ from aisdati.errors import UserError
 from aisdati.geo import EARTH_RADIUS_M, haversine_m, spherical_step
 from aisdati.model.env import (
     ENV_ID,
-    FamilySource,
     Reference,
     ReferenceSource,
     TrajectoryImitationEnv,
-    make_family_env,
 )
-from aisdati.model.families import FAMILIES, Family, get_family, register_family
 from aisdati.model.rules import PlanarRule, SphericalRule
+from aisdati.selftest.families import FAMILIES, Family, get_family, register_family
+from aisdati.selftest.sources import FamilySource, make_family_env
 
 PAPER = ("fixedstart", "ushaped", "circles", "ribbons")
 NM_M = 1852.0

@@ -40,7 +40,7 @@ def test_import_aisdati_is_light():
 
 def test_registered_once_with_a_string_entry_point():
     spec = gymnasium.spec(aisdati.ENV_ID)
-    assert spec.entry_point == "aisdati.model.env:make_family_env"
+    assert spec.entry_point == "aisdati.selftest.sources:make_family_env"
     from aisdati.model import env
 
     assert env.ENV_ID == aisdati.ENV_ID

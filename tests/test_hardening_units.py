@@ -11,8 +11,8 @@ import pyarrow as pa
 import pyarrow.csv as pcsv
 import pytest
 
+from aisdati.ais.card import training_mask, validate_ais_card
 from aisdati.errors import UserError
-from aisdati.model.card import training_mask, validate_ais_card
 from aisdati.options import check_option
 from aisdati.preprocess.read import LineGuard, _to_time
 

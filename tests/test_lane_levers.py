@@ -11,17 +11,17 @@ import numpy as np
 import pytest
 import torch
 
+from aisdati.ais.policy import dati_act
+from aisdati.ais.space import PRESETS, lane_config
+from aisdati.ais.training import TrainSettings, _curves
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.train import train_detector
 from aisdati.errors import UserError
-from aisdati.model.ais import TrainSettings, _curves
-from aisdati.model.ais_policy import dati_act
-from aisdati.model.ais_space import PRESETS, lane_config
 from aisdati.model.dati import DATIConfig, DATITrainer
-from aisdati.model.env import make_family_env
-from aisdati.model.families import get_family
 from aisdati.model.networks import DATINetworks, NetworkConfig
-from aisdati.trackdata import load_tracks, read_track_table
+from aisdati.selftest.families import get_family
+from aisdati.selftest.sources import make_family_env
+from aisdati.tracks.store import load_tracks, read_track_table
 
 SMALL = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1)
 

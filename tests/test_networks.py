@@ -8,9 +8,10 @@ import pytest
 import torch
 
 from aisdati.model.dati import DATIConfig, DATITrainer, _gradient_penalty
-from aisdati.model.env import FamilySource, TrajectoryImitationEnv
-from aisdati.model.families import get_family
+from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig, NonNegativeLinear
+from aisdati.selftest.families import get_family
+from aisdati.selftest.sources import FamilySource
 
 E, B = 3, 5
 STATE, DECISION = 2, 3  # different on purpose, so that a swapped dimension fails

@@ -22,7 +22,7 @@ from aisdati.preprocess.routes import (
     route_distance_km,
 )
 from aisdati.preprocess.settings import IngestSettings
-from aisdati.trackdata import (
+from aisdati.tracks.store import (
     MIN_ROUTE_TRACKS,
     load_tracks,
     read_track_table,

@@ -14,11 +14,11 @@ import torch
 
 from aisdati.cli import SELFTEST_PRESET_OPTION
 from aisdati.errors import UserError
-from aisdati.model.baselines import BC_PAPER, BCPolicy, BCTrainer
+from aisdati.model.bc import BC_PAPER, BCPolicy, BCTrainer
 from aisdati.model.dati import DATIConfig, DATITrainer, LatentNoise, NoiseProcess
-from aisdati.model.env import FamilySource, TrajectoryImitationEnv
-from aisdati.model.families import get_family
-from aisdati.model.selftest import (
+from aisdati.model.env import TrajectoryImitationEnv
+from aisdati.selftest.families import get_family
+from aisdati.selftest.protocol import (
     SELFTEST_PRESETS,
     SelftestSettings,
     _grid,
@@ -26,6 +26,7 @@ from aisdati.model.selftest import (
     preset_settings,
     run_selftest,
 )
+from aisdati.selftest.sources import FamilySource
 
 
 def tiny_env(name: str = "circles", steps: int = 12, exact: bool = False):
@@ -245,7 +246,7 @@ def test_bad_preset_options_are_one_line_errors(cli, tmp_path, args, message):
 
 
 def test_bc_config_round_trips_through_json_and_reads_older_cards():
-    from aisdati.model.baselines import BCConfig
+    from aisdati.model.bc import BCConfig
 
     assert BCConfig.from_dict(json.loads(json.dumps(BC_PAPER.to_dict()))) == BC_PAPER
     old = {k: v for k, v in BCConfig().to_dict().items() if k not in ("time_input", "epochs")}

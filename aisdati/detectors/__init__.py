@@ -8,11 +8,11 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
+from aisdati.ais.card import validate_ais_card
 from aisdati.detectors.base import SCORES, Detector, Scores, ScoreSettings
 from aisdati.detectors.learnt import BCDetector, DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.errors import UserError
-from aisdati.model.card import validate_ais_card
 from aisdati.options import parse_names
 
 DETECTORS: dict[str, type[Detector]] = {

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from aisdati.errors import UserError
-from aisdati.trackdata import Track
+from aisdati.tracks.store import Track
 
 SCORES = ("rollout", "step", "lane", "both")
 
@@ -32,7 +32,7 @@ def tail_mean(values: np.ndarray, fraction: float) -> float:
 class ScoreSettings:
     score: str = "lane"
     """lane, rollout (the paper's), step (teacher-forced) or both; see
-    `aisdati.model.ais_policy`."""
+    `aisdati.ais.policy`."""
     rollouts: int = 10
     """K: free rollouts per track (the rollout score is the best of K), and one-step draws
     per report."""

@@ -1,6 +1,6 @@
 """Detectors that judge tracks with a learnt policy: `dati` (the paper's) and `bc`.
 
-Both score the same ways (`aisdati.model.ais_policy`): free rollouts (`rollout`, the paper's),
+Both score the same ways (`aisdati.ais.policy`): free rollouts (`rollout`, the paper's),
 teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
 `both`: the rollout and step scores, each divided by the median of the training tracks' own
 scores of that kind, summed, so neither dominates by its unit of scale (a track as typical as
@@ -18,18 +18,18 @@ from typing import Any
 import numpy as np
 import torch
 
+from aisdati.ais.corridor import Corridor
+from aisdati.ais.policy import Act, AISPolicy, dati_act
+from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector, Scores, ScoreSettings, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
 from aisdati.geo import lane_distances
-from aisdati.model.ais_policy import Act, AISPolicy, dati_act
-from aisdati.model.ais_space import AISSpace
-from aisdati.model.baselines import BCConfig, BCPolicy
+from aisdati.model.bc import BCConfig, BCPolicy
 from aisdati.model.checkpoint import atomic_write_bytes, load_networks
-from aisdati.model.corridor import Corridor
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
-from aisdati.trackdata import Track
+from aisdati.tracks.store import Track
 
 
 class PolicyDetector(Detector):

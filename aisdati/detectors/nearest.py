@@ -27,7 +27,7 @@ from aisdati.dtw import matched_distances, nearest_mean_dtw_m
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m, lane_distances
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.trackdata import Track
+from aisdati.tracks.store import Track
 
 
 class NearestDetector(Detector):

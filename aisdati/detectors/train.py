@@ -11,12 +11,7 @@ from typing import Any
 
 import torch
 
-from aisdati.detectors import model_name
-from aisdati.detectors.base import ScoreSettings
-from aisdati.detectors.learnt import BCDetector, DATIDetector
-from aisdati.detectors.nearest import NearestDetector
-from aisdati.errors import UserError
-from aisdati.model.ais import (
+from aisdati.ais.training import (
     StepCallback,
     TrainSettings,
     base_card,
@@ -28,9 +23,14 @@ from aisdati.model.ais import (
     train_ais,
     train_ais_ensemble,
 )
-from aisdati.model.baselines import BCConfig, BCTrainer
+from aisdati.detectors import model_name
+from aisdati.detectors.base import ScoreSettings
+from aisdati.detectors.learnt import BCDetector, DATIDetector
+from aisdati.detectors.nearest import NearestDetector
+from aisdati.errors import UserError
+from aisdati.model.bc import BCConfig, BCTrainer
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.trackdata import load_tracks
+from aisdati.tracks.store import load_tracks
 
 
 def _calibrate_dati(stem: Path, how: ScoreSettings) -> dict[str, Any]:

@@ -17,7 +17,7 @@ Per environment step and member (section 4 and appendix A.2):
    the reference's next point, and the transition is stored.
 Early stopping watches each member's own per-episode mean total loss (patience 10) and keeps the
 forward actor (with its Time2Vec) of the best episode; `keep="final"` keeps the last episode's
-instead (what the paper's code ends up doing, see `aisdati.model.selftest`).
+instead (what the paper's code ends up doing, see `aisdati.selftest.protocol`).
 
 Choices where the paper is silent (all configurable, see `DATIConfig`): the gradient penalty
 interpolates between real samples and the *current* actor's fakes (Gulrajani et al.); the L1 terms
@@ -234,7 +234,7 @@ class DATITrainer:
     ):
         """`validate(trainer, k)`, when given, scores live member k at the end of each of its
         episodes (lower is better); the best actor and early stopping then follow that score
-        instead of the episode's loss (see `aisdati.model.ais` for the AIS one: the DTW of the
+        instead of the episode's loss (see `aisdati.ais.training` for the AIS one: the DTW of the
         actor's rollouts on validation tracks). `noise` gives each member its own latent noise
         process (default: the config's)."""
         if len(envs) != len(seeds) or not envs:
@@ -476,6 +476,12 @@ class DATITrainer:
         logs = [self._end_episode(k, dtw) for k, dtw in ended]
         self._drop([k for (k, _), log in zip(ended, logs, strict=True) if log.stopped])
         return logs
+
+    def running_episode(self, k: int) -> tuple[int, float]:
+        """Steps taken and mean reward so far in active member k's current episode (for
+        progress bars: the episode's log exists only once it ends)."""
+        steps = self._episode_steps[k]
+        return steps, self._episode_reward[k] / max(steps, 1)
 
     def _end_episode(self, k: int, final_dtw: float) -> EpisodeLog:
         member = self.active[k]

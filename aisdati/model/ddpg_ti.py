@@ -36,8 +36,8 @@ from torch import Tensor, nn
 
 from aisdati.model.dati import EnsembleReplayBuffer
 from aisdati.model.env import TrajectoryImitationEnv
-from aisdati.model.evaluate import Act, seed_generator
 from aisdati.model.networks import EnsembleLinear, MLPTrunk, NetworkConfig, SplitLinear, Time2Vec
+from aisdati.model.rollout import Act, seed_generator
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,8 @@ else -1. A move that would leave the region keeps the agent where it is ("sticki
 
 Observation: (x, y) of the agent scaled into [0, 1] by the region's box, and the step index t.
 The references, the region and the DTW normalisation come from a `ReferenceSource`, so the same
-environment serves the synthetic families and real AIS tracks.
+environment serves the synthetic families (aisdati.selftest.sources) and real AIS tracks
+(aisdati.ais.training): this module knows neither.
 """
 
 from __future__ import annotations
@@ -22,8 +23,7 @@ import numpy as np
 
 from aisdati import ENV_ID as ENV_ID  # registered with Gymnasium by aisdati/__init__.py
 from aisdati.dtw import IncrementalDTW
-from aisdati.model.families import Family, get_family
-from aisdati.model.rules import PlanarRule, UpdateRule
+from aisdati.model.rules import UpdateRule
 
 
 @dataclass(frozen=True)
@@ -95,27 +95,6 @@ class ReferenceSource(ABC):
         prev = np.vstack([pos[:1], pos[:-1]])
         dts = np.r_[0.0, ref.dts[:-1]]
         return self.features(pos, prev, dts)
-
-
-class FamilySource(ReferenceSource):
-    """References drawn from a synthetic family, α uniform in its interval per episode."""
-
-    def __init__(self, family: Family) -> None:
-        self.family = family
-        low, high = family.speed_range
-        self.rule = PlanarRule(dt=family.dt, max_speed=high, min_speed=low)
-        self.bounds = family.bounds
-        self.max_steps = family.steps
-
-    def reference(self, alpha: float) -> Reference:
-        dts = np.full(self.family.steps, self.family.dt)
-        return Reference(self.family.reference(alpha), dts, {"alpha": alpha})
-
-    def sample(self, rng: np.random.Generator) -> Reference:
-        return self.reference(self.family.sample_alpha(rng))
-
-    def normalize(self, distance: float, path_length: int) -> float:
-        return distance / self.family.diameter
 
 
 class TrajectoryImitationEnv(gym.Env):
@@ -242,9 +221,3 @@ class TrajectoryImitationEnv(gym.Env):
         state = self.source.features(self.position, self.previous, self.last_dt)
         time = self.source.time_input(self.t, self.horizon)
         return np.r_[state, time].astype(np.float32)
-
-
-def make_family_env(family: str | Family = "circles", **kwargs: Any) -> TrajectoryImitationEnv:
-    """Environment over a synthetic family, by name or object (the entry point of `ENV_ID`)."""
-    fam = get_family(family) if isinstance(family, str) else family
-    return TrajectoryImitationEnv(FamilySource(fam), **kwargs)

@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from aisdati.ais.space import AISSpace
 from aisdati.dtw import batch_mean_dtw_m
 from aisdati.geo import haversine_m
-from aisdati.model.ais_space import AISSpace
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
 from aisdati.model.rules import SphericalRule

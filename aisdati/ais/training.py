@@ -31,10 +31,10 @@ import numpy as np
 import torch
 
 from aisdati import __version__
+from aisdati.ais.card import track_keys
+from aisdati.ais.policy import AISPolicy, dati_act
+from aisdati.ais.space import PRESETS, AISSpace, LaneConfig
 from aisdati.errors import UserError
-from aisdati.model.ais_policy import AISPolicy, dati_act
-from aisdati.model.ais_space import PRESETS, AISSpace, LaneConfig
-from aisdati.model.card import track_keys
 from aisdati.model.checkpoint import atomic_write_bytes, save_networks
 from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
 from aisdati.model.env import Reference, ReferenceSource, TrajectoryImitationEnv
@@ -44,7 +44,7 @@ from aisdati.model.resume import (
     read_checkpoint,
     save_checkpoint,
 )
-from aisdati.trackdata import Track, load_tracks, read_track_table, select_cluster
+from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
 EPSILON_M = 500.0
 """The paper's ε for AIS, in metres (mean great-circle distance along the warping path)."""
@@ -136,7 +136,7 @@ class TrainSettings:
     patience: int = 10
     epsilon_m: float = EPSILON_M
     preset: str = "lanes"
-    """Name of the lane configuration (`aisdati.model.ais_space.PRESETS`) and its overrides."""
+    """Name of the lane configuration (`aisdati.ais.space.PRESETS`) and its overrides."""
     lane: LaneConfig = field(default_factory=lambda: PRESETS["lanes"])
     track_ids: tuple[int, ...] | None = None
     """Train on exactly these tracks of the cluster (`aisdati evaluate`'s split); None: all,

@@ -8,7 +8,7 @@ Define your own family in a few lines and register it, so that `aisdati selftest
 and the environment find it::
 
     import numpy as np
-    from aisdati.model.families import Family, register_family
+    from aisdati.selftest.families import Family, register_family
 
     register_family(Family(
         name="spiral",

@@ -17,10 +17,10 @@ import pyarrow.parquet as pq
 import shapely
 
 from aisdati.errors import UserError
-from aisdati.evaluate.inject import MIN_POINTS, Injected, inject
+from aisdati.evaluation.inject import MIN_POINTS, Injected, inject
 from aisdati.geo import haversine_m, initial_bearing_deg
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.trackdata import read_track_table, select_cluster
+from aisdati.tracks.store import read_track_table, select_cluster
 
 KNOT_MPS = 1852.0 / 3600.0
 MIN_SPLIT = 4

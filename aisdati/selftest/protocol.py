@@ -44,15 +44,16 @@ import torch
 
 from aisdati import __version__
 from aisdati.errors import UserError
-from aisdati.model.baselines import BC_PAPER, BCConfig, BCTrainer, bc_act
+from aisdati.model.bc import BC_PAPER, BCConfig, BCTrainer, bc_act
 from aisdati.model.checkpoint import atomic_write_bytes
 from aisdati.model.dati import DATIConfig, DATITrainer, NoiseProcess
 from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer, ddpg_ti_act
-from aisdati.model.env import FamilySource, Reference, TrajectoryImitationEnv
-from aisdati.model.evaluate import Summary, rollout, rollout_policy, summarize
-from aisdati.model.families import PAPER_DATI, Family, get_family
+from aisdati.model.env import Reference, TrajectoryImitationEnv
+from aisdati.model.rollout import Summary, rollout, rollout_policy, summarize
 from aisdati.options import parse_names
 from aisdati.plots import plot_best_rollouts, plot_families
+from aisdati.selftest.families import PAPER_DATI, Family, get_family
+from aisdati.selftest.sources import FamilySource
 
 PAPER_FAMILIES = ("fixedstart", "ushaped", "circles", "ribbons")
 

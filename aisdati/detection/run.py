@@ -31,12 +31,12 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from aisdati.ais.card import card_warnings, training_mask
 from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m
-from aisdati.model.card import card_warnings, training_mask
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.trackdata import Track, load_tracks, read_track_table, select_cluster
+from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
 SCORES_SCHEMA = pa.schema(
     [

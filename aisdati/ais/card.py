@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from aisdati.ais.space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, state_width
 from aisdati.errors import UserError
-from aisdati.model.ais_space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, state_width
 
 MAX_MMSI = 2**53
 _MISSING = object()

@@ -3,7 +3,7 @@
 1. Split one cluster's (or route's) tracks by vessel into training and held-out sets (seeded),
    or take the training set from existing model cards (`models_dir`).
 2. Write anomalies of the chosen kinds into a seeded half of the held-out tracks
-   (`aisdati.evaluate.inject`); save everything in ingest's schema under `<out>/data`.
+   (`aisdati.evaluation.inject`); save everything in ingest's schema under `<out>/data`.
 3. Train every detector asked for on the training tracks (`<out>/models`), or load it.
 4. Score the held-out tracks and report, per detector, score and anomaly kind: ROC AUC, average
    precision, precision / recall / F1 at the detector's calibrated flagging rule (the
@@ -25,13 +25,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from aisdati.ais.space import PRESETS, LaneConfig
+from aisdati.ais.training import TrainSettings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
-from aisdati.evaluate import dataset
-from aisdati.evaluate.metrics import flagging, ranking
-from aisdati.model.ais import TrainSettings
-from aisdati.model.ais_space import PRESETS, LaneConfig
-from aisdati.trackdata import load_tracks, read_track_table, routes_with, select_cluster
+from aisdati.evaluation import dataset
+from aisdati.evaluation.metrics import flagging, ranking
+from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
 POSITION_KINDS = ("detour", "jump", "loiter")
 """The summary row the README's targets use: anomalies a position-only score can see."""

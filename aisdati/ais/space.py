@@ -53,9 +53,9 @@ from typing import Any
 
 import numpy as np
 
+from aisdati.ais.corridor import Corridor
 from aisdati.errors import UserError
 from aisdati.geo import spherical_decision
-from aisdati.model.corridor import Corridor
 from aisdati.model.rules import SphericalRule, mean_course
 
 BOX_MARGIN = 0.1

@@ -16,9 +16,9 @@ import pyarrow.parquet as pq
 from rich import box
 from rich.table import Table
 
-from aisdati.evaluate.run import Evaluation, RoutesEvaluation
+from aisdati.evaluation.run import Evaluation, RoutesEvaluation
 from aisdati.model.checkpoint import atomic_write_bytes
-from aisdati.trackdata import load_tracks
+from aisdati.tracks.store import load_tracks
 
 
 def _settings(settings: Any) -> dict[str, Any]:

@@ -41,8 +41,8 @@ import torch
 from torch import Tensor, nn
 
 from aisdati.model.env import TrajectoryImitationEnv
-from aisdati.model.evaluate import Act, seed_generator
 from aisdati.model.networks import EnsembleLinear, MLPTrunk, NetworkConfig, Time2Vec
+from aisdati.model.rollout import Act, seed_generator
 
 
 # ------------------------------------------------------------------------------------------ BC
