@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup test demo quick selftest
+.PHONY: setup test demo quick selftest docs browser
 
 setup: $(VENV)/.installed
 
@@ -12,9 +12,16 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $@
 
-test: setup
-	$(BIN)/ruff check aisdati tests benchmarks
+test: setup browser
+	$(BIN)/ruff check aisdati tests benchmarks scripts
 	$(BIN)/pytest
+
+# Headless Chromium (Debian's package) for the offline-map test; where it cannot be installed
+# (not root, no apt-get, no registry) that test skips with a message instead of failing.
+browser:
+	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null \
+	  && { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
+	  >/dev/null 2>&1; } || echo "chromium could not be installed: the offline-map browser test will skip"
 
 demo: setup
 	bash scripts/demo.sh
@@ -24,3 +31,7 @@ quick: setup
 
 selftest: setup
 	$(BIN)/aisdati selftest --out runs/table1
+
+# the documentation site (mkdocs.yml) into build/site, failing on any warning or broken link
+docs: setup
+	$(BIN)/mkdocs build --strict

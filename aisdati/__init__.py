@@ -1,5 +1,9 @@
 """aisdati: maritime AIS anomaly detection with domain-adaptive trajectory imitation (DATI)."""
 
+from aisdati.startup import guard_startup
+
+guard_startup()  # first: a Ctrl-C while the CLI imports exits 130 without a traceback
+
 __version__ = "0.1.0"
 
 ENV_ID = "aisdati/TrajectoryImitation-v0"

@@ -119,20 +119,22 @@ def _arrays_from_geometry(geom) -> dict[str, np.ndarray]:
     }
 
 
-def _osm_arrays() -> dict[str, np.ndarray]:
+def osm_arrays() -> dict[str, np.ndarray]:
+    """The OSM land polygons of roaring-landmask as flat arrays (the slow conversion)."""
     from roaring_landmask import LandmaskProvider, Shapes
 
     return _arrays_from_geometry(shapely.from_wkb(Shapes.wkb(LandmaskProvider.Osm)))
 
 
-def _ne110m_arrays() -> dict[str, np.ndarray]:
+def ne110m_arrays() -> dict[str, np.ndarray]:
+    """The fallback Natural Earth 1:110m land shipped with aisdati, as flat arrays."""
     from shapely.geometry import shape
 
     doc = json.loads((files("aisdati") / "data" / "land_110m_americas.geojson").read_text())
     return _arrays_from_geometry(shape(doc["features"][0]["geometry"]))
 
 
-def _cached_osm_arrays(version: str) -> dict[str, np.ndarray]:
+def cached_osm_arrays(version: str) -> dict[str, np.ndarray]:
     """The OSM arrays, memory-mapped from the cache, built there first if missing."""
     folder = cache_dir() / f"land-osm-roaring-{version}-v{CACHE_FORMAT}"
     try:
@@ -140,7 +142,7 @@ def _cached_osm_arrays(version: str) -> dict[str, np.ndarray]:
     except (OSError, ValueError):
         pass
     log.info("building the coastline cache in %s (once per machine)", folder)
-    arrays = _osm_arrays()
+    arrays = osm_arrays()
     tmp = folder.with_name(f".{folder.name}.{os.getpid()}.tmp")
     try:
         tmp.mkdir(parents=True, exist_ok=True)
@@ -163,7 +165,7 @@ def _world() -> _World:
 
         import roaring_landmask  # noqa: F401
 
-        arrays, src = _cached_osm_arrays(version("roaring-landmask")), OSM
+        arrays, src = cached_osm_arrays(version("roaring-landmask")), OSM
     except ImportError:
         warnings.warn(
             "roaring-landmask is not installed: maps and on_land use the coarse Natural Earth "
@@ -171,8 +173,15 @@ def _world() -> _World:
             RuntimeWarning,
             stacklevel=3,
         )
-        arrays, src = _ne110m_arrays(), NE110M
+        arrays, src = ne110m_arrays(), NE110M
     return _World(**arrays, source=src)
+
+
+def clear_caches() -> None:
+    """Forget the land loaded and cut so far: the next call loads it again (after the cache
+    folder or the installed packages changed)."""
+    for cached in (_world, _land, _block, _tile):
+        cached.cache_clear()
 
 
 def source() -> CoastlineSource:

@@ -16,6 +16,13 @@ this rule, so their paths and path lengths agree. Inner loops are compiled with 
 
 Metrics: "euclidean" (points of any dimension) and "haversine" (points are (lon, lat) in degrees;
 great-circle distance in metres on a sphere of radius `EARTH_RADIUS_M`, as the `haversine` package).
+
+The compiled kernels do not check their indices (numba does no bounds checking), so every public
+function checks its input in Python first and raises `ValueError` for what a kernel cannot take:
+non-finite points (a NaN cost compares false with everything, so no predecessor ever wins) and
+offsets, lengths or indices outside the arrays. The one back-track (`dtw_path`) is bounded by
+construction as well: it never leaves the cost matrix and writes at most n + m - 1 cells, whatever
+the costs.
 """
 
 from __future__ import annotations
@@ -26,10 +33,10 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from aisdati.geo import EARTH_RADIUS_M, unit_vectors
+from aisdati.geo import EARTH_RADIUS_M, arc_m, unit_vectors
 
-_METRICS = {"euclidean": 0, "haversine": 1}
-_EUCLIDEAN = 0
+_EUCLIDEAN, _HAVERSINE = 0, 1
+_METRICS = {"euclidean": _EUCLIDEAN, "haversine": _HAVERSINE}
 _DIAG, _UP, _LEFT = 0, 1, 2
 
 
@@ -41,8 +48,14 @@ def _metric_code(metric: str) -> int:
         raise ValueError(f"unknown DTW metric {metric!r}; allowed: {allowed}") from None
 
 
+def _check_finite(arr: np.ndarray, name: str) -> None:
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} holds non-finite values (NaN or inf): DTW needs finite points")
+
+
 def _as_series(x, name: str, code: int) -> np.ndarray:
-    """Validate a series as a C-contiguous float64 array [n, d] (1-D input is read as d = 1)."""
+    """Validate a series as a finite, C-contiguous float64 array [n, d] (1-D input is read as
+    d = 1)."""
     arr = np.asarray(x, dtype=np.float64)
     if arr.ndim == 1:
         arr = arr[:, None]
@@ -50,7 +63,21 @@ def _as_series(x, name: str, code: int) -> np.ndarray:
         raise ValueError(f"{name} must be a non-empty array [n, d], got shape {arr.shape}")
     if code != _EUCLIDEAN and arr.shape[1] != 2:
         raise ValueError(f"haversine DTW needs (lon, lat) points, {name} has shape {arr.shape}")
+    _check_finite(arr, name)
     return np.ascontiguousarray(arr)
+
+
+def _as_indices(x, name: str, size: int, length: int | None = None) -> np.ndarray:
+    """Validate indices into an axis of `size` (and their number) as a C-contiguous int64 array."""
+    arr = np.asarray(x)
+    if arr.size and arr.dtype.kind not in "iu":
+        raise ValueError(f"{name} must be integers, got {arr.dtype}")
+    arr = np.ascontiguousarray(arr, dtype=np.int64)
+    if length is not None and arr.shape[0] != length:
+        raise ValueError(f"{name} must hold {length} values, got {arr.shape[0]}")
+    if arr.size and (arr.min() < 0 or arr.max() >= size):
+        raise ValueError(f"{name} must lie in [0, {size}), got [{arr.min()}, {arr.max()}]")
+    return arr
 
 
 def _check_pair(a, b, metric: str) -> tuple[np.ndarray, np.ndarray, int]:
@@ -162,14 +189,24 @@ def _cost_and_path(a: np.ndarray, b: np.ndarray, code: int) -> tuple[float, np.n
             cur_d[j] = d + best
             moves[i, j] = move
         prev_d, cur_d = cur_d, prev_d
+    return prev_d[m - 1], _back_track(moves)
+
+
+@njit(cache=True)
+def _back_track(moves: np.ndarray) -> np.ndarray:
+    """The path from (n-1, m-1) back to (0, 0) along the back-pointers, returned from (0, 0).
+    On the first row only left is possible and on the first column only up (which finite costs
+    always choose), so every step lowers i + j by at least one and stays in the matrix: at most
+    n + m - 1 cells, whatever the back-pointers hold."""
+    n, m = moves.shape
     path = np.empty((n + m - 1, 2), dtype=np.int64)
     i, j, k = n - 1, m - 1, 0
-    while True:
+    while k < n + m - 1:
         path[k, 0], path[k, 1] = i, j
         k += 1
         if i == 0 and j == 0:
             break
-        move = moves[i, j]
+        move = _LEFT if i == 0 else _UP if j == 0 else moves[i, j]
         if move == _DIAG:
             i -= 1
             j -= 1
@@ -177,7 +214,7 @@ def _cost_and_path(a: np.ndarray, b: np.ndarray, code: int) -> tuple[float, np.n
             i -= 1
         else:
             j -= 1
-    return prev_d[m - 1], path[:k][::-1].copy()
+    return path[:k][::-1].copy()
 
 
 @njit(cache=True)
@@ -273,6 +310,47 @@ def dtw_path_length(a, b, metric: str = "euclidean") -> tuple[float, int]:
     return float(cost), int(length)
 
 
+def prepare_lonlat(series: np.ndarray) -> np.ndarray:
+    """Lon/lat series of one length, [n, k, 2] degrees, in the form `pairs_mean_dtw_m` reads:
+    [n, k, 3] (lon, lat, cos lat) in radians, so that comparing each series with many others
+    takes each cosine once. Reversing a prepared series equals preparing the reversed one."""
+    series = np.asarray(series, dtype=np.float64)
+    if series.ndim != 3 or series.shape[1] == 0 or series.shape[2] != 2:
+        raise ValueError(f"series must be lon/lat [n, k >= 1, 2], got shape {series.shape}")
+    _check_finite(series, "series")
+    out = np.empty((series.shape[0], series.shape[1], 3))
+    for i in range(series.shape[0]):
+        out[i] = _prepare(np.ascontiguousarray(series[i]), _HAVERSINE)
+    return out
+
+
+def pairs_mean_dtw_m(a: np.ndarray, b: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Exact great-circle DTW / warping-path length (the mean distance in metres between matched
+    points) of a[pairs[p, 0]] against b[pairs[p, 1]] for every p, on all cores; a and b are
+    `prepare_lonlat`'s, pairs an int array [m, 2]."""
+    for name, x in (("a", a), ("b", b)):
+        if not (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 3):
+            raise ValueError(f"{name} must be prepare_lonlat's float64 array [n, k, 3]")
+        if x.shape[1] == 0 or x.shape[2] != 3:
+            raise ValueError(f"{name} must be prepare_lonlat's [n, k >= 1, 3], got {x.shape}")
+        _check_finite(x, name)
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2:
+        raise ValueError(f"pairs must be an array [m, 2], got shape {pairs.shape}")
+    first = _as_indices(pairs[:, 0], "pairs[:, 0]", len(a))
+    second = _as_indices(pairs[:, 1], "pairs[:, 1]", len(b))
+    return _prepared_pairs_mean(a, b, np.ascontiguousarray(np.stack([first, second], axis=1)))
+
+
+@njit(cache=True, parallel=True)
+def _prepared_pairs_mean(a, b, pairs):  # pragma: no cover - compiled
+    out = np.empty(pairs.shape[0])
+    for p in prange(pairs.shape[0]):
+        cost, length = _cost_and_length(a[pairs[p, 0]], b[pairs[p, 1]], _HAVERSINE)
+        out[p] = cost / length
+    return out
+
+
 class IncrementalDTW:
     """Exact DTW of two series that grow together, one point each per `push`.
 
@@ -324,6 +402,8 @@ class IncrementalDTW:
             self._b = np.empty((self._capacity, width))
         elif pa.size != self._dim or pb.size != self._dim:
             raise ValueError(f"points must have {self._dim} values, got {pa.size} and {pb.size}")
+        if not (np.isfinite(pa).all() and np.isfinite(pb).all()):
+            raise ValueError(f"a point holds non-finite values (NaN or inf): {pa}, {pb}")
         t = self._n
         if t == self._a.shape[0]:
             self._grow(2 * t)
@@ -353,15 +433,36 @@ class IncrementalDTW:
         return {"n": n, "dim": self._dim, **arrays}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from `state_dict`; a state that does not fit (it comes from a file) is a
+        `ValueError`, as the compiled push trusts the arrays it is given."""
+        n, dim = int(state["n"]), int(state["dim"])
+        saved = {key: np.asarray(state[key]) for key in self._STATE_ARRAYS}
+        self._check_state(n, dim, saved)
         self.reset()
-        n = int(state["n"])
-        self._n, self._dim = n, int(state["dim"])
+        self._n, self._dim = n, dim
         size = max(self._capacity, n)
-        for key in self._STATE_ARRAYS:
-            saved = np.asarray(state[key])
-            arr = np.empty((size, *saved.shape[1:]), dtype=getattr(self, key).dtype)
-            arr[:n] = saved
+        for key, values in saved.items():
+            arr = np.empty((size, *values.shape[1:]), dtype=getattr(self, key).dtype)
+            arr[:n] = values
             setattr(self, key, arr)
+
+    def _check_state(self, n: int, dim: int, saved: dict[str, np.ndarray]) -> None:
+        if n < 0:
+            raise ValueError(f"DTW state: n must be >= 0, got {n}")
+        if n and (dim < 1 or (self._code != _EUCLIDEAN and dim != 2)):
+            raise ValueError(f"DTW state: {dim} values per point do not fit {self.metric} DTW")
+        width = dim if self._code == _EUCLIDEAN else 3
+        for key, values in saved.items():
+            shape = (n, width) if key in ("_a", "_b") else (n,)
+            empty = not n and values.ndim == len(shape) and not values.size
+            if values.shape != shape and not empty:
+                raise ValueError(f"DTW state: {key} must have shape {shape}, got {values.shape}")
+            if key.endswith("_l"):
+                ok = values.dtype.kind in "iu" and np.all((values >= 1) & (values <= 2 * n - 1))
+            else:
+                ok = values.dtype.kind == "f" and np.isfinite(values).all()
+            if not ok:
+                raise ValueError(f"DTW state: {key} holds values no DTW of {n} points has")
 
     @property
     def n(self) -> int:
@@ -377,11 +478,6 @@ class IncrementalDTW:
     def path_length(self) -> int:
         """Number of cells on the optimal warping path of the prefixes (0 when empty)."""
         return int(self._row_l[self._n - 1]) if self._n else 0
-
-    @property
-    def mean_distance(self) -> float:
-        """Mean point distance along the optimal path: distance / path_length (0 when empty)."""
-        return self.distance / self.path_length if self._n else 0.0
 
 
 # ------------------------------------------------------------------ batched great-circle DTW
@@ -450,10 +546,14 @@ def _pairs_mean(a, a_off, a_len, b, b_off, pair_a, pair_b):  # pragma: no cover 
     return out
 
 
-def _flatten(series: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    offsets = np.zeros(len(series) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(s) for s in series])
-    return unit_vectors(np.concatenate(series)), offsets
+def _flatten(series: list[np.ndarray], name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Non-empty, finite lon/lat series as one array of unit vectors and their offsets."""
+    if not series:
+        raise ValueError(f"{name} must hold at least one series")
+    checked = [_as_series(s, f"{name}[{k}]", _HAVERSINE) for k, s in enumerate(series)]
+    offsets = np.zeros(len(checked) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(s) for s in checked])
+    return unit_vectors(np.concatenate(checked)), offsets
 
 
 def batch_mean_dtw_m(
@@ -461,14 +561,18 @@ def batch_mean_dtw_m(
 ) -> np.ndarray:
     """Great-circle DTW / warping-path length (the mean distance in metres between matched
     points) of rollouts[b, :lengths[b]] against tracks[owner[b]], for every b, on all cores."""
+    rollouts = np.asarray(rollouts, dtype=np.float64)
+    if rollouts.ndim != 3 or rollouts.shape[2] != 2:
+        raise ValueError(f"rollouts must be lon/lat [b, steps, 2], got shape {rollouts.shape}")
+    _check_finite(rollouts, "rollouts")
+    count, width = rollouts.shape[:2]
+    lengths = _as_indices(np.asarray(lengths) - 1, "lengths - 1", width, count) + 1
+    b, b_off = _flatten(list(tracks), "tracks")
+    owner = _as_indices(owner, "owner", len(b_off) - 1, count)
     rolls = unit_vectors(rollouts).reshape(-1, 3)
-    width = rollouts.shape[1]
-    a_off = np.arange(len(rollouts) + 1, dtype=np.int64) * width
-    b, b_off = _flatten(list(tracks))
-    pairs = np.arange(len(rollouts), dtype=np.int64)
-    return _pairs_mean(
-        rolls, a_off, np.asarray(lengths, np.int64), b, b_off, pairs, np.asarray(owner, np.int64)
-    )
+    a_off = np.arange(count + 1, dtype=np.int64) * width
+    pairs = np.arange(count, dtype=np.int64)
+    return _pairs_mean(rolls, a_off, lengths, b, b_off, pairs, owner)
 
 
 @njit(cache=True, parallel=True)
@@ -486,9 +590,7 @@ def _nearest(q, q_off, r, r_off, cand, cand_off, lower):  # pragma: no cover - c
                 break
             j = cand[c]
             m = r_off[j + 1] - r_off[j]
-            cost, length = _gc_cost_length(
-                q, q_off[k], n, r, r_off[j], m, best[k] * (n + m - 1)
-            )
+            cost, length = _gc_cost_length(q, q_off[k], n, r, r_off[j], m, best[k] * (n + m - 1))
             if length > 0 and cost / length < best[k]:
                 best[k] = cost / length
                 arg[k] = j
@@ -503,15 +605,16 @@ def nearest_mean_dtw_m(
     a query without candidates. Pruning is exact: the endpoints are always matched, so
     (d(first, first) + d(last, last)) / (n + m - 1) bounds the mean from below; candidates are
     tried from the smallest bound and the search stops when the bound cannot beat the best."""
-    q, q_off = _flatten(list(queries))
-    r, r_off = _flatten(list(references))
+    q, q_off = _flatten(list(queries), "queries")
+    r, r_off = _flatten(list(references), "references")
+    if len(candidates) != len(queries):
+        raise ValueError(f"{len(queries)} queries, {len(candidates)} candidate lists")
     order, lower = [], []
     for k, cand in enumerate(candidates):
-        cand = np.asarray(cand, np.int64)
+        cand = _as_indices(cand, f"candidates[{k}]", len(r_off) - 1)
         a0, a1 = q[q_off[k]], q[q_off[k + 1] - 1]
         b0, b1 = r[r_off[cand]], r[r_off[cand + 1] - 1]
-        chord = np.linalg.norm(b0 - a0, axis=1), np.linalg.norm(b1 - a1, axis=1)
-        ends = sum(2 * EARTH_RADIUS_M * np.arcsin(np.minimum(c / 2, 1.0)) for c in chord)
+        ends = arc_m(np.linalg.norm(b0 - a0, axis=1)) + arc_m(np.linalg.norm(b1 - a1, axis=1))
         lb = ends / (q_off[k + 1] - q_off[k] + np.diff(r_off)[cand] - 1)
         by = np.argsort(lb, kind="stable")
         order.append(cand[by])
@@ -528,9 +631,7 @@ def matched_distances(track: np.ndarray, other: np.ndarray) -> np.ndarray:
     of `other` that the optimal warping path matches it with: where along the track it strays."""
     _, path = dtw_path(other, track, "haversine")
     a, b = other[path[:, 0]], track[path[:, 1]]
-    d = 2 * EARTH_RADIUS_M * np.arcsin(
-        np.minimum(np.linalg.norm(unit_vectors(a) - unit_vectors(b), axis=1) / 2, 1.0)
-    )
+    d = arc_m(np.linalg.norm(unit_vectors(a) - unit_vectors(b), axis=1))
     out = np.full(len(track), np.inf)
     np.minimum.at(out, path[:, 1], d)
     return out

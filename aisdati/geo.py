@@ -7,19 +7,17 @@ rule is eq. (5) of the paper: a flat-Earth step whose longitude is rescaled by c
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 EARTH_RADIUS_M = 6_371_008.8
 """Mean Earth radius in metres (IUGG), as used by the `haversine` package."""
 
 NM_PER_DEGREE = 60.0
 """Nautical miles per degree of latitude, the paper's conversion factor (appendix A.3)."""
-
-
-def _radians(*degrees) -> list[np.ndarray]:
-    return [np.radians(np.asarray(v, dtype=np.float64)) for v in degrees]
 
 
 def haversine_m(lon1, lat1, lon2, lat2):
@@ -32,6 +30,20 @@ def haversine_m(lon1, lat1, lon2, lat2):
         + np.cos(lat1) * np.cos(lat2) * np.sin((lon2 - lon1) / 2) ** 2
     )
     return 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
+
+
+@njit(cache=True)
+def haversine_one_m(lon1: float, lat1: float, lon2: float, lat2: float) -> float:
+    """`haversine_m` of one pair of points, compiled: for the sequential scans of ingest
+    (`aisdati.preprocess.clean`, `aisdati.preprocess.stops`), which compare report by report."""
+    to_rad = math.pi / 180.0
+    phi1 = lat1 * to_rad
+    phi2 = lat2 * to_rad
+    h = (
+        math.sin((phi2 - phi1) / 2) ** 2
+        + math.cos(phi1) * math.cos(phi2) * math.sin((lon2 - lon1) * to_rad / 2) ** 2
+    )
+    return 2 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(h, 0.0), 1.0)))
 
 
 def initial_bearing_deg(lon1, lat1, lon2, lat2):
@@ -74,6 +86,11 @@ def unit_vectors(lonlat: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(
         np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
     )
+
+
+def arc_m(chord: np.ndarray) -> np.ndarray:
+    """Great-circle distance (m) of chords between `unit_vectors`: 2R asin(chord / 2)."""
+    return 2 * EARTH_RADIUS_M * np.arcsin(np.minimum(chord / 2, 1.0))
 
 
 def _neighbours(n: int) -> tuple[np.ndarray, np.ndarray]:

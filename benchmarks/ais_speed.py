@@ -21,8 +21,8 @@ import numpy as np
 import torch
 
 from aisdati.ais.policy import AISPolicy, dati_act
+from aisdati.ais.source import build_source, make_env
 from aisdati.ais.space import LaneConfig
-from aisdati.ais.training import build_source, make_env
 from aisdati.dtw import batch_mean_dtw_m
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.networks import DATINetworks

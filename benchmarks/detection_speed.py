@@ -22,11 +22,12 @@ import time
 import numpy as np
 import torch
 
+from aisdati.ais import DEFAULT_PRESET
 from aisdati.ais.policy import AISPolicy, dati_act
-from aisdati.ais.space import DEFAULT_PRESET, PRESETS, LaneConfig
-from aisdati.ais.training import build_source
-from aisdati.detectors.base import ScoreSettings, tail_mean
+from aisdati.ais.source import build_source
+from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.detectors.nearest import NearestDetector
+from aisdati.detectors.scoring import ScoreSettings, tail_mean
 from aisdati.geo import lane_distances
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
@@ -81,8 +82,8 @@ def bench_step(tracks: list[Track], draws: int) -> float:
 
 
 def bench_nearest(train: list[Track], test: list[Track]) -> tuple[float, float]:
-    mmsi = np.array([t.mmsi for t in train])
-    det = NearestDetector("bench", {}, [t.positions for t in train], mmsi)
+    det = NearestDetector()  # the search alone: the tracks, without fitting (calibration)
+    det.tracks, det.mmsi = [t.positions for t in train], np.array([t.mmsi for t in train])
     det.search([t.positions for t in test[:2]], 10.0)  # compile
     t0 = time.perf_counter()
     dist, _ = det.search([t.positions for t in test], ScoreSettings().near_km)

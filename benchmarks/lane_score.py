@@ -41,7 +41,7 @@ def scored(seed_dir: Path, detector: str, how: ScoreSettings) -> pd.DataFrame:
         table = pd.read_csv(data / "labels.csv")
         stem = route if detector == "dati" else f"{route}-{detector}"
         det = load_detector(seed_dir / route / "models" / stem)
-        train = load_tracks(data, [int(i) for i in det.card["data"]["track_ids"]])
+        train = load_tracks(data, [int(i) for i in det.card.data.track_ids])
         if isinstance(det, NearestDetector):  # each training track against the other vessels
             own = det.lane_scores([t.positions for t in train], how, det.mmsi)[0]
         else:

@@ -35,13 +35,9 @@ from aisdati.model.bc import BC_PAPER, BCConfig, BCTrainer
 from aisdati.model.dati import DATITrainer
 from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer
 from aisdati.model.env import TrajectoryImitationEnv
-from aisdati.selftest.protocol import (
-    PAPER_FAMILIES,
-    SelftestSettings,
-    preset_settings,
-    run_selftest,
-    settings_family,
-)
+from aisdati.selftest.paper import PAPER_FAMILIES
+from aisdati.selftest.protocol import run_selftest
+from aisdati.selftest.settings import SelftestSettings, preset_settings, settings_family
 from aisdati.selftest.sources import FamilySource
 
 EPISODES, STEPS = 100, 200
@@ -70,9 +66,9 @@ def bc_ms(settings: SelftestSettings, cfg: BCConfig, names: list[str], updates: 
     """ms per gradient update of one BC ensemble."""
     cfg = replace(cfg, episodes=2, epochs=None, updates_per_episode=updates)
     trainer = BCTrainer(_envs(settings, names), list(range(len(names))), cfg)
-    trainer.train_episode()  # warm-up, then time one episode's updates
+    trainer.step()  # warm-up, then time one episode's updates
     start = time.perf_counter()
-    trainer.train_episode()
+    trainer.step()
     return (time.perf_counter() - start) / updates * 1e3
 
 

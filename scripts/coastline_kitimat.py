@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.coastline import on_land
-from aisdati.plots import _draw_land, _save, _set_map_limits
+from aisdati.plots import draw_land, save, set_map_limits
 
 BOX = (-129.95, 52.55, -128.49, 53.76)  # the sample's area: Douglas Channel to Hecate Strait
 COLORS = {"up": "tab:red", "down": "tab:blue", "other": "0.35"}
@@ -30,15 +30,15 @@ def main(data_dir: Path, out: Path) -> None:
     for tid, g in points.groupby("track_id", sort=False):
         c = cluster.get(tid, "other")
         ax.plot(g["lon"], g["lat"], color=COLORS[c], lw=0.5 if c == "other" else 1.0, alpha=0.7)
-    _set_map_limits(ax, np.array(BOX[:2]), np.array(BOX[2:]))
-    _draw_land(ax)
+    set_map_limits(ax, np.array(BOX[:2]), np.array(BOX[2:]))
+    draw_land(ax)
     handles = [plt.Line2D([], [], color=v, lw=1.2, label=f"{k} tracks") for k, v in COLORS.items()]
     ax.legend(handles=handles, fontsize=8, loc="upper right")
     ax.set_title(
         f"Kitimat sample, Jul-Aug 2018: {points['track_id'].nunique()} tracks, "
         f"{len(points):,} reports ({land.mean():.2%} on land)"
     )
-    _save(fig, out)
+    save(fig, out)
     print(f"wrote {out}; {land.sum()} of {len(points)} reports fall on land")
 
 

@@ -24,7 +24,7 @@ import pandas as pd
 from sklearn.metrics import roc_auc_score
 
 from aisdati.detectors import ScoreSettings, load_detector
-from aisdati.plots import _draw_land, _save, _set_map_limits
+from aisdati.plots import draw_land, save, set_map_limits
 from aisdati.tracks.store import load_tracks
 
 COLORS = {
@@ -71,7 +71,7 @@ def draw_lane(ax: plt.Axes, seed_dir: Path, route: str, track: int) -> None:
     """The track, DATI's lane from its start and the training tracks, coloured by deviation."""
     det = load_detector(seed_dir / route / "models" / route)
     data = seed_dir / route / "data"
-    train = load_tracks(data, [int(i) for i in det.card["data"]["track_ids"]])
+    train = load_tracks(data, [int(i) for i in det.card.data.track_ids])
     (held,) = load_tracks(data, [track])
     how = ScoreSettings(seed=int(seed_dir.name[4:]), lane_traffic=False)
     scored = det.score([held], how)
@@ -79,7 +79,7 @@ def draw_lane(ax: plt.Axes, seed_dir: Path, route: str, track: int) -> None:
     _, _, (lane,) = policy.rollout_scores(
         [held.positions], how.rollouts, how.seed, how.lane_reach, how.lane_rollouts
     )
-    _draw_land(ax)
+    draw_land(ax)
     for t in train:
         ax.plot(*t.positions.T, color="0.6", lw=0.6)
     for r in lane:
@@ -93,7 +93,7 @@ def draw_lane(ax: plt.Axes, seed_dir: Path, route: str, track: int) -> None:
     profile = scored.profiles[0]
     worst = p[profile >= np.quantile(profile, 1.0 - how.tail)]  # the reports its score averages
     margin = np.array([0.15, 0.08])  # degrees: about 10 km around them
-    _set_map_limits(ax, worst.min(axis=0) - margin, worst.max(axis=0) + margin)
+    set_map_limits(ax, worst.min(axis=0) - margin, worst.max(axis=0) + margin)
     ax.set_title(
         f"track {track} (star: its start; {seed_dir.name}): grey training tracks,\nblue DATI's "
         f"{len(lane)} rollouts from its start, green its traffic (one from each training start)",
@@ -129,7 +129,7 @@ def main() -> None:
     where = next(r / f"seed{first}" for r in runs if (r / f"seed{first}" / args.route).is_dir())
     draw_lane(right, where, args.route, args.track)
     fig.tight_layout()
-    _save(fig, out)
+    save(fig, out)
     print(f"wrote {out}")
 
 

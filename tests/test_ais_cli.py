@@ -7,8 +7,9 @@ import json
 import pyarrow.parquet as pq
 import pytest
 
-from aisdati.ais.space import DEFAULT_PRESET, PRESETS
-from aisdati.detection.run import SCORES_SCHEMA
+from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais.space import PRESETS
+from aisdati.detection.outputs import SCORES_SCHEMA
 
 
 @pytest.fixture(scope="module")

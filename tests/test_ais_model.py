@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aisdati.ais.training import build_source, make_env, track_reference
+from aisdati.ais.source import build_source, make_env, track_reference
 from aisdati.detection.run import flag
 from aisdati.dtw import batch_mean_dtw_m, dtw_path_length, matched_distances
 from aisdati.geo import haversine_m, spherical_step
@@ -99,7 +99,7 @@ def test_flag_top_percent():
 
 
 def test_label_metrics_weighted_f1_and_auc():
-    from aisdati.detection.run import label_metrics
+    from aisdati.detection.labels import label_metrics
 
     y = np.array([1, 1, 0, 0, 0, 0])
     flagged = np.array([1, 0, 1, 0, 0, 0])

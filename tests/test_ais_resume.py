@@ -9,7 +9,8 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from aisdati.ais.space import DEFAULT_PRESET, lane_config
+from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings, train_ais
 from aisdati.cli import app
 

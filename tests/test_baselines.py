@@ -14,13 +14,9 @@ from aisdati.errors import UserError
 from aisdati.model.bc import BCConfig, BCTrainer, bc_act
 from aisdati.model.networks import DATINetworks
 from aisdati.model.rollout import rollout_policy
-from aisdati.selftest.protocol import (
-    ABLATION,
-    PAPER_TABLE1,
-    SelftestSettings,
-    evaluation_references,
-    parse_methods,
-)
+from aisdati.selftest.paper import PAPER_TABLE1
+from aisdati.selftest.protocol import evaluation_references
+from aisdati.selftest.settings import ABLATION, SelftestSettings, parse_methods
 from aisdati.selftest.sources import make_family_env
 
 

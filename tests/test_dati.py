@@ -11,14 +11,15 @@ import pytest
 import torch
 
 from aisdati.errors import UserError
-from aisdati.model.checkpoint import load_networks, save_networks
 from aisdati.model.dati import WARMUP_SPREAD, DATIConfig, DATITrainer
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig
-from aisdati.model.rollout import interquartile_mean, rollout, summarize
+from aisdati.model.persistence import load_networks, save_networks
+from aisdati.model.rollout import dati_policy, rollout_policy
 from aisdati.selftest.families import get_family
 from aisdati.selftest.protocol import evaluation_references
 from aisdati.selftest.sources import FamilySource
+from aisdati.selftest.summary import interquartile_mean, summarize
 
 SMALL = DATIConfig(episodes=2, batch_size=16, patience=0)
 
@@ -97,7 +98,7 @@ def _train_with_snapshots(trainer: DATITrainer):
     """Train, keeping member 0's forward actor (and Time2Vec) at the end of every episode."""
     snapshots: dict[int, dict[str, torch.Tensor]] = {}
 
-    def on_step(logs):
+    def on_step(trainer, logs):
         for log in logs:
             if log.member == 0:
                 snapshots[log.episode] = {
@@ -213,13 +214,11 @@ def test_warmup_fills_the_buffer_with_near_perfect_decisions():
 
 
 def test_latent_noise_processes():
-    from aisdati.model.dati import LatentNoise
-
     gens = [torch.Generator().manual_seed(s) for s in (1, 2)]
-    gauss = LatentNoise(DATIConfig(), gens)
+    gauss = DATIConfig().latent_noise(gens)
     draws = torch.cat([gauss.sample() for _ in range(200)], dim=1)  # [2, 200, 64]
     assert draws.std() == pytest.approx(0.3, abs=0.02)
-    ou = LatentNoise(DATIConfig(noise="ou"), [torch.Generator().manual_seed(1)])
+    ou = DATIConfig(noise="ou").latent_noise([torch.Generator().manual_seed(1)])
     a, b = ou.sample(), ou.sample()
     # Ornstein-Uhlenbeck: small increments of σ sqrt(dt) from a state that persists
     assert (a.std() / 0.03) == pytest.approx(1.0, abs=0.3)
@@ -265,7 +264,7 @@ def _rollout(nets, cfg, seed):
     fam = tiny_family(12)
     refs = evaluation_references(fam, 2, 99)
     grid = [[TrajectoryImitationEnv(FamilySource(fam)) for _ in refs] for _ in range(2)]
-    return rollout(nets, grid, [refs, refs], cfg, seed=seed)
+    return rollout_policy(dati_policy(nets, cfg, len(refs), seed), grid, [refs, refs])
 
 
 def test_save_load_gives_an_identical_rollout(saved):
@@ -280,17 +279,17 @@ def test_save_load_gives_an_identical_rollout(saved):
     assert ours.keys() == theirs.keys()
     for key in ours:
         assert torch.equal(ours[key], theirs[key]), key
-    a = _rollout(nets, cfg, seed=5)
-    b = _rollout(loaded, cfg2, seed=5)
-    assert a.scores.shape == (2, 2) and np.all(np.isfinite(a.scores))
-    np.testing.assert_array_equal(a.scores, b.scores)
-    for row_a, row_b in zip(a.paths, b.paths, strict=True):
+    a_paths, a_scores = _rollout(nets, cfg, seed=5)
+    b_paths, b_scores = _rollout(loaded, cfg2, seed=5)
+    assert a_scores.shape == (2, 2) and np.all(np.isfinite(a_scores))
+    np.testing.assert_array_equal(a_scores, b_scores)
+    for row_a, row_b in zip(a_paths, b_paths, strict=True):
         for pa, pb in zip(row_a, row_b, strict=True):
             assert pa.shape == (13, 2)
             np.testing.assert_array_equal(pa, pb)
     # another evaluation seed draws other noise
-    c = _rollout(loaded, cfg2, seed=6)
-    assert not np.array_equal(a.scores, c.scores)
+    c_scores = _rollout(loaded, cfg2, seed=6)[1]
+    assert not np.array_equal(a_scores, c_scores)
 
 
 def test_load_of_a_corrupt_weights_file_is_a_user_error(saved):

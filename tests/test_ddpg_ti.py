@@ -159,7 +159,7 @@ def test_ddpg_ti_trains_and_rolls_out():
     cfg = DDPGTIConfig(episodes=4)  # 80 steps: trains from step 65 on
     trainer = DDPGTITrainer([make_family_env(LINE)], [0], cfg)
     ended = []
-    actor = trainer.train(lambda k, n: ended.append((k, n)))
+    actor = trainer.train(lambda t, logs: ended.extend((g.member, g.episode) for g in logs))
     assert ended == [(0, 1), (0, 2), (0, 3), (0, 4)] and trainer.updates == 80 - 64
     assert sum(trainer.actor.features.widths) == 156
     assert trainer.opt_actor.param_groups[0]["lr"] == pytest.approx(1e-4)

@@ -12,16 +12,23 @@ import numpy as np
 import pytest
 import torch
 
+from aisdati.ais.card import CalibratedWith
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import AISPolicy
+from aisdati.ais.source import build_source, make_env, track_reference
 from aisdati.ais.space import PRESETS, LaneConfig, lane_config
-from aisdati.ais.training import TrainSettings, build_source, make_env, track_reference
+from aisdati.ais.training import TrainSettings
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.dtw import dtw_path_length, nearest_mean_dtw_m
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import inject
 from aisdati.tracks.store import load_tracks, read_track_table
+
+
+def nearest(tracks, how=None):
+    """A fitted `nearest` (the paper's lane set-up: its card needs no corridor)."""
+    return NearestDetector(TrainSettings(lane=LaneConfig()), how).fit(tracks)
 
 
 @pytest.fixture(scope="module")
@@ -42,8 +49,8 @@ def test_nearest_search_is_exact_despite_pruning(tracks):
 
 
 def test_nearest_calibration_leaves_each_vessel_out(tracks):
-    det = NearestDetector.fit("n", tracks, {})
-    cal = np.asarray(det.card["calibration"]["nearest"])
+    det = nearest(tracks)
+    cal = np.asarray(det.card.calibration["nearest"])
     assert np.all(cal > 0)  # no track is compared with itself or its own vessel
     scored = det.score(tracks[:3], ScoreSettings())
     np.testing.assert_allclose(scored.score_m, 0.0, atol=1e-6)  # its own training tracks
@@ -155,7 +162,7 @@ def test_an_agent_outside_the_corridor_moves_in_and_then_stays(tracks):
     grid = grid.reshape(-1, 2)
     gaps = corridor.gap_m(grid)
     start = grid[np.argmin(np.abs(gaps - 3000))]  # a start ~3 km off the lanes
-    assert not space.contains(start) and space._in_box(start)
+    assert not space.contains(start) and space.in_box(start)
     g0 = corridor.gap_m(start[None])[0]
     moves = 0.01 * np.array([[np.cos(a), np.sin(a)] for a in np.radians(np.arange(0, 360, 45))])
     # a move that takes it no farther from the corridor is taken as it is (held to moves that
@@ -312,7 +319,8 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     assert card["calibrated_with"]["lane_traffic"] is True and det.threshold(lane_how, 0.05) > 0
     with pytest.raises(UserError, match="calibrated with --lane-traffic, not --no-lane-traffic"):
         det.threshold(replace(lane_how, lane_traffic=False), 0.05)
-    del det.card["calibrated_with"]["lane_traffic"]  # a card from before the traffic rollouts
+    course = det.card.calibrated_with.lane_course_km
+    det.card.calibrated_with = CalibratedWith(lane_course_km=course)  # from before the traffic
     with pytest.raises(UserError, match="with --no-lane-traffic, not --lane-traffic: pass that"):
         det.threshold(lane_how, 0.05)
     assert det.threshold(replace(lane_how, lane_traffic=False), 0.05) > 0
@@ -344,11 +352,11 @@ def test_the_baselines_train_one_model_under_the_lanes_seed_ensemble(cli, kitima
                 "--method", method, "--episodes", "1", "--max-tracks", "4", "-q")  # fmt: skip
         assert r.exit_code == 0, r.output
         det = load_detector(models / f"route-2-{method}")
-        assert det.card["preset"] == "lanes" and det.card["lane_config"]["members"] == 1
+        assert det.card.preset == "lanes" and det.card.lane_config.members == 1
         held = load_tracks(kitimat, read_track_table(kitimat).query("route == 'route-2'")
                            ["track_id"].tolist()[-2:])  # fmt: skip
         assert np.isfinite(det.score(held, ScoreSettings(rollouts=2)).score_m).all()
-    assert len(load_detector(models / "route-2-bc").card["seeds"]) == 1
+    assert len(load_detector(models / "route-2-bc").card.networks.seeds) == 1
 
 
 def test_gym_space_of_the_paper_state_is_unchanged(tracks):
@@ -411,21 +419,21 @@ def test_sailing_a_lane_backwards_costs_the_course_weight(tracks):
 
 
 def test_a_threshold_needs_the_course_weight_the_model_was_calibrated_with(tracks):
-    det = NearestDetector.fit("n", tracks, {}, ScoreSettings(lane_course_km=2.0))
-    assert det.card["calibrated_with"]["lane_course_km"] == 2.0
+    det = nearest(tracks, ScoreSettings(lane_course_km=2.0))
+    assert det.card.calibrated_with.lane_course_km == 2.0
     how = ScoreSettings(score="lane", lane_course_km=2.0)
     assert det.threshold(how, 0.05) > 0
     with pytest.raises(UserError, match="--lane-course-km 2, not 0"):
         det.threshold(replace(how, lane_course_km=0.0), 0.05)
-    del det.card["calibrated_with"]  # a card from before the course weight
+    det.card.calibrated_with = None  # a card from before the course weight
     assert det.threshold(replace(how, lane_course_km=0.0), 0.05) > 0
 
 
 def test_nearest_calibrates_a_route_sailed_by_one_vessel_on_its_other_tracks(tracks):
     ferry = [replace(t, mmsi=100000001) for t in tracks[:6]]  # one boat runs the whole line
-    det = NearestDetector.fit("ferry", ferry, {})
+    det = nearest(ferry)
     for key in ("nearest", "lane"):
-        cal = np.asarray(det.card["calibration"][key])
+        cal = np.asarray(det.card.calibration[key])
         assert len(cal) == 6 and np.all(np.isfinite(cal)) and np.all(cal > 0)
     assert det.threshold(ScoreSettings(score="lane"), 0.05) > 0
 
@@ -433,8 +441,8 @@ def test_nearest_calibrates_a_route_sailed_by_one_vessel_on_its_other_tracks(tra
 def test_nearest_lane_score_sees_a_jump_and_is_calibrated_per_vessel(kitimat):
     table = read_track_table(kitimat)
     held, *lane = load_tracks(kitimat, table.loc[table["route"] == "route-1", "track_id"][:20])
-    det = NearestDetector.fit("n", [t for t in lane if t.mmsi != held.mmsi], {})
-    assert np.all(np.asarray(det.card["calibration"]["lane"]) >= 0)
+    det = nearest([t for t in lane if t.mmsi != held.mmsi])
+    assert np.all(np.asarray(det.card.calibration["lane"]) >= 0)
     times = np.r_[0.0, np.cumsum(held.dts)] * 3600.0
     params = {"jump": {"span": (0.1, 0.2), "km": (5.0, 5.0)}}
     got = inject("jump", held.positions, times, np.random.default_rng(1), params)
@@ -455,7 +463,7 @@ def test_detect_and_evaluate_default_to_the_score_settings_lane():
 
 
 def test_the_tail_fraction_runs_from_the_largest_deviation_to_the_mean(tracks):
-    det = NearestDetector.fit("n", tracks[3:], {})
+    det = nearest(tracks[3:])
     times = np.r_[0.0, np.cumsum(tracks[0].dts)] * 3600.0
     jumped = inject("jump", tracks[0].positions, times, np.random.default_rng(1))
     how = ScoreSettings(score="lane")

@@ -3,7 +3,10 @@ whole-pair form, and the haversine metric against the `haversine` package."""
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -12,7 +15,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from aisdati.dtw import IncrementalDTW, dtw, dtw_path, dtw_path_length
+from aisdati.dtw import (
+    IncrementalDTW,
+    batch_mean_dtw_m,
+    dtw,
+    dtw_path,
+    dtw_path_length,
+    matched_distances,
+    nearest_mean_dtw_m,
+    pairs_mean_dtw_m,
+    prepare_lonlat,
+)
 from aisdati.geo import haversine_m
 
 COORD = st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
@@ -97,13 +110,11 @@ def test_incremental_matches_whole_pair_beyond_capacity(metric):
     a[90:100] = b[90:100]
     inc = IncrementalDTW(metric=metric, capacity=8)
     assert inc.n == 0 and inc.distance == 0.0 and inc.path_length == 0
-    assert inc.mean_distance == 0.0
     for t in range(n):
         inc.push(a[t], b[t])
         cost, length = dtw_path_length(a[: t + 1], b[: t + 1], metric=metric)
         assert inc.distance == pytest.approx(cost, rel=1e-12)
         assert inc.path_length == length
-        assert inc.mean_distance == pytest.approx(cost / length, rel=1e-12)
     assert dtw(a, b, metric=metric) == pytest.approx(naive_dtw(a, b, metric), rel=1e-9)
     inc.reset()
     assert inc.n == 0 and inc.distance == 0.0
@@ -167,3 +178,95 @@ def test_incremental_dtw_continues_exactly_from_its_state():
     empty = IncrementalDTW()
     empty.load_state_dict(IncrementalDTW().state_dict())
     assert empty.n == 0 and empty.push([0.0, 0.0], [3.0, 4.0]) == 5.0
+
+
+# ------------------------------------------------------------- input the kernels cannot take
+NAN_TRACK = np.array([[-74.0, 40.6], [np.nan, 40.7], [-74.1, 40.8]])
+TRACK = np.array([[-74.0, 40.6], [-74.05, 40.7], [-74.1, 40.8]])
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_every_public_dtw_refuses_non_finite_points(bad):
+    """NaN costs compare false with everything, so no predecessor wins and the back-track of
+    `dtw_path` left its matrix (a segfault in `detect`); every entry refuses them first."""
+    worse = np.where(np.isnan(NAN_TRACK), bad, NAN_TRACK)
+    for call in (
+        lambda: dtw(worse, TRACK),
+        lambda: dtw_path(TRACK, worse, "haversine"),
+        lambda: dtw_path_length(worse, TRACK, "haversine"),
+        lambda: matched_distances(TRACK, worse),
+        lambda: IncrementalDTW("haversine").push(worse[1], TRACK[1]),
+        lambda: batch_mean_dtw_m(worse[None], np.array([3]), [TRACK], np.array([0])),
+        lambda: batch_mean_dtw_m(TRACK[None], np.array([3]), [worse], np.array([0])),
+        lambda: nearest_mean_dtw_m([worse], [TRACK], [np.array([0])]),
+        lambda: nearest_mean_dtw_m([TRACK], [TRACK, worse], [np.array([0, 1])]),
+        lambda: prepare_lonlat(worse[None]),
+    ):
+        with pytest.raises(ValueError, match="non-finite"):
+            call()
+
+
+def test_indices_into_the_kernels_arrays_are_checked():
+    """numba does not check indices: out of range they read and write other memory."""
+    ready = prepare_lonlat(TRACK[None])
+    for call, needle in (
+        (lambda: pairs_mean_dtw_m(ready, ready, np.array([[0, 1]])), r"pairs\[:, 1\] must lie"),
+        (lambda: pairs_mean_dtw_m(ready, ready, np.array([[-1, 0]])), r"pairs\[:, 0\] must lie"),
+        (lambda: batch_mean_dtw_m(TRACK[None], np.array([4]), [TRACK], np.array([0])),
+         "lengths - 1 must lie in"),
+        (lambda: batch_mean_dtw_m(TRACK[None], np.array([0]), [TRACK], np.array([0])),
+         "lengths - 1 must lie in"),
+        (lambda: batch_mean_dtw_m(TRACK[None], np.array([3]), [TRACK], np.array([1])),
+         "owner must lie in"),
+        (lambda: nearest_mean_dtw_m([TRACK], [TRACK], [np.array([1])]),
+         r"candidates\[0\] must lie in"),
+        (lambda: nearest_mean_dtw_m([TRACK], [TRACK], []), "1 queries, 0 candidate lists"),
+        (lambda: nearest_mean_dtw_m([TRACK], [np.empty((0, 2))], [np.array([0])]),
+         r"references\[0\] must be a non-empty array"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=needle):
+            call()
+    assert pairs_mean_dtw_m(ready, ready, np.array([[0, 0]])) == pytest.approx([0.0])
+
+
+BACK_TRACK = """
+import numpy as np
+from aisdati.dtw import dtw_path
+big = 1e308  # finite points whose distances overflow to inf: every cost is inf
+cost, path = dtw_path(np.array([[big], [-big], [big]]), np.full((5, 1), -big))
+print(cost, path.tolist())
+"""
+
+
+def test_the_back_track_stays_in_its_matrix_whatever_the_costs():
+    """With costs that compare false (inf < inf) every back-pointer says diagonal; the
+    back-track walked off the first row into memory past its path. In a process of its own,
+    so that a crash fails this test instead of the session."""
+    proc = subprocess.run(
+        [sys.executable, "-c", BACK_TRACK], capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
+    cost, path = proc.stdout.split(" ", 1)
+    assert cost == "inf"
+    assert json.loads(path) == [[0, 0], [0, 1], [0, 2], [1, 3], [2, 4]]
+
+
+def test_a_damaged_incremental_state_is_refused():
+    """A training checkpoint's DTW state goes to a compiled push that trusts its arrays."""
+    dtw_state = IncrementalDTW("haversine")
+    for a, b in zip(TRACK, TRACK[::-1], strict=True):
+        dtw_state.push(a, b)
+    good = dtw_state.state_dict()
+    for change, needle in (
+        ({"n": 10**6}, r"_a must have shape \(1000000, 3\)"),
+        ({"n": -1}, "n must be >= 0"),
+        ({"dim": 3}, "3 values per point do not fit haversine DTW"),
+        ({"_row_d": np.array([0.0, np.nan, 1.0])}, "_row_d holds values no DTW of 3 points has"),
+        ({"_col_l": np.array([1, 2, 99])}, "_col_l holds values no DTW of 3 points has"),
+        ({"_row_l": np.array([1.0, 2.0, 3.0])}, "_row_l holds values"),
+    ):
+        with pytest.raises(ValueError, match=needle):
+            IncrementalDTW("haversine").load_state_dict({**good, **change})
+    restored = IncrementalDTW("haversine")
+    restored.load_state_dict(good)
+    assert restored.distance == dtw_state.distance

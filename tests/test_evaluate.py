@@ -188,7 +188,7 @@ def test_a_3_km_detour_scores_above_its_source_for_nearest_and_dati(kitimat, tmp
     detoured = Track(-1, held.mmsi, held.start, got.positions, np.diff(got.times_s) / 3600,
                      held.cluster)
     how = ScoreSettings(score="rollout", rollouts=4)
-    near = NearestDetector.fit("n", load_tracks(kitimat, train_ids), {})
+    near = NearestDetector().fit(load_tracks(kitimat, train_ids))
     s = near.score([held, detoured], how).score_m
     assert s[1] > 1.3 * s[0]
     trained = train_detector(

@@ -39,14 +39,12 @@ def leftovers(folder: Path) -> list[str]:
     return sorted(n for n in names if ".tmp" in n or n.startswith(".ingest-"))
 
 
-@pytest.fixture(scope="module")
-def baseline(tmp_path_factory):
-    """The clean NY hour, ingested once: what every damaged copy is compared with."""
+def ingest_ny_hour(out: Path) -> dict:
+    """The clean NY hour ingested into `out`: its report."""
     from typer.testing import CliRunner
 
     from aisdati.cli import app
 
-    out = tmp_path_factory.mktemp("baseline")
     src = Path(__file__).parent / "data" / NY_HOUR
     args = ["ingest", "--input", str(src), "--out", str(out), *SETTINGS, "--json"]
     result = CliRunner().invoke(app, args)
@@ -54,6 +52,12 @@ def baseline(tmp_path_factory):
     report = json.loads(result.stdout)
     assert report["rows_read"] == NY_ROWS and report["tracks"]["total"] > 20
     return report
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory):
+    """The clean NY hour, ingested once: what every damaged copy is compared with."""
+    return ingest_ny_hour(tmp_path_factory.mktemp("baseline"))
 
 
 def ny_lines(data: Path) -> list[bytes]:

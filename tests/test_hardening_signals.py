@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from aisdati.options import hold_lock
+from aisdati.outdir import hold_lock
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = Path(__file__).parent / "data"
@@ -193,8 +193,8 @@ def _interrupt_inside_a_c_callback() -> None:
 
 
 def test_a_ctrl_c_swallowed_by_a_c_callback_still_stops_the_outputs(tmp_path, capfd):
-    from aisdati.model.checkpoint import atomic_write_bytes
-    from aisdati.options import handle_termination, raise_if_interrupted
+    from aisdati.interrupts import handle_termination, raise_if_interrupted
+    from aisdati.outdir import atomic_write_bytes
 
     # a test run started in the background may inherit an ignored SIGINT: give it the default
     inherited = signal.signal(signal.SIGINT, signal.default_int_handler)

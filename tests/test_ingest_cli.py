@@ -15,8 +15,8 @@ import pyarrow.parquet as pq
 import pytest
 import zstandard
 
-from aisdati.preprocess.output import POINTS_SCHEMA
 from aisdati.preprocess.roi import florida_straits, in_roi
+from aisdati.tracks.schema import POINTS_SCHEMA
 
 HEAD_ZIP = "AIS_2022_01_03_head.zip"
 HEADER = "MMSI,BaseDateTime,LAT,LON,SOG,COG,Heading,VesselName"

@@ -13,7 +13,7 @@ import torch
 
 from aisdati.ais.policy import dati_act
 from aisdati.ais.space import PRESETS, lane_config
-from aisdati.ais.training import TrainSettings, _curves
+from aisdati.ais.training import TrainSettings, member_curves
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.train import train_detector
 from aisdati.errors import UserError
@@ -197,8 +197,9 @@ def test_the_pretrained_actor_is_kept_unless_an_episode_beats_it_on_validation()
     assert any(not torch.equal(warm[k], live[k]) for k in warm)  # training moved on
     kept = final.forward_actor.state_dict()
     assert all(torch.equal(warm[k], kept[k]) for k in warm)
-    assert _curves(trainer.history, True, 2, trainer.pretrained_metric[0])["best_episode"] == 0
-    assert _curves(trainer.history, True, 2, 3.0)["best_episode"] == 1
+    warm_start = trainer.pretrained_metric[0]
+    assert member_curves(trainer.history, True, 2, warm_start)["best_episode"] == 0
+    assert member_curves(trainer.history, True, 2, 3.0)["best_episode"] == 1
 
 
 def test_the_averaged_actor_follows_the_live_one_and_is_what_is_validated_and_kept():
@@ -238,7 +239,7 @@ def test_a_member_leaving_takes_its_average_along():
     trainer = DATITrainer(envs, [0, 1], DATIConfig(batch_size=16, actor_average=0.5))
     trainer.step()
     second = {n: p[1].clone() for n, p in trainer.average.named_parameters()}
-    trainer._drop([0])
+    trainer.remove_members([0])
     assert all(torch.equal(p[0], second[n]) for n, p in trainer.average.named_parameters())
     trainer.step()  # the ensemble of one goes on
     assert trainer.average.forward_actor.out.weight.shape[0] == 1

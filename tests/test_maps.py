@@ -1,4 +1,4 @@
-"""The offline coastline (aisdati.coastline) and the maps drawn over it (aisdati.plots)."""
+"""The offline coastline (aisdati.coastline) and the maps drawn over it (aisdati.detection.maps)."""
 
 from __future__ import annotations
 
@@ -11,30 +11,24 @@ import pytest
 from shapely.geometry import MultiPolygon, box
 
 from aisdati import coastline
-from aisdati.plots import (
-    LAND_COLOR,
+from aisdati.detection.maps import plot_detection_map, plot_track_evidence
+from aisdati.detection.webmap import (
     LAYER_BEST_ROLLOUTS,
+    LAYER_COAST,
     LAYER_FLAGGED,
     LAYER_MEDOIDS,
     LAYER_ROLLOUTS,
     LAYER_STRETCHES,
     LAYER_TRACKS,
-    WATER_COLOR,
     html_detection_map,
-    plot_detection_map,
-    plot_track_evidence,
 )
+from aisdati.plots import LAND_COLOR, WATER_COLOR
 
 # Checked on a drawn map: the middle of Douglas Channel (about 4 km wide here, 2 km from either
 # shore) and a point 5 km inland on the land east of it, in the Kitimat sample's area.
 DOUGLAS_CHANNEL = (-129.205, 53.55)
 INLAND_KITIMAT = (-128.75, 53.3)
 KITIMAT_BOX = (-129.5, 53.2, -128.6, 53.7)
-
-
-def _clear_caches() -> None:
-    for f in (coastline._world, coastline._land, coastline._block, coastline._tile):
-        f.cache_clear()
 
 
 def _rgb(hex_color: str) -> np.ndarray:
@@ -101,9 +95,9 @@ def test_land_is_clipped_and_cached():
 
 @pytest.fixture
 def fresh_coastline():
-    _clear_caches()
+    coastline.clear_caches()
     yield
-    _clear_caches()
+    coastline.clear_caches()
 
 
 def test_fallback_without_roaring_landmask(monkeypatch, fresh_coastline):
@@ -121,17 +115,17 @@ def test_cache_is_written_then_memory_mapped(monkeypatch, tmp_path, fresh_coastl
 
     def fake_osm():  # the small 1:110m outline instead of the 9-million-vertex OSM land
         built.append(1)
-        return coastline._ne110m_arrays()
+        return coastline.ne110m_arrays()
 
-    monkeypatch.setattr(coastline, "_osm_arrays", fake_osm)
-    first = coastline._cached_osm_arrays("test")
+    monkeypatch.setattr(coastline, "osm_arrays", fake_osm)
+    first = coastline.cached_osm_arrays("test")
     (folder,) = tmp_path.iterdir()
     assert sorted(p.name for p in folder.iterdir()) == [f"{k}.npy" for k in sorted(first)]
-    again = coastline._cached_osm_arrays("test")
+    again = coastline.cached_osm_arrays("test")
     assert built == [1] and isinstance(again["coords"], np.memmap)
     np.testing.assert_array_equal(again["coords"], first["coords"])
     (folder / "coords.npy").write_bytes(b"broken")
-    coastline._cached_osm_arrays("test")
+    coastline.cached_osm_arrays("test")
     assert built == [1, 1] and np.load(folder / "coords.npy").shape == first["coords"].shape
 
 
@@ -208,6 +202,7 @@ def test_html_map_layers(tmp_path):
         LAYER_BEST_ROLLOUTS,
         LAYER_STRETCHES,
         LAYER_MEDOIDS,
+        LAYER_COAST,
     ):
         assert name in page
     assert "injected turn" in page and "Kitimat &lt;test&gt;" in page

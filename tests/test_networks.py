@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from aisdati.model.dati import DATIConfig, DATITrainer, _gradient_penalty
+from aisdati.model.dati import DATIConfig, DATITrainer, gradient_penalty
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig, NonNegativeLinear
 from aisdati.selftest.families import get_family
@@ -148,11 +148,11 @@ def test_gradient_penalty_is_per_sample():
     fake = nets.forward_actor(x, eta, nets.time_features(t)).detach()
     u = torch.rand(2, 6, 1, generator=torch.Generator().manual_seed(2))
     time = nets.time_features(t)
-    batch = _gradient_penalty(nets.forward_critic, real, fake, r, time, u)
+    batch = gradient_penalty(nets.forward_critic, real, fake, r, time, u)
     assert batch.shape == (2,)
     singles = torch.stack(
         [
-            _gradient_penalty(
+            gradient_penalty(
                 nets.forward_critic,
                 real[:, i : i + 1],
                 fake[:, i : i + 1],
@@ -179,7 +179,7 @@ def test_gradient_penalty_is_differentiable_in_the_critic():
     cfg = NetworkConfig()
     nets = DATINetworks(STATE, DECISION, cfg, seeds=[3])
     x, _, _, t, r = _inputs(cfg, members=1, batch=4)
-    gp = _gradient_penalty(nets.backward_critic, x, x.flip(1), r, nets.time_features(t), t / 200)
+    gp = gradient_penalty(nets.backward_critic, x, x.flip(1), r, nets.time_features(t), t / 200)
     gp.sum().backward()
     grad = nets.backward_critic.input_features.weight.grad
     assert grad is not None and torch.any(grad != 0)

@@ -7,7 +7,7 @@ import numpy as np
 import pyarrow as pa
 
 from aisdati.preprocess.clean import check_values, clean_vessels, derive_sog_cog, filter_area_speed
-from aisdati.preprocess.read import PARTITION_SCHEMA
+from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.report import CODE
 from aisdati.preprocess.roi import florida_straits
 from aisdati.preprocess.settings import IngestSettings

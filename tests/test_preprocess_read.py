@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pyarrow as pa
 import pytest
 
 from aisdati.errors import UserError
-from aisdati.preprocess.read import Source, SourceReader, resolve_columns, to_canonical
+from aisdati.preprocess.convert import to_canonical
+from aisdati.preprocess.inputs import Source, sources_of
+from aisdati.preprocess.layouts import resolve_columns
+from aisdati.preprocess.read import SourceReader
 from aisdati.preprocess.report import CODE
 
 
@@ -88,3 +93,29 @@ def test_reordered_columns_and_misspelt_header_ny_hour(data):
     assert reader.columns["lon"] == "LON" and reader.columns["mmsi"] == "MMSI"
     table, _ = to_canonical(next(iter(reader.batches())), reader.columns, 0)
     assert np.nanmin(table.column("cog").to_numpy()) < 0  # raw negative COG, normalised later
+
+
+@pytest.mark.parametrize(
+    ("name", "kind", "compression"),
+    [
+        ("AIS_2022_01_03.csv", "csv", None),
+        ("ais-2025-01-01.csv.zst", "csv", "zstd"),
+        ("points.csv.gz", "csv", "gzip"),
+        ("day.parquet", "parquet", None),
+        ("log.nmea", "nmea", None),
+        ("log.ais.gz", "nmea", "gzip"),
+        ("receiver.txt.zst", "nmea", "zstd"),
+    ],
+)
+def test_file_kinds_and_compression_come_from_the_name(name, kind, compression):
+    source = Source(Path(name))
+    assert (source.kind, source.compression) == (kind, compression)
+
+
+def test_zip_members_are_csv(data):
+    (source,) = sources_of(data / "AIS_2022_01_03_head.zip")
+    assert (source.kind, source.compression, source.label) == (
+        "csv",
+        None,
+        "AIS_2022_01_03_head.zip:AIS_2022_01_03.csv",
+    )

@@ -15,13 +15,14 @@ from aisdati.errors import UserError
 from aisdati.geo import haversine_m
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.routes import (
-    ROUTES_SCHEMA,
     RouteSettings,
+    ShapeDistance,
     cluster_routes,
     lines_from_wkb,
-    route_distance_km,
+    resample,
 )
 from aisdati.preprocess.settings import IngestSettings
+from aisdati.tracks.schema import ROUTES_SCHEMA
 from aisdati.tracks.store import (
     MIN_ROUTE_TRACKS,
     load_tracks,
@@ -37,6 +38,12 @@ NW_ENTRANCE = (-129.88, 53.75)
 SE_CORNER = (-128.50, 52.61)
 WHITEHALL = (-74.0130, 40.7010)
 ST_GEORGE = (-74.0718, 40.6440)
+
+
+def route_distance_km(a: np.ndarray, b: np.ndarray, samples: int = 32) -> float:
+    """Mean great-circle DTW (km) between two lon/lat lines resampled as the routes compare them."""
+    shapes = ShapeDistance(resample([a, b], samples))
+    return float(shapes.pairs(np.array([0]), np.array([1]))[0])
 
 
 def _near(lon, lat, place, km):

@@ -15,16 +15,16 @@ import torch
 from aisdati.cli import SELFTEST_PRESET_OPTION
 from aisdati.errors import UserError
 from aisdati.model.bc import BC_PAPER, BCPolicy, BCTrainer
-from aisdati.model.dati import DATIConfig, DATITrainer, LatentNoise, NoiseProcess
+from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import TrajectoryImitationEnv
+from aisdati.model.noise import NoiseProcess
 from aisdati.selftest.families import get_family
-from aisdati.selftest.protocol import (
+from aisdati.selftest.protocol import evaluation_grid, run_selftest
+from aisdati.selftest.settings import (
     SELFTEST_PRESETS,
     SelftestSettings,
-    _grid,
     family_for,
     preset_settings,
-    run_selftest,
 )
 from aisdati.selftest.sources import FamilySource
 
@@ -51,7 +51,7 @@ def test_bc_paper_collects_every_episode_then_trains_its_epochs():
     cfg = replace(BC_PAPER, episodes=3, epochs=2)
     trainer = BCTrainer([tiny_env(), tiny_env()], [0, 1], cfg)
     before = [p.detach().clone() for p in trainer.policy.parameters()]
-    trainer.train_episode()
+    trainer.step()
     assert np.isnan(trainer.losses[-1]).all()  # demonstrations only, no update yet
     assert all(torch.equal(a, b) for a, b in zip(before, trainer.policy.parameters(), strict=True))
     steps = []
@@ -99,7 +99,7 @@ def test_latent_noise_follows_each_members_process():
     cfg = DATIConfig()
     gens = [torch.Generator().manual_seed(3) for _ in range(3)]
     procs = [NoiseProcess("ou", 0.01), NoiseProcess("ou", 0.09), NoiseProcess("gaussian")]
-    eta = LatentNoise(cfg, gens, procs).sample()[:, 0]
+    eta = cfg.latent_noise(gens, procs).sample()[:, 0]
     draw = torch.randn(1, cfg.network.latent_dim, generator=torch.Generator().manual_seed(3))[0]
     draw = draw * cfg.noise_sigma
     torch.testing.assert_close(eta[0], draw * 0.1)  # OU from 0: one step of sqrt(dt) x draw
@@ -126,7 +126,7 @@ def _t2v_after_one_batch(adversarial: bool) -> tuple[dict, dict]:
     cfg = DATIConfig(batch_size=8, lr_critic=0.0, lr_l1=0.0, adversarial_time2vec=adversarial)
     trainer = DATITrainer([tiny_env()], [0], cfg)
     before = {n: p.detach().clone() for n, p in trainer.nets.time2vec.named_parameters()}
-    trainer._train_batch()  # the critics' and L1 steps have lr 0: only the adversarial one moves
+    trainer.train_batch()  # the critics' and L1 steps have lr 0: only the adversarial one moves
     return before, dict(trainer.nets.time2vec.named_parameters())
 
 
@@ -142,7 +142,7 @@ def test_the_time2vec_still_learns_from_the_l1_terms_when_frozen_for_the_adversa
     cfg = DATIConfig(batch_size=8, lr_critic=0.0, lr_actor=0.0, adversarial_time2vec=False)
     trainer = DATITrainer([tiny_env()], [0], cfg)
     before = {n: p.detach().clone() for n, p in trainer.nets.time2vec.named_parameters()}
-    trainer._train_batch()
+    trainer.train_batch()
     assert any(not torch.equal(p, before[n]) for n, p in trainer.nets.time2vec.named_parameters())
 
 
@@ -164,7 +164,7 @@ def test_each_seed_has_its_own_references_in_the_paper_preset():
     for preset, distinct in (("paper", True), ("ours", False)):
         settings = preset_settings(preset, references=4, steps=12)
         fams = {"circles": family_for("circles", 12, settings.exact_region)}
-        refs, _ = _grid(group, settings, fams)
+        refs, _ = evaluation_grid(group, settings, fams)
         alphas = [[r.label["alpha"] for r in row] for row in refs]
         assert alphas[0] == alphas[2]  # the same seed (another method) meets the same ones
         assert (alphas[0] != alphas[1]) is distinct

@@ -21,17 +21,17 @@ from aisdati.preprocess.stops import (
     dwell_rules,
     split_reports,
 )
+from aisdati.tracks.schema import KNOT_MPS
 
 MIN = 60_000_000  # one minute in microseconds
 M_PER_DEG = 111_195.0
-KN = 1852.0 / 3600.0
 
 
 def sailing(minutes, speeds_kn, lat0=40.0):
     """Positions of a vessel sailing north at the given speeds, one report per minute mark."""
     minutes = np.asarray(minutes, dtype=float)
     speeds = np.asarray(speeds_kn, dtype=float)
-    north_m = np.r_[0.0, np.cumsum(np.diff(minutes) * 60 * speeds[1:] * KN)]
+    north_m = np.r_[0.0, np.cumsum(np.diff(minutes) * 60 * speeds[1:] * KNOT_MPS)]
     return np.full(len(minutes), -74.0), lat0 + north_m / M_PER_DEG
 
 

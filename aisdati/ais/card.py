@@ -1,10 +1,19 @@
-"""The AIS model card (`<cluster>.json` beside `<cluster>.pt`), validated as a whole before use.
+"""The AIS model card (`<stem>.json` beside a detector's weights or tracks) as one typed object.
+
+`ModelCard` is what every detector (dati, bc, nearest) knows about itself besides its networks
+or remembered tracks: the data it was trained on, the region and update rule it moves in, the
+lane configuration, how training went and the scores its threshold is calibrated on. Code reads
+and edits the card's fields; only `to_dict` and `from_dict` know the JSON.
 
 A card edited by hand or damaged can hold a negative or NaN speed range, an inverted region,
 start points in the sea of NaN: the networks still load and `detect` would run and flag other
-tracks than the model would. So every field `detect` reads is checked for its type, finiteness
-and range, and the first bad one is named in a one-line `UserError`:
-`model card models/up.json: rule.max_sog_kn must be a finite number > 0, got -3`.
+tracks than the model would. So `from_dict` checks every field `detect` reads for its type,
+finiteness and range, and names the first bad one in a one-line `UserError`:
+`model card models/up.json: rule.max_sog_kn must be a finite number in (0, 1000], got -3`.
+Every count has an upper bound too (`MAX_TRACKS`, `MAX_POINTS`, ...: what the largest real
+model could hold), since counts size what is built from the card: `data.points: 1e12` asked the
+traffic rollouts for terabytes. `read_card` reads the file itself within a size and a nesting
+depth (`aisdati.model.readers.read_json`).
 
 Also here: which of a data set's tracks a model was trained on (`training_mask`), by a key that
 survives re-ingesting (vessel and time span), and the warnings a usable card can still deserve
@@ -13,256 +22,447 @@ survives re-ingesting (vessel and time span), and the warnings a usable card can
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from aisdati.ais.space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, state_width
+from aisdati.ais.card_fields import CardFields, is_number
+from aisdati.ais.space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, LaneConfig, state_width
 from aisdati.errors import UserError
+from aisdati.model.persistence import MAX_LAYERS, MAX_UNITS, NETWORKS_FORMAT
+from aisdati.model.readers import read_json
+from aisdati.model.rules import SphericalRule
+from aisdati.tracks.store import Track
 
+CARD_FORMATS: dict[str, str] = {
+    "dati": NETWORKS_FORMAT,  # DATI's card is the one its networks are saved with
+    "bc": "aisdati-bc/1",
+    "nearest": "aisdati-nearest/1",
+}
+"""Each detector's card format (the card's `format`), by method: the one place card versions
+are written."""
+KIND = "ais"
 MAX_MMSI = 2**53
-_MISSING = object()
+MAX_COUNT = 2**53
+"""Counts that size nothing (shown only): any integer JSON holds exactly."""
+MAX_SEED = 2**63 - 1
+"""torch's generators take 64-bit seeds (a lane's members: the run's seed + 1000 k)."""
+MAX_TRACKS = 100_000
+"""Training tracks of one model: DATI trains one episode per track (the paper: 170), and
+`nearest` compares a track with every training track that starts near it."""
+MAX_TRACK_POINTS = 100_000
+"""Mean reports per training track: 55 hours at one report every 2 s. DATI's reward DTW costs
+O(n) per step, O(n²) per episode; the lane score's traffic rollouts run this many steps."""
+MAX_POINTS = 50_000_000
+"""All training reports: `nearest` keeps them in memory (16 bytes each, 0.8 GB), a lane's
+traffic rollouts take 32 bytes per report."""
+MAX_EPISODES = 1_000_000
+"""Training episodes (the paper: 170): a million episodes of the shortest track take weeks."""
+MAX_VALIDATION_ROLLOUTS = 1000
+"""Rollouts per validation track (the lanes preset: 3)."""
+RULE_NAME = "spherical (eq. 5)"
+RULE_DECISIONS = ("sog_kn", "cog_deg", "dt_h")
 
 
-class _Card:
-    """Typed access to a card's fields by dotted path; every failure is one named `UserError`."""
-
-    def __init__(self, doc: Any, path: Path | str) -> None:
-        self.doc = doc
-        self.path = path
-
-    def fail(self, field: str, rule: str, value: Any, shown: str | None = None) -> UserError:
-        got = _show(value) if shown is None else shown
-        return UserError(f"model card {self.path}: {field} must be {rule}, got {got}")
-
-    def get(self, field: str, default: Any = _MISSING) -> Any:
-        node = self.doc
-        for part in field.split("."):
-            if not isinstance(node, dict) or part not in node:
-                if default is not _MISSING:
-                    return default
-                raise UserError(f"model card {self.path}: {field} is missing")
-            node = node[part]
-        return node
-
-    def number(
-        self,
-        field: str,
-        low: float | None = None,
-        high: float | None = None,
-        low_open: bool = False,
-        value: Any = _MISSING,
-    ) -> float:
-        v = self.get(field) if value is _MISSING else value
-        rule = _rule(low, high, low_open)
-        if not _is_number(v) or not math.isfinite(v):
-            raise self.fail(field, f"a finite number{rule}", v)
-        if low is not None and (v <= low if low_open else v < low):
-            raise self.fail(field, f"a finite number{rule}", v)
-        if high is not None and v > high:
-            raise self.fail(field, f"a finite number{rule}", v)
-        return float(v)
-
-    def integer(
-        self, field: str, low: int | None = None, high: int | None = None, value: Any = _MISSING
-    ) -> int:
-        v = self.get(field) if value is _MISSING else value
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise self.fail(field, f"an integer{_rule(low, high)}", v)
-        if (low is not None and v < low) or (high is not None and v > high):
-            raise self.fail(field, f"an integer{_rule(low, high)}", v)
-        return v
-
-    def choice(self, field: str, allowed: Sequence[Any]) -> Any:
-        v = self.get(field)
-        if isinstance(v, bool) or v not in allowed:
-            raise self.fail(field, "one of " + ", ".join(map(_show, allowed)), v)
-        return v
-
-    def boolean(self, field: str, default: Any = _MISSING) -> Any:
-        v = self.get(field, default)
-        if v is not default and not isinstance(v, bool):
-            raise self.fail(field, "true or false", v)
-        return v
-
-    def text(self, field: str) -> str:
-        v = self.get(field)
-        if not isinstance(v, str) or not v.strip():
-            raise self.fail(field, "a non-empty string", v)
-        return v
-
-    def array(self, field: str, length: int | None = None, min_length: int = 0) -> list[Any]:
-        v = self.get(field)
-        if not isinstance(v, list):
-            raise self.fail(field, "a list", v)
-        if length is not None and len(v) != length:
-            raise self.fail(field, f"a list of {length}", v, f"{len(v)} items")
-        if len(v) < min_length:
-            raise self.fail(field, f"a list of at least {min_length}", v, f"{len(v)} items")
-        return v
-
-    def interval(self, field: str, low: float, high: float) -> tuple[float, float]:
-        pair = self.array(field, length=2)
-        lo = self.number(f"{field}[0]", low, high, value=pair[0])
-        hi = self.number(f"{field}[1]", low, high, value=pair[1])
-        if not lo < hi:
-            raise self.fail(field, "[low, high] with low < high", pair)
-        return lo, hi
+def card_method(fmt: Any) -> str | None:
+    """The method a card `format` belongs to (None: not an aisdati detector's card)."""
+    return next((m for m, f in CARD_FORMATS.items() if f == fmt), None)
 
 
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+# ---------------------------------------------------------------------------------- sections
+@dataclass(frozen=True)
+class Region:
+    """The lon/lat box the agent is kept in (the training tracks' box with a margin)."""
+
+    lon: tuple[float, float]
+    lat: tuple[float, float]
+
+    @classmethod
+    def from_bounds(cls, bounds: tuple[np.ndarray, np.ndarray]) -> Region:
+        lo, hi = bounds
+        return cls((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])))
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) as (lon, lat) arrays."""
+        return (
+            np.array([self.lon[0], self.lat[0]], np.float64),
+            np.array([self.lon[1], self.lat[1]], np.float64),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"lon": list(self.lon), "lat": list(self.lat)}
 
 
-def _rule(low: float | None, high: float | None, low_open: bool = False) -> str:
-    if low is not None and high is not None:
-        return f" in {'(' if low_open else '['}{_num(low)}, {_num(high)}]"
-    if low is not None:
-        return f" {'>' if low_open else '>='} {_num(low)}"
-    if high is not None:
-        return f" <= {_num(high)}"
-    return ""
+@dataclass(frozen=True)
+class RuleCard:
+    """The decision ranges of the spherical update rule (eq. 5)."""
+
+    max_sog_kn: float
+    max_dt_h: float
+    cog_center_deg: float | None = None
+    """The centre of the COG window; None in cards from before it (then 180)."""
+
+    @classmethod
+    def from_rule(cls, rule: SphericalRule) -> RuleCard:
+        return cls(rule.max_sog, rule.max_dt_h, rule.cog_center)
+
+    def to_rule(self) -> SphericalRule:
+        center = 180.0 if self.cog_center_deg is None else float(self.cog_center_deg)
+        return SphericalRule(
+            max_sog=float(self.max_sog_kn), max_dt_h=float(self.max_dt_h), cog_center=center
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        doc = {"name": RULE_NAME, "decisions": list(RULE_DECISIONS)}
+        doc |= {"max_sog_kn": self.max_sog_kn, "max_dt_h": self.max_dt_h}
+        return doc if self.cog_center_deg is None else doc | {"cog_center_deg": self.cog_center_deg}
 
 
-def _num(x: float) -> str:
-    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+@dataclass(kw_only=True)
+class DataCard:
+    """The training tracks: their ids and stable keys, sizes, start points and where they came
+    from (`dir`, `files`, `cluster`, `tracks_in_cluster`: what training from an ingest folder
+    records; None when fitted on tracks in memory)."""
+
+    track_ids: list[int]
+    points: int
+    """All their reports; the traffic rollouts of a lane run their mean length."""
+    start_points: list[list[float]]
+    """[lon, lat] of each track's first report."""
+    track_keys: list[list[Any]] | None = None
+    """[mmsi, "start", "end"] per track (ISO 8601, UTC; `track_keys`); None in cards before
+    0.1.0, which `training_mask` matches by id."""
+    dir: str | None = None
+    files: list[str] | None = None
+    cluster: str | None = None
+    tracks_in_cluster: int | None = None
+    tracks_used: int | None = None
+    time_span: list[str] | None = None
+
+    @classmethod
+    def of_tracks(
+        cls, tracks: Sequence[Track], spans: pd.DataFrame | None = None, **source: Any
+    ) -> DataCard:
+        """The card of `tracks`. `spans`: their rows of tracks.parquet (mmsi, start, end), in
+        their order; without it, each track's span is its first report plus its time steps.
+        `source`: where they came from (dir, files, cluster, tracks_in_cluster)."""
+        if spans is None:
+            start = [pd.Timestamp(t.start) for t in tracks]
+            hours = [float(t.dts.sum()) for t in tracks]
+            end = [s + pd.to_timedelta(h, "h") for s, h in zip(start, hours, strict=True)]
+            spans = pd.DataFrame({"mmsi": [t.mmsi for t in tracks], "start": start, "end": end})
+        return cls(
+            tracks_used=len(tracks),
+            track_ids=[t.track_id for t in tracks],
+            track_keys=track_keys(spans),
+            points=int(sum(len(t.positions) for t in tracks)),
+            time_span=[str(spans["start"].min()), str(spans["end"].max())],
+            start_points=[[float(t.positions[0, 0]), float(t.positions[0, 1])] for t in tracks],
+            **source,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        order = ("dir", "files", "cluster", "tracks_in_cluster", "tracks_used", "track_ids",
+                 "track_keys", "points", "time_span", "start_points")  # fmt: skip
+        return _present({k: getattr(self, k) for k in order})
 
 
-def _show(value: Any) -> str:
-    """A value as the error message shows it: short, one line, no raw control characters."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)  # nan, inf, -inf
-    if _is_number(value):
-        return _num(value)
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+@dataclass(kw_only=True)
+class TrainingReport:
+    """How training went. `detect` warns about a model whose training did not `finish`; the
+    rest of the method's record (DATI's curves per member, BC's final loss) is `details`."""
+
+    episodes_run: int | None = None
+    episodes_max: int | None = None
+    wall_seconds: float | None = None
+    finished: bool | None = None
+    routes_in_ensemble: int | None = None
+    """Routes trained as one batched ensemble with this one (absent: trained alone)."""
+    details: dict[str, Any] = field(default_factory=dict)
+
+    TYPED = ("episodes_run", "episodes_max", "wall_seconds", "finished", "routes_in_ensemble")
+
+    def to_dict(self) -> dict[str, Any]:
+        typed = _present({k: getattr(self, k) for k in self.TYPED})
+        first = {k: typed.pop(k) for k in ("episodes_run",) if k in typed}
+        return {**first, **self.details, **typed}
 
 
-def validate_ais_card(doc: Any, path: Path | str) -> dict[str, Any]:
-    """Check an AIS model card as a whole (what loading a detector and `detect` rely on) and
-    return it; the first field out of type, range or finiteness raises a one-line `UserError`.
-    Every detector's card (dati, bc, nearest) shares the data, region, rule and lane fields;
-    DATI's and BC's add their networks' settings."""
-    card = _Card(doc, path)
-    if not isinstance(doc, dict):
-        raise UserError(f"model card {path}: expected a JSON object, got {type(doc).__name__}")
-    if doc.get("kind") != "ais":
-        raise UserError(f"{path} is not an AIS model card (train one with `aisdati train`)")
-    fmt = doc.get("format")
-    card.text("cluster")
-    card.integer("seed")
+@dataclass(frozen=True)
+class CalibratedWith:
+    """The scoring settings a card's calibration scores were computed with
+    (`ScoreSettings.calibrated_with`): a threshold needs the same. The defaults are what cards
+    that do not record a setting were calibrated with."""
 
-    # the update rule and the region it sticks to
-    card.number("rule.max_sog_kn", 0.0, 1000.0, low_open=True)
-    card.number("rule.max_dt_h", 0.0, 24.0 * 366, low_open=True)
-    if card.get("rule.cog_center_deg", None) is not None:
-        card.number("rule.cog_center_deg", -360.0, 360.0)
-    card.interval("region.lon", -360.0, 360.0)
-    card.interval("region.lat", -91.0, 91.0)
-    lane = card.get("lane_config", None)
-    if lane is not None:
-        if not isinstance(lane, dict):
-            raise card.fail("lane_config", "an object", lane)
-        if "corridor_km" in lane:
-            card.number("lane_config.corridor_km", 0.0, 1000.0, low_open=True)
-        for key in ("validation_tracks", "validation_rollouts"):
-            if key in lane:
-                card.integer(f"lane_config.{key}", 1)
-        for key, most in (("fourier", MAX_FOURIER), ("pretrain", MAX_PRETRAIN)):
-            if key in lane:
-                card.integer(f"lane_config.{key}", 0, most)
+    lane_course_km: float = 0.0
+    lane_traffic: bool = False
 
-    # the networks
-    if fmt in ("aisdati-dati/1", "aisdati-bc/1"):
-        has = isinstance(lane, dict) and "members" in lane  # older cards: one member
-        members = card.integer("lane_config.members", 1, MAX_MEMBERS) if has else 1
-        seeds = card.array("seeds", length=members)
-        for i, seed in enumerate(seeds):
-            card.integer(f"seeds[{i}]", value=seed)
-    if fmt == "aisdati-dati/1":
-        view = lane if isinstance(lane, dict) else {}
-        card.choice("state_dim", (state_width(view.get("state", ""), view.get("fourier", 0)),))
-        card.integer("decision_dim", 3, 3)
-        card.choice("config.noise", ("gaussian", "ou"))
-        card.number("config.noise_sigma", 0.0, 100.0)
-        card.number("config.ou_theta", 0.0, 100.0)
-        card.number("config.ou_dt", 0.0, 100.0, low_open=True)
-        card.integer("config.network.latent_dim", 1)
-        card.number("epsilon_m", 0.0, low_open=True)
-    elif fmt == "aisdati-bc/1":
-        config = card.get("config")
-        if not isinstance(config, dict):
-            raise card.fail("config", "an object", config)
+
+@dataclass(kw_only=True)
+class NetworkCard:
+    """A learnt detector's networks: one seed per ensemble member and their hyperparameters
+    (`DATIConfig.to_dict()` or `BCConfig.to_dict()`); DATI's also record their widths."""
+
+    seeds: list[int]
+    config: dict[str, Any]
+    state_dim: int | None = None
+    decision_dim: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        widths = _present({"state_dim": self.state_dim, "decision_dim": self.decision_dim})
+        return {**widths, "config": self.config, "seeds": self.seeds}
+
+
+# ------------------------------------------------------------------------------------ the card
+@dataclass(kw_only=True)
+class ModelCard:
+    """Everything a saved detector says about itself; see the module docstring."""
+
+    method: str
+    """dati, bc or nearest (the card's `format`, `CARD_FORMATS`)."""
+    cluster: str
+    seed: int
+    data: DataCard
+    region: Region
+    rule: RuleCard
+    lane_config: LaneConfig = field(default_factory=LaneConfig)
+    """The lane configuration (cards from before them: the paper's, `LaneConfig()`)."""
+    preset: str | None = None
+    """The name of the preset `lane_config` came from (with any overrides)."""
+    created: str | None = None
+    code_version: str | None = None
+    training: TrainingReport = field(default_factory=TrainingReport)
+    calibration: dict[str, list[float]] = field(default_factory=dict)
+    """The training tracks' own scores by kind (rollout, step, lane, both; nearest): what
+    thresholds and `--score both` divide by. Empty until calibrated."""
+    calibrated_with: CalibratedWith | None = None
+    networks: NetworkCard | None = None
+    """dati and bc; None for nearest, which remembers tracks."""
+    epsilon_m: float | None = None
+    """DATI's ε (metres) and how it is compared with the DTW (`epsilon_interpretation`)."""
+    epsilon_interpretation: str | None = None
+
+    @property
+    def format(self) -> str:
+        return CARD_FORMATS[self.method]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The card as JSON-ready dicts and lists (what `<stem>.json` holds)."""
+        doc = {"format": self.format, "method": self.method, "kind": KIND, "cluster": self.cluster,
+               "created": self.created, "code_version": self.code_version, "seed": self.seed,
+               "data": self.data.to_dict(), "preset": self.preset,
+               "region": self.region.to_dict(), "rule": self.rule.to_dict(),
+               "lane_config": self.lane_config.to_dict(), "epsilon_m": self.epsilon_m,
+               "epsilon_interpretation": self.epsilon_interpretation,
+               "training": self.training.to_dict() or None, "calibration": self.calibration or None,
+               "calibrated_with": asdict(self.calibrated_with) if self.calibrated_with else None,
+               }  # fmt: skip
+        return _present(doc) | (self.networks.to_dict() if self.networks else {})
+
+    @classmethod
+    def from_dict(cls, doc: Any, path: Path | str) -> ModelCard:
+        """Read and check a card as a whole (what loading a detector and `detect` rely on); the
+        first field out of type, range or finiteness raises a one-line `UserError`."""
+        f = CardFields(doc, path)
+        if not isinstance(doc, dict):
+            raise UserError(f"model card {path}: expected a JSON object, got {type(doc).__name__}")
+        method = card_method(doc.get("format"))
+        if method is None:
+            raise UserError(f"{path} is not an aisdati model card")
+        if doc.get("kind") != KIND or any(k not in doc for k in ("rule", "region", "data")):
+            raise UserError(f"{path} is not an AIS model card (train one with `aisdati train`)")
+        cluster, seed = f.text("cluster"), f.integer("seed", 0, MAX_SEED)
+        rule, region = _read_rule(f), _read_region(f)
+        lane = _read_lane(f)
+        networks = _read_networks(f, method, lane)
+        return cls(
+            method=method, cluster=cluster, seed=seed, rule=rule, region=region,
+            lane_config=lane, networks=networks, data=_read_data(f),
+            calibration=_read_calibration(f), calibrated_with=_read_calibrated_with(f),
+            training=_read_training(f), preset=doc.get("preset"), created=doc.get("created"),
+            code_version=doc.get("code_version"), epsilon_m=doc.get("epsilon_m"),
+            epsilon_interpretation=doc.get("epsilon_interpretation"),
+        )  # fmt: skip
+
+
+def read_card(path: Path) -> ModelCard:
+    """The checked card in the file `path` (`ModelCard.from_dict`); any problem is one line."""
+    if not path.is_file():
+        raise UserError(f"model file not found: {path}")
+    return ModelCard.from_dict(read_json(path), path)
+
+
+def _present(doc: dict[str, Any]) -> dict[str, Any]:
+    """`doc` without the entries that are None (fields a card need not have)."""
+    return {k: v for k, v in doc.items() if v is not None}
+
+
+# ------------------------------------------------------------------------- reading each section
+def _read_rule(f: CardFields) -> RuleCard:
+    """The update rule's ranges; the COG centre is optional (older cards: 180)."""
+    sog = f.number("rule.max_sog_kn", 0.0, 1000.0, low_open=True)
+    dt = f.number("rule.max_dt_h", 0.0, 24.0 * 366, low_open=True)
+    center = None
+    if f.get("rule.cog_center_deg", None) is not None:
+        center = f.number("rule.cog_center_deg", -360.0, 360.0)
+    return RuleCard(sog, dt, center)
+
+
+def _read_region(f: CardFields) -> Region:
+    return Region(f.interval("region.lon", -360.0, 360.0), f.interval("region.lat", -91.0, 91.0))
+
+
+def _read_lane(f: CardFields) -> LaneConfig:
+    """The lane configuration; cards from before lane configurations: the paper's."""
+    lane = f.obj("lane_config", None)
+    if lane is None:
+        return LaneConfig()
+    if "corridor_km" in lane:
+        f.number("lane_config.corridor_km", 0.0, 1000.0, low_open=True)
+    validation = {"validation_tracks": MAX_TRACKS, "validation_rollouts": MAX_VALIDATION_ROLLOUTS}
+    for key, most in validation.items():
+        if key in lane:
+            f.integer(f"lane_config.{key}", 1, most)
+    for key, least, most in (
+        ("fourier", 0, MAX_FOURIER), ("pretrain", 0, MAX_PRETRAIN), ("members", 1, MAX_MEMBERS)
+    ):  # fmt: skip
+        if key in lane:
+            f.integer(f"lane_config.{key}", least, most)
+    try:
+        return LaneConfig.from_dict(lane)
+    except UserError as exc:  # a setting out of its choices
+        raise UserError(f"model card {f.path}: lane_config: {exc}") from None
+    except TypeError:
+        known = ", ".join(LaneConfig().to_dict())
+        raise f.fail("lane_config", f"an object of {known}", lane) from None
+
+
+def _read_networks(f: CardFields, method: str, lane: LaneConfig) -> NetworkCard | None:
+    """A learnt detector's seeds (one per member of its lane) and hyperparameters."""
+    if method not in ("dati", "bc"):
+        return None
+    seeds = f.array("seeds", length=lane.members)
+    for i, seed in enumerate(seeds):
+        f.integer(f"seeds[{i}]", 0, MAX_SEED, value=seed)
+    if method == "bc":
+        config = f.obj("config")
         for key, value in config.items():
-            if _is_number(value):
-                card.number(f"config.{key}", value=value)
+            if is_number(value):
+                f.number(f"config.{key}", value=value)
+        _read_sizes(f, "config", ("state_features", "time_embedding_dim", "hidden_units"))
+        return NetworkCard(seeds=seeds, config=config)
+    state_dim = f.choice("state_dim", (state_width(lane.state, lane.fourier),))
+    decision_dim = f.integer("decision_dim", 3, 3)
+    f.choice("config.noise", ("gaussian", "ou"))
+    f.number("config.noise_sigma", 0.0, 100.0)
+    f.number("config.ou_theta", 0.0, 100.0)
+    f.number("config.ou_dt", 0.0, 100.0, low_open=True)
+    f.integer("config.network.latent_dim", 1, MAX_UNITS)
+    units = ("feature_units", "time_embedding_dim", "hidden_units")
+    _read_sizes(f, "config.network", units)
+    f.number("epsilon_m", 0.0, low_open=True)
+    return NetworkCard(
+        seeds=seeds, config=f.get("config"), state_dim=state_dim, decision_dim=decision_dim
+    )
 
-    # the training data: ids, starts and (since 0.1.0) stable keys
-    ids = card.array("data.track_ids", min_length=1)
+
+def _read_sizes(f: CardFields, section: str, units: Sequence[str]) -> None:
+    """The network sizes a section sets (the others are the defaults): networks are built at
+    them before the weights are read."""
+    for key in (*units, "hidden_layers"):
+        if f.get(f"{section}.{key}", None) is not None:
+            f.integer(f"{section}.{key}", 1, MAX_LAYERS if key == "hidden_layers" else MAX_UNITS)
+
+
+def _read_data(f: CardFields) -> DataCard:
+    """The training tracks: ids, starts and (since 0.1.0) stable keys."""
+    ids = f.array("data.track_ids", min_length=1, max_length=MAX_TRACKS)
     for i, v in enumerate(ids):
-        card.integer(f"data.track_ids[{i}]", 0, value=v)
-    card.integer("data.points", len(ids))  # the traffic's rollouts run their mean length
-    starts = card.array("data.start_points", length=len(ids))
+        f.integer(f"data.track_ids[{i}]", 0, MAX_COUNT, value=v)
+    most = min(MAX_POINTS, len(ids) * MAX_TRACK_POINTS)
+    points = f.integer("data.points", len(ids), most)  # the traffic rollouts run their mean
+    for key, most in (("tracks_in_cluster", MAX_COUNT), ("tracks_used", MAX_TRACKS)):
+        if f.get(f"data.{key}", None) is not None:
+            f.integer(f"data.{key}", 0, most)
+    starts = f.array("data.start_points", length=len(ids))
     for i, point in enumerate(starts):
-        field = f"data.start_points[{i}]"
+        name = f"data.start_points[{i}]"
         if not isinstance(point, list) or len(point) != 2:
-            raise card.fail(field, "a [lon, lat] pair", point)
-        card.number(f"{field}[0]", -180.0, 180.0, value=point[0])
-        card.number(f"{field}[1]", -90.0, 90.0, value=point[1])
-    keys = card.get("data.track_keys", None)
+            raise f.fail(name, "a [lon, lat] pair", point)
+        f.number(f"{name}[0]", -180.0, 180.0, value=point[0])
+        f.number(f"{name}[1]", -90.0, 90.0, value=point[1])
+    keys = f.get("data.track_keys", None)
     if keys is not None:
-        card.array("data.track_keys", length=len(ids))
-        parse_track_keys(keys, card)
-
-    # scores of the training tracks, which thresholds and `--score both` divide by
-    calibration = card.get("calibration", None)
-    if calibration is not None:
-        if not isinstance(calibration, dict):
-            raise card.fail("calibration", "an object", calibration)
-        for key, values in calibration.items():
-            card.array(f"calibration.{key}", min_length=1)
-            for i, v in enumerate(values):
-                card.number(f"calibration.{key}[{i}]", 0.0, value=v)
-    calibrated_with = card.get("calibrated_with", None)  # the scoring settings of calibration
-    if calibrated_with is not None:
-        if not isinstance(calibrated_with, dict):
-            raise card.fail("calibrated_with", "an object", calibrated_with)
-        if "lane_course_km" in calibrated_with:  # older cards: position only
-            card.number("calibrated_with.lane_course_km", 0.0, 1000.0)
-        if "lane_traffic" in calibrated_with:  # older cards: without the traffic rollouts
-            card.boolean("calibrated_with.lane_traffic", None)
-
-    # training state: `detect` warns about a model whose training did not finish
-    card.boolean("training.finished", None)
-    if card.get("training.episodes_run", None) is not None:
-        card.integer("training.episodes_run", 0)
-    return doc
+        f.array("data.track_keys", length=len(ids))
+        parse_track_keys(keys, f)
+    data = f.get("data")
+    source = {k: data.get(k) for k in ("dir", "files", "cluster", "tracks_in_cluster",
+                                       "tracks_used", "time_span")}  # fmt: skip
+    return DataCard(track_ids=ids, points=points, start_points=starts, track_keys=keys, **source)
 
 
-def parse_track_keys(keys: Sequence[Any], card: _Card | None = None) -> pd.DataFrame:
+def _read_calibration(f: CardFields) -> dict[str, list[float]]:
+    """The training tracks' own scores, which thresholds and `--score both` divide by."""
+    calibration = f.obj("calibration", {})
+    for key, values in calibration.items():
+        f.array(f"calibration.{key}", min_length=1, max_length=MAX_TRACKS)
+        for i, v in enumerate(values):
+            f.number(f"calibration.{key}[{i}]", 0.0, value=v)
+    return calibration
+
+
+def _read_calibrated_with(f: CardFields) -> CalibratedWith | None:
+    """The scoring settings of the calibration; older cards record fewer (or none)."""
+    recorded = f.obj("calibrated_with", None)
+    if recorded is None:
+        return None
+    settings = {}
+    if "lane_course_km" in recorded:  # older cards: position only
+        settings["lane_course_km"] = f.number("calibrated_with.lane_course_km", 0.0, 1000.0)
+    if recorded.get("lane_traffic") is not None:  # older cards: without the traffic rollouts
+        settings["lane_traffic"] = f.boolean("calibrated_with.lane_traffic")
+    return CalibratedWith(**settings)
+
+
+def _read_training(f: CardFields) -> TrainingReport:
+    """Training state: `detect` warns about a model whose training did not finish."""
+    finished = f.boolean("training.finished")
+    counts = {"episodes_run": (0, MAX_EPISODES), "episodes_max": (1, MAX_EPISODES),
+              "routes_in_ensemble": (1, MAX_COUNT), "steps": (0, MAX_COUNT)}  # fmt: skip
+    for key, (least, most) in counts.items():
+        if f.get(f"training.{key}", None) is not None:
+            f.integer(f"training.{key}", least, most)
+    record = dict(f.obj("training", {}))
+    typed = {k: record.pop(k, None) for k in TrainingReport.TYPED}
+    typed["finished"] = finished
+    return TrainingReport(**typed, details=record)
+
+
+# ------------------------------------------------------------------------- the training tracks
+def parse_track_keys(keys: Sequence[Any], fields: CardFields | None = None) -> pd.DataFrame:
     """`data.track_keys` ([mmsi, "start", "end"] per training track; "end" may be missing) as a
     frame of mmsi, start and end (UTC)."""
-    card = card or _Card({}, "?")
+    f = fields or CardFields({}, "?")
     mmsi, start, end = [], [], []
     for i, key in enumerate(keys):
-        field = f"data.track_keys[{i}]"
+        name = f"data.track_keys[{i}]"
         if not isinstance(key, list) or len(key) not in (2, 3):
-            raise card.fail(field, '[mmsi, "start", "end"]', key)
-        mmsi.append(card.integer(f"{field}[0]", 1, MAX_MMSI, value=key[0]))
+            raise f.fail(name, '[mmsi, "start", "end"]', key)
+        mmsi.append(f.integer(f"{name}[0]", 1, MAX_MMSI, value=key[0]))
         times = []
         for j, text in enumerate(key[1:], start=1):
             ok = isinstance(text, str)
             stamp = pd.to_datetime(text, utc=True, errors="coerce") if ok else None
             if stamp is None or pd.isna(stamp):
-                raise card.fail(f"{field}[{j}]", "an ISO 8601 time", text)
+                raise f.fail(f"{name}[{j}]", "an ISO 8601 time", text)
             times.append(stamp)
         if len(times) == 2 and times[1] < times[0]:
-            raise card.fail(field, "a start before its end", key)
+            raise f.fail(name, "a start before its end", key)
         start.append(times[0])
         end.append(times[-1])
     return pd.DataFrame(
@@ -287,16 +487,15 @@ def _iso(stamp: Any) -> str:
     return ts.isoformat()
 
 
-def training_mask(card: dict[str, Any], tracks: pd.DataFrame) -> np.ndarray:
+def training_mask(card: ModelCard, tracks: pd.DataFrame) -> np.ndarray:
     """Which rows of a tracks.parquet frame (track_id, mmsi, start, end) are the model's training
     tracks. With `data.track_keys`: the same vessel over an overlapping time span (so re-ingesting
     with other settings, which renumbers tracks and may move a track's ends by a few reports,
     still finds them). Older cards without keys: by track id, as they were written."""
-    keys = card["data"].get("track_keys")
-    if keys is None:
-        ids = {int(i) for i in card["data"]["track_ids"]}
+    if card.data.track_keys is None:
+        ids = {int(i) for i in card.data.track_ids}
         return np.isin(tracks["track_id"].to_numpy(), list(ids))
-    trained = parse_track_keys(keys)
+    trained = parse_track_keys(card.data.track_keys)
     mask = np.zeros(len(tracks), dtype=bool)
     if trained.empty or tracks.empty:
         return mask
@@ -314,17 +513,17 @@ def training_mask(card: dict[str, Any], tracks: pd.DataFrame) -> np.ndarray:
     return mask
 
 
-def card_warnings(card: dict[str, Any], name: str) -> list[str]:
+# ------------------------------------------------------------------------------------ warnings
+def card_warnings(card: ModelCard, name: str) -> list[str]:
     """What an operator should know before trusting a valid card's model."""
-    warnings = []
-    tr = card.get("training")
-    if isinstance(tr, dict) and tr.get("finished") is False:
-        warnings.append(
-            f"model {name}: training did not finish (stopped after {tr.get('episodes_run')} of "
-            f"{tr.get('episodes_max')} episodes), so its scores come from a partly trained model; "
-            "finish it with `aisdati train --resume`"
-        )
-    return warnings
+    tr = card.training
+    if tr.finished is not False:
+        return []
+    return [
+        f"model {name}: training did not finish (stopped after {tr.episodes_run} of "
+        f"{tr.episodes_max} episodes), so its scores come from a partly trained model; "
+        "finish it with `aisdati train --resume`"
+    ]
 
 
 def unfinished_models(
@@ -339,13 +538,12 @@ def unfinished_models(
         stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
     warnings = []
     for stem in stems:
+        path = stem.with_suffix(".json")
         try:
-            doc = json.loads(stem.with_suffix(".json").read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            card = read_card(path)
+        except UserError:
             continue
-        if not isinstance(doc, dict) or doc.get("kind") != "ais":
+        if not names and method and card.method != method:
             continue
-        if not names and method and not str(doc.get("format", "")).startswith(f"aisdati-{method}/"):
-            continue
-        warnings += card_warnings(doc, stem.name)
+        warnings += card_warnings(card, stem.name)
     return warnings

@@ -18,11 +18,14 @@ from __future__ import annotations
 import io
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from aisdati.errors import UserError
 from aisdati.geo import EARTH_RADIUS_M
+from aisdati.model.readers import ArraySpec, read_npz
 
 M_PER_DEG = np.pi * EARTH_RADIUS_M / 180.0
 TURNS_DEG = (*(a for k in range(15, 180, 15) for a in (k, -k)), 180)
@@ -127,6 +130,21 @@ class Corridor:
         return buf.getvalue()
 
     @classmethod
-    def from_file(cls, path) -> Corridor:
-        with np.load(path, allow_pickle=False) as z:
-            return cls(z["mask"].astype(bool), z["origin"], z["step"])
+    def from_file(cls, path: Path) -> Corridor:
+        """What `to_bytes` wrote; a damaged or foreign file is a one-line `UserError`."""
+        z = read_npz(path, CORRIDOR_ARRAYS)
+        mask, origin, step = z["mask"].astype(bool), z["origin"], z["step"]
+        if 0 in mask.shape:
+            raise UserError(f"cannot load {path}: its grid ('mask') is empty")
+        if not np.all(step > 0):
+            raise UserError(f"cannot load {path}: the cell size ('step') must be > 0, got {step}")
+        return cls(mask, origin, step)
+
+
+CORRIDOR_ARRAYS = {
+    "mask": ArraySpec("biu", 2),
+    "origin": ArraySpec("f", 1, width=2),
+    "step": ArraySpec("f", 1, width=2),
+}
+"""What a corridor file holds (`Corridor.to_bytes`): at most `ArraySpec.max_items` cells, a
+region 2,300 km square at the default 200 m."""

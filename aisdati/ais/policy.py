@@ -26,7 +26,6 @@ tail_mean`, so a short jump or loiter counts as much as a long detour, whatever 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -39,6 +38,7 @@ from aisdati.dtw import batch_mean_dtw_m
 from aisdati.geo import haversine_m
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
+from aisdati.model.noise import NoiseProcess
 from aisdati.model.rules import SphericalRule
 
 Act = Callable[[np.ndarray], np.ndarray]
@@ -195,14 +195,11 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
     every member in turn (row i acts with member i mod M: a seed ensemble's K draws spread
     over its members; each member computes its own rows only). Each row draws its own latent
     noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
-    latent = config.network.latent_dim
-    state_dim = nets.forward_actor.input_features.weight.shape[1]
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
 
     def make(n: int, seed: int, temporal: bool) -> Act:
-        gen = torch.Generator().manual_seed(int(seed))
-        eta = torch.zeros(n, latent)
-        ou = config.noise == "ou" and temporal
+        process = config.noise_process if temporal else NoiseProcess("gaussian")
+        noise = config.latent_noise([torch.Generator().manual_seed(int(seed))], [process], rows=n)
         if member is None:  # member m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid
             width = -(-n // members)
             grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
@@ -212,16 +209,8 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
         grid = grid.clamp(max=n - 1)
 
         def act(obs: np.ndarray) -> np.ndarray:
-            nonlocal eta
-            draw = torch.randn((n, latent), generator=gen) * config.noise_sigma
-            if ou:
-                eta = eta - config.ou_theta * eta * config.ou_dt + draw * math.sqrt(config.ou_dt)
-            else:
-                eta = draw
-            x = torch.as_tensor(obs)[grid]
-            with torch.no_grad():
-                time = nets.time_features(x[..., state_dim:].contiguous())
-                out = nets.forward_actor(x[..., :state_dim].contiguous(), eta[grid], time)
+            eta = noise.sample()[0]
+            out = nets.decide(torch.as_tensor(obs)[grid], eta[grid])
             if member is not None:
                 return out[member].numpy()
             decided = torch.empty(n, out.shape[-1], dtype=out.dtype)

@@ -49,14 +49,18 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aisdati.ais import DEFAULT_PRESET
 from aisdati.ais.corridor import Corridor
 from aisdati.errors import UserError
 from aisdati.geo import spherical_decision
 from aisdati.model.rules import SphericalRule, mean_course
+
+if TYPE_CHECKING:
+    from aisdati.ais.card import ModelCard
 
 BOX_MARGIN = 0.1
 """The region box is the training tracks' box widened by this fraction of its span."""
@@ -121,7 +125,7 @@ class LaneConfig:
 
 PRESETS: dict[str, LaneConfig] = {
     "paper": LaneConfig(),
-    "lanes": LaneConfig(
+    DEFAULT_PRESET: LaneConfig(
         validation=True,
         region="corridor",
         ranges="quantile",
@@ -132,8 +136,8 @@ PRESETS: dict[str, LaneConfig] = {
     ),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
-combination that measured best with `aisdati evaluate` (README, "Lane learning")."""
-DEFAULT_PRESET = "lanes"
+combination that measured best with `aisdati evaluate` (docs/results). The default's name is
+`aisdati.ais.DEFAULT_PRESET`."""
 
 
 def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:
@@ -226,12 +230,13 @@ class AISSpace:
         return PROGRESS_SCALE if self.config.time == "progress" else float(max_steps)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
-        inside = self._in_box(points)
+        inside = self.in_box(points)
         if self.corridor is not None:
             inside &= self.corridor.allowed(np.asarray(points, np.float64))
         return inside
 
-    def _in_box(self, points: np.ndarray) -> np.ndarray:
+    def in_box(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point is finite and inside the region's box (whatever the corridor)."""
         points = np.asarray(points, np.float64)
         lo, hi = self.bounds
         return np.all(np.isfinite(points), axis=-1) & np.all(
@@ -247,7 +252,7 @@ class AISSpace:
         pos, prop = np.atleast_2d(position), np.atleast_2d(proposed)
         if self.corridor is not None:
             prop = self.corridor.slide(pos, prop)
-        out = np.where(self._in_box(prop)[:, None], prop, pos)
+        out = np.where(self.in_box(prop)[:, None], prop, pos)
         return out[0] if single else out
 
     def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
@@ -289,33 +294,10 @@ class AISSpace:
             return PROGRESS_SCALE * t / np.maximum(np.asarray(horizon, np.float64), 1.0)
         return t
 
-    def card(self) -> dict[str, Any]:
-        lo, hi = self.bounds
-        return {
-            "region": {"lon": [float(lo[0]), float(hi[0])], "lat": [float(lo[1]), float(hi[1])]},
-            "rule": {
-                "name": "spherical (eq. 5)",
-                "decisions": ["sog_kn", "cog_deg", "dt_h"],
-                "max_sog_kn": self.rule.max_sog,
-                "max_dt_h": self.rule.max_dt_h,
-                "cog_center_deg": self.rule.cog_center,
-            },
-            "lane_config": self.config.to_dict(),
-        }
-
     @classmethod
-    def from_card(cls, card: dict[str, Any], corridor: Corridor | None = None) -> AISSpace:
-        r, reg = card["rule"], card["region"]
-        rule = SphericalRule(
-            max_sog=float(r["max_sog_kn"]),
-            max_dt_h=float(r["max_dt_h"]),
-            cog_center=float(r.get("cog_center_deg", 180.0)),
-        )
-        bounds = (
-            np.array([reg["lon"][0], reg["lat"][0]], np.float64),
-            np.array([reg["lon"][1], reg["lat"][1]], np.float64),
-        )
-        return cls(bounds, rule, LaneConfig.from_dict(card.get("lane_config")), corridor)
+    def from_card(cls, card: ModelCard, corridor: Corridor | None = None) -> AISSpace:
+        """The space a saved model moves in (its corridor is saved beside it)."""
+        return cls(card.region.bounds, card.rule.to_rule(), card.lane_config, corridor)
 
 
 def _on_land():

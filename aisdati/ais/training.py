@@ -1,4 +1,4 @@
-"""DATI on real AIS tracks (section 6 of the paper): the reference source, training and the card.
+"""DATI on real AIS tracks (section 6 of the paper): training one model per route, and its card.
 
 The environment is the foundation's `TrajectoryImitationEnv` with
 - states (lon, lat) in degrees, decisions (SOG knots, COG degrees from north, dt hours) and the
@@ -14,14 +14,21 @@ The environment is the foundation's `TrajectoryImitationEnv` with
 - scaling: states by the region's box; decisions by [0, max SOG] x [0, 360) x [0, max dt], the
   maxima being `DECISION_HEADROOM` x the largest perfect SOG and dt in the training tracks, so the
   perfect decisions of every training track are inside the box (a perfect policy reproduces them).
+
+One path trains every DATI model (`train_lanes`): N routes x M seeds as one batched ensemble,
+each route a group of members with its own tracks, region, rule, validation and early stopping,
+so ten routes cost far less than ten runs. One route is an ensemble of one route
+(`train_ais`, `aisdati train --cluster X`); every route of an area is `aisdati train --cluster
+routes`. The reference source and environment are `aisdati.ais.source`.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import subprocess
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -31,147 +38,71 @@ import numpy as np
 import torch
 
 from aisdati import __version__
-from aisdati.ais.card import track_keys
+from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais.card import DataCard, ModelCard, NetworkCard, Region, RuleCard, TrainingReport
+from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import AISPolicy, dati_act
+from aisdati.ais.source import EPSILON_M, AISTrackSource, build_source, make_env
 from aisdati.ais.space import PRESETS, AISSpace, LaneConfig
 from aisdati.errors import UserError
-from aisdati.model.checkpoint import atomic_write_bytes, save_networks
-from aisdati.model.dati import DATIConfig, DATITrainer, EpisodeLog
-from aisdati.model.env import Reference, ReferenceSource, TrajectoryImitationEnv
+from aisdati.model.dati import DATIConfig, DATITrainer
+from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks
-from aisdati.model.resume import (
-    load_trainer_state,
-    read_checkpoint,
-    save_checkpoint,
-)
+from aisdati.model.persistence import load_error, read_checkpoint, save_checkpoint, save_networks
+from aisdati.model.readers import read_json
+from aisdati.model.trainer import Callback, EpisodeLog
+from aisdati.outdir import atomic_write_bytes
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
-EPSILON_M = 500.0
-"""The paper's ε for AIS, in metres (mean great-circle distance along the warping path)."""
 EPSILON_READING = (
     "epsilon (metres) is compared with the exponentially smoothed mean great-circle distance "
     "along the optimal DTW warping path (DTW sum / number of path cells), not with the DTW sum"
 )
 
 
-def track_reference(track: Track) -> Reference:
-    return Reference(
-        track.positions,
-        track.dts,
-        {"track_id": track.track_id, "mmsi": track.mmsi},
-    )
-
-
-class AISTrackSource(ReferenceSource):
-    """References from real tracks, one per episode, each track once per pass in shuffled order."""
-
-    def __init__(self, references: Sequence[Reference], space: AISSpace) -> None:
-        if not references:
-            raise ValueError("no references")
-        self.references = list(references)
-        self.space = space
-        self.rule = space.rule
-        self.bounds = space.bounds
-        self.max_steps = max(r.steps for r in self.references)
-        self.order: list[int] = []
-        self.position = 0
-
-    # the agent's view and moves are the space's (the same functions score tracks later)
-    @property
-    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.space.state_bounds
-
-    @property
-    def time_high(self) -> float:
-        return self.space.time_high(self.max_steps)
-
-    def contains(self, position: np.ndarray) -> bool:
-        return bool(self.space.contains(position))
-
-    def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
-        return self.space.resolve(position, proposed)
-
-    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
-        return self.space.features(positions, previous, dts)
-
-    def time_input(self, t: np.ndarray, horizon: int) -> np.ndarray:
-        return self.space.time_input(t, horizon)
-
-    def sample(self, rng: np.random.Generator) -> Reference:
-        if self.position >= len(self.order):
-            self.order = [int(i) for i in rng.permutation(len(self.references))]
-            self.position = 0
-        ref = self.references[self.order[self.position]]
-        self.position += 1
-        return ref
-
-    def restart(self) -> None:
-        self.order, self.position = [], 0
-
-    def normalize(self, distance: float, path_length: int) -> float:
-        """Mean great-circle distance along the warping path, metres."""
-        return distance / max(path_length, 1)
-
-    def state_dict(self) -> dict[str, Any]:
-        return {"order": list(self.order), "position": self.position}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.order = [int(i) for i in state["order"]]
-        self.position = int(state["position"])
-
-
-def make_env(source: AISTrackSource, epsilon: float = EPSILON_M) -> TrajectoryImitationEnv:
-    return TrajectoryImitationEnv(source, epsilon=epsilon)
-
-
 @dataclass(frozen=True)
 class TrainSettings:
-    data_dir: Path
-    cluster: str
-    out_dir: Path
+    """How to train a detector. `data_dir` and `cluster` select the tracks of an ingest folder
+    (`aisdati train`); a detector fitted on tracks in memory needs neither, and writes no files
+    without `out_dir`."""
+
+    data_dir: Path | None = None
+    cluster: str = "tracks"
+    """The cluster or route of `data_dir` to train on (the name of the tracks in the card)."""
+    out_dir: Path | None = None
     episodes: int = 170
     seed: int = 0
     max_tracks: int | None = 170
     """Downsample the cluster to this many tracks (the paper: 170); None keeps all."""
     patience: int = 10
     epsilon_m: float = EPSILON_M
-    preset: str = "lanes"
+    preset: str = DEFAULT_PRESET
     """Name of the lane configuration (`aisdati.ais.space.PRESETS`) and its overrides."""
-    lane: LaneConfig = field(default_factory=lambda: PRESETS["lanes"])
+    lane: LaneConfig = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
     track_ids: tuple[int, ...] | None = None
     """Train on exactly these tracks of the cluster (`aisdati evaluate`'s split); None: all,
     downsampled to `max_tracks`."""
     stem: str | None = None
     """Model file name in `out_dir` (default: the cluster's name)."""
     resume: bool = False
-    """Continue from <out>/<cluster>.ckpt (written after every episode) when it exists."""
+    """Continue from <out>/<stem>.ckpt (written after every episode) when it exists."""
 
 
-@dataclass
-class TrainResult:
-    model: Path
-    card: dict[str, Any]
-    history: list[EpisodeLog]
-    wall_seconds: float
-    steps: int
-    resumed_from: int = 0
-    """Episodes already done by the checkpoint this run resumed from (0: a fresh run)."""
+def check_settings(settings: TrainSettings) -> None:
+    if settings.episodes < 1:
+        raise UserError(f"--episodes must be at least 1, got {settings.episodes}")
+    if settings.max_tracks is not None and settings.max_tracks < 1:
+        raise UserError(f"--max-tracks must be at least 1, got {settings.max_tracks}")
 
 
-def code_version() -> str:
-    try:
-        rev = subprocess.run(
-            ["git", "describe", "--always", "--dirty"],
-            capture_output=True,
-            text=True,
-            timeout=5,
-            cwd=Path(__file__).parent,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        rev = ""
-    return f"aisdati {__version__}" + (f" ({rev})" if rev else "")
+def model_stem(settings: TrainSettings) -> Path | None:
+    """<out>/<stem> of the settings' model files; None without `out_dir` (nothing is written)."""
+    if settings.out_dir is None:
+        return None
+    return settings.out_dir / (settings.stem or settings.cluster)
 
 
+# ------------------------------------------------------------------------ the training tracks
 def choose_training_tracks(settings: TrainSettings) -> tuple[list[int], int]:
     """Track ids of the cluster, downsampled uniformly (seeded) to `max_tracks`; and the total."""
     table = select_cluster(read_track_table(settings.data_dir), settings.cluster, settings.data_dir)
@@ -185,92 +116,106 @@ def choose_training_tracks(settings: TrainSettings) -> tuple[list[int], int]:
     return [int(i) for i in ids], total
 
 
-def build_source(tracks: Sequence[Track], config: LaneConfig | None = None) -> AISTrackSource:
-    space = AISSpace.fit(
-        [t.positions for t in tracks], [t.dts for t in tracks], config or LaneConfig()
-    )
-    return AISTrackSource([track_reference(t) for t in tracks], space)
-
-
-def data_card(settings: TrainSettings, tracks: Sequence[Track], total: int) -> dict[str, Any]:
+def data_card(settings: TrainSettings, tracks: Sequence[Track], total: int) -> DataCard:
+    """The card's data section of tracks read from the ingest folder: the files, the cluster and
+    the tracks' stable keys from tracks.parquet."""
     table = read_track_table(settings.data_dir).set_index("track_id")
-    used = table.loc[[t.track_id for t in tracks]]
-    return {
-        "dir": str(settings.data_dir),
-        "files": [
-            str(settings.data_dir / "points.parquet"),
-            str(settings.data_dir / "tracks.parquet"),
-        ],
-        "cluster": settings.cluster,
-        "tracks_in_cluster": total,
-        "tracks_used": len(tracks),
-        "track_ids": [t.track_id for t in tracks],
-        "track_keys": track_keys(used),
-        "points": int(sum(len(t.positions) for t in tracks)),
-        "time_span": [str(used["start"].min()), str(used["end"].max())],
-        "start_points": [[float(t.positions[0, 0]), float(t.positions[0, 1])] for t in tracks],
-    }
+    files = [str(settings.data_dir / n) for n in ("points.parquet", "tracks.parquet")]
+    spans = table.loc[[t.track_id for t in tracks]]
+    return DataCard.of_tracks(
+        tracks, spans, dir=str(settings.data_dir), files=files, cluster=settings.cluster,
+        tracks_in_cluster=total,
+    )  # fmt: skip
 
 
-def base_card(
-    settings: TrainSettings, source: AISTrackSource, data: dict[str, Any]
-) -> dict[str, Any]:
+def training_set(settings: TrainSettings) -> tuple[list[Track], DataCard]:
+    """The settings' training tracks of the ingest folder, and the card's data section."""
+    check_settings(settings)
+    if settings.data_dir is None:
+        raise UserError("training from an ingest folder needs the folder (--data)")
+    ids, total = choose_training_tracks(settings)
+    tracks = load_tracks(settings.data_dir, ids)
+    return tracks, data_card(settings, tracks, total)
+
+
+# ------------------------------------------------------------------------------------- cards
+@functools.cache
+def code_version() -> str:
+    """`aisdati <version> (<git describe>)`, looked up once per process (cards are written after
+    every episode)."""
+    try:
+        rev = subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            cwd=Path(__file__).parent,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        rev = ""
+    return f"aisdati {__version__}" + (f" ({rev})" if rev else "")
+
+
+def base_card(method: str, settings: TrainSettings, space: AISSpace, data: DataCard) -> ModelCard:
     """What every AIS detector's card says: the data, the region, the decision ranges and the
     lane configuration (with the preset it came from)."""
-    return {
-        "kind": "ais",
-        "cluster": settings.cluster,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "code_version": code_version(),
-        "seed": settings.seed,
-        "data": data,
-        "preset": settings.preset,
-        **source.space.card(),
-    }
+    return ModelCard(
+        method=method,
+        cluster=settings.cluster,
+        created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        code_version=code_version(),
+        seed=settings.seed,
+        data=data,
+        preset=settings.preset,
+        region=Region.from_bounds(space.bounds),
+        rule=RuleCard.from_rule(space.rule),
+        lane_config=space.config,
+    )
 
 
 def model_card(
     settings: TrainSettings,
-    source: AISTrackSource,
-    data: dict[str, Any],
+    space: AISSpace,
+    data: DataCard,
     history: Sequence[EpisodeLog],
     wall: float,
     steps: int,
     pretrained: dict[int, float | None],
-) -> dict[str, Any]:
+) -> ModelCard:
     """The card of a trained lane model; with several members (`LaneConfig.members`) the
-    top-level curves are the first member's and `training.members` holds each member's.
+    top-level curves are the first member's and `details["members"]` holds each member's.
     `pretrained` maps each member (as `EpisodeLog.member` numbers it) to its validation score
     after pretraining."""
     by_member: dict[int, list[EpisodeLog]] = {}
     for g in history:
         by_member.setdefault(g.member, []).append(g)
-    validation, cap = source.space.config.validation, settings.episodes
+    validation, cap = space.config.validation, settings.episodes
     curves = [
-        _curves(logs, validation, cap, pretrained.get(member))
+        member_curves(logs, validation, cap, pretrained.get(member))
         for member, logs in sorted(by_member.items())
     ]
-    first = curves[0] if curves else _curves([], validation, cap, None)
-    training = {
+    first = dict(curves[0] if curves else member_curves([], validation, cap, None))
+    details = {
         **first,
-        "episodes_max": settings.episodes,
         "patience": settings.patience,
-        "selected_by": "validation rollouts" if source.space.config.validation else "loss",
+        "selected_by": "validation rollouts" if validation else "loss",
         "steps": steps,
-        "wall_seconds": round(wall, 2),
         "steps_per_second": round(steps / wall, 2) if wall > 0 else None,
     }
     if len(curves) > 1:
-        training["members"] = curves
-    return {
-        **base_card(settings, source, data),
-        "epsilon_m": settings.epsilon_m,
-        "epsilon_interpretation": EPSILON_READING,
-        "training": training,
-    }
+        details["members"] = curves
+    card = base_card("dati", settings, space, data)
+    card.epsilon_m, card.epsilon_interpretation = settings.epsilon_m, EPSILON_READING
+    card.training = TrainingReport(
+        episodes_run=details.pop("episodes_run"),
+        episodes_max=settings.episodes,
+        wall_seconds=round(wall, 2),
+        details=details,
+    )
+    return card
 
 
-def _curves(
+def member_curves(
     logs: Sequence[EpisodeLog], validation: bool, episodes: int, pretrained: float | None
 ) -> dict[str, Any]:
     """One member's training curves and the episode its kept actor comes from (0: the
@@ -294,6 +239,7 @@ def _curves(
     }
 
 
+# ------------------------------------------------------------------------- what DATI trains with
 def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
     """The paper's hyperparameters, with OU latent noise at the data's median report interval
     (hours) and a state-aware critic when the lane configuration asks for them."""
@@ -343,126 +289,7 @@ class Validator:
         return float(np.median(scores))
 
 
-def model_stem(settings: TrainSettings) -> Path:
-    return settings.out_dir / (settings.stem or settings.cluster)
-
-
-StepCallback = Callable[[DATITrainer, list[EpisodeLog]], None]
-
-
-def train_ais(settings: TrainSettings, on_step: StepCallback | None = None) -> TrainResult:
-    """Train one DATI model on a cluster's tracks; writes <out>/<cluster>.pt, .json (the card) and
-    .log.jsonl (one line per episode), the .pt and .json after every episode (best actor so far),
-    so an interrupted run leaves a usable model."""
-    if settings.episodes < 1:
-        raise UserError(f"--episodes must be at least 1, got {settings.episodes}")
-    if settings.max_tracks is not None and settings.max_tracks < 1:
-        raise UserError(f"--max-tracks must be at least 1, got {settings.max_tracks}")
-    torch.set_num_threads(1)  # one member of small networks: one thread is fastest (3x on 2 cores)
-    ids, total = choose_training_tracks(settings)
-    tracks = load_tracks(settings.data_dir, ids)
-    source = build_source(tracks, settings.lane)
-    data = data_card(settings, tracks, total)
-    config = dati_config(settings, tracks)
-    members = settings.lane.members
-    # each member draws its own episode order from the same tracks
-    envs = [
-        make_env(AISTrackSource(source.references, source.space), settings.epsilon_m)
-        for _ in range(members)
-    ]
-    validate = None
-    if settings.lane.validation:
-        validator = Validator(source.space, config, tracks, settings.lane, settings.seed)
-        validate = _MemberValidators([validator] * members)
-    trainer = DATITrainer(envs, member_seeds(settings.seed, members), config, validate)
-    stem = model_stem(settings)
-    log_path = stem.with_suffix(".log.jsonl")
-    ckpt_path = stem.with_suffix(".ckpt")
-    log_lines: list[str] = []
-    steps, wall_before, resumed_from = 0, 0.0, 0
-    identity = {"cluster": settings.cluster, "seed": settings.seed, "track_ids": ids}
-    if settings.resume and ckpt_path.is_file():
-        doc = read_checkpoint(ckpt_path)
-        if doc.get("identity") != identity:
-            raise UserError(
-                f"{ckpt_path} belongs to another run (cluster, seed or training tracks differ); "
-                "use the same --seed/--max-tracks/--data, or train without --resume"
-            )
-        by_id = {r.label["track_id"]: r for r in source.references}
-        load_trainer_state(trainer, doc["trainer"], [by_id[int(i)] for i in doc["current"]])
-        orders = doc["source"]  # each live member's episode order (one dict before ensembles)
-        orders = orders if isinstance(orders, list) else [orders] * len(trainer.envs)
-        for env, order in zip(trainer.envs, orders, strict=True):
-            env.source.load_state_dict(order)
-        log_lines = list(doc["log_lines"])
-        steps, wall_before = int(doc["steps"]), float(doc["wall_seconds"])
-        resumed_from = len(trainer.history)  # >= 1: checkpoints are written after episodes
-    elif settings.resume and stem.with_suffix(".json").is_file():
-        try:
-            old = json.loads(stem.with_suffix(".json").read_text())
-        except (OSError, ValueError):
-            old = {}
-        if not isinstance(old, dict) or not all(
-            isinstance(old.get(k, {}), dict) for k in ("data", "training")
-        ):
-            old = {}  # a damaged card: nothing to compare with (detect refuses it, naming why)
-        same = old.get("seed") == settings.seed and old.get("data", {}).get("track_ids") == ids
-        if same and old.get("training", {}).get("finished"):
-            raise UserError(
-                f"{stem.with_suffix('.pt')} has finished training: nothing to resume "
-                "(drop --resume to train again)"
-            )
-    t0 = time.perf_counter()
-    if not resumed_from:
-        trainer.pretrain(demonstrations(envs))
-    pretrained = dict(enumerate(trainer.pretrained_metric))  # members 0 .. M-1
-
-    def elapsed() -> float:
-        return wall_before + time.perf_counter() - t0
-
-    def checkpoint() -> None:
-        card = model_card(settings, source, data, trainer.history, elapsed(), steps, pretrained)
-        card["training"]["finished"] = trainer.done
-        save_networks(stem, trainer.final, config, card)
-        if source.space.corridor is not None:
-            corridor_path = stem.with_suffix(".corridor.npz")
-            if not corridor_path.is_file():
-                atomic_write_bytes(corridor_path, source.space.corridor.to_bytes())
-        atomic_write_bytes(log_path, "".join(log_lines).encode())
-        if trainer.done:
-            ckpt_path.unlink(missing_ok=True)
-        else:
-            extra = {
-                "identity": identity,
-                "source": [env.source.state_dict() for env in trainer.envs],
-                "current": [int(e.reference.label["track_id"]) for e in trainer.envs],
-                "log_lines": log_lines,
-                "steps": steps,
-                "wall_seconds": elapsed(),
-            }
-            save_checkpoint(ckpt_path, trainer, extra)
-
-    while not trainer.done:
-        logs = trainer.step()
-        steps += 1
-        for log in logs:
-            row = {**log.__dict__, "wall_seconds": round(elapsed(), 3)}
-            log_lines.append(json.dumps(row) + "\n")
-        if logs:
-            checkpoint()
-        if on_step is not None:
-            on_step(trainer, logs)
-    if resumed_from and not steps:
-        checkpoint()
-    wall = elapsed()
-    card = model_card(settings, source, data, trainer.history, wall, steps, pretrained)
-    card["training"]["finished"] = True
-    return TrainResult(
-        stem.with_suffix(".pt"), card, list(trainer.history), wall, steps, resumed_from
-    )
-
-
-class _MemberValidators:
+class MemberValidators:
     """One `Validator` per ensemble member (each route validates on its own tracks; the seeds
     of one lane share theirs)."""
 
@@ -481,76 +308,295 @@ def member_seeds(seed: int, members: int) -> list[int]:
 def member_networks(nets: DATINetworks, ks: slice) -> DATINetworks:
     """Members `ks` of an ensemble as a network of their own (every parameter has the members
     first)."""
-    part = DATINetworks(
-        nets.forward_actor.input_features.weight.shape[1],
-        nets.forward_actor.out.weight.shape[2],
-        nets.cfg,
-        nets.seeds[ks],
-    )
+    part = DATINetworks(nets.state_dim, nets.decision_dim, nets.cfg, nets.seeds[ks])
     part.load_state_dict({n: p[ks].clone() for n, p in nets.state_dict().items()})
     return part
 
 
-def train_ais_ensemble(
-    settings: Sequence[TrainSettings],
-    on_step: StepCallback | None = None,
-) -> list[TrainResult]:
-    """Train one DATI model per settings (one per route) as ONE batched ensemble: each route is a
-    member with its own tracks, region, rule, validation and early stopping; every layer runs
-    all members in one batched matmul, so ten routes cost far less than ten runs. Each member is
-    saved as its own model (<out>/<route>.pt/.json). No checkpoints: --resume is per model."""
-    if not settings:
-        raise UserError("no route to train")
-    torch.set_num_threads(1)
-    if len({s.lane for s in settings}) > 1:
-        raise UserError("routes trained as one ensemble need one configuration (same --lane)")
-    members = settings[0].lane.members  # per route: route i holds members i*M .. i*M + M-1
-    sources, datas, groups, envs = [], [], [], []
-    for s in settings:
-        ids, total = choose_training_tracks(s)
-        tracks = load_tracks(s.data_dir, ids)
-        groups.append(tracks)
-        sources.append(build_source(tracks, s.lane))
-        datas.append(data_card(s, tracks, total))
-        envs += [
-            make_env(AISTrackSource(sources[-1].references, sources[-1].space), s.epsilon_m)
-            for _ in range(members)
+# --------------------------------------------------------------------------- training: one path
+@dataclass
+class LaneRoute:
+    """One route's (or cluster's) training tracks and its card's data section: a group of the
+    ensemble's members learns them (`LaneConfig.members` seeds)."""
+
+    settings: TrainSettings
+    tracks: list[Track]
+    data: DataCard
+
+    @property
+    def stem(self) -> Path | None:
+        return model_stem(self.settings)
+
+
+@dataclass
+class TrainResult:
+    model: Path | None
+    """<out>/<stem>.pt; None when trained without `out_dir` (nothing written)."""
+    card: ModelCard
+    networks: DATINetworks
+    config: DATIConfig
+    corridor: Corridor | None
+    """The corridor the route's agents moved in (`region="corridor"`)."""
+    history: list[EpisodeLog]
+    wall_seconds: float
+    steps: int
+    resumed_from: int = 0
+    """Episodes already done by the checkpoint this run resumed from (0: a fresh run)."""
+
+
+class EnsembleRun:
+    """N routes x M seeds trained as one batched `DATITrainer`: route k holds members
+    k*M .. k*M + M-1, each member its own episode order over its route's tracks, and every
+    layer runs all members in one batched matmul. After every episode a route's members end,
+    its model files are written (<out>/<stem>.pt, .json, .log.jsonl: the best actors so far),
+    so an interrupted run leaves usable models. A one-route run also keeps a checkpoint
+    (<stem>.ckpt) that `--resume` continues from exactly: it holds the whole trainer."""
+
+    def __init__(self, routes: Sequence[LaneRoute]):
+        if not routes:
+            raise UserError("no route to train")
+        if len({r.settings.lane for r in routes}) > 1:
+            raise UserError("routes trained as one ensemble need one configuration (same --lane)")
+        if len(routes) > 1 and any(r.settings.resume for r in routes):
+            raise UserError("--resume continues one model: resume each route on its own")
+        for r in routes:
+            check_settings(r.settings)
+        self.routes = list(routes)
+        first = self.routes[0].settings
+        self.members = first.lane.members
+        self.sources = [build_source(r.tracks, r.settings.lane) for r in self.routes]
+        envs = [  # each member draws its own episode order from its route's tracks
+            make_env(AISTrackSource(src.references, src.space), r.settings.epsilon_m)
+            for r, src in zip(self.routes, self.sources, strict=True)
+            for _ in range(self.members)
         ]
-    # one configuration for all members (OU noise at the median dt of all routes' tracks)
-    config = dati_config(settings[0], [t for g in groups for t in g])
-    validators = [
-        Validator(src.space, config, g, s.lane, s.seed)
-        for src, g, s in zip(sources, groups, settings, strict=True)
-        for _ in range(members)
-    ]
-    validate = _MemberValidators(validators) if settings[0].lane.validation else None
-    seeds = member_seeds(settings[0].seed, members * len(settings))
-    t0 = time.perf_counter()
-    trainer = DATITrainer(envs, seeds, config, validate)
-    trainer.pretrain(demonstrations(envs))
-    steps = 0
-    while not trainer.done:
-        logs = trainer.step()
-        steps += 1
-        if on_step is not None:
-            on_step(trainer, logs)
-    wall = time.perf_counter() - t0
-    results = []
-    for k, s in enumerate(settings):
-        mine = slice(k * members, (k + 1) * members)
-        history = [h for h in trainer.history if mine.start <= h.member < mine.stop]
-        stem = model_stem(s)
-        starts = {m: trainer.pretrained_metric[m] for m in range(mine.start, mine.stop)}
-        card = model_card(s, sources[k], datas[k], history, wall, steps, starts)
-        card["seed"] = seeds[mine.start]
-        card["training"]["finished"] = True
-        card["training"]["routes_in_ensemble"] = len(settings)
-        save_networks(stem, member_networks(trainer.final, mine), config, card)
-        if sources[k].space.corridor is not None:
-            atomic_write_bytes(
-                stem.with_suffix(".corridor.npz"), sources[k].space.corridor.to_bytes()
+        # one configuration for all members (OU noise at the median dt of all routes' tracks)
+        self.config = dati_config(first, [t for r in self.routes for t in r.tracks])
+        validate = None
+        if first.lane.validation:
+            validators = [
+                Validator(src.space, self.config, r.tracks, r.settings.lane, r.settings.seed)
+                for r, src in zip(self.routes, self.sources, strict=True)
+            ]
+            validate = MemberValidators([v for v in validators for _ in range(self.members)])
+        self.seeds = member_seeds(first.seed, self.members * len(self.routes))
+        self.envs = envs
+        self.trainer = DATITrainer(envs, self.seeds, self.config, validate)
+        self.log_lines: list[list[str]] = [[] for _ in self.routes]
+        self.steps, self.wall_before, self.resumed_from = 0, 0.0, 0
+        self.started = time.perf_counter()
+        stem = self.routes[0].stem
+        alone = len(self.routes) == 1 and stem is not None
+        self.checkpoint_path = stem.with_suffix(".ckpt") if alone else None
+
+    # -------------------------------------------------------------------------- members
+    def members_of(self, k: int) -> range:
+        return range(k * self.members, (k + 1) * self.members)
+
+    def route_of(self, member: int) -> int:
+        return member // self.members
+
+    def history(self, k: int) -> list[EpisodeLog]:
+        return [h for h in self.trainer.history if h.member in self.members_of(k)]
+
+    def route_done(self, k: int) -> bool:
+        return not any(m in self.members_of(k) for m in self.trainer.active)
+
+    def networks(self, k: int) -> DATINetworks:
+        """Route k's members' kept actors (best or final) as a network of their own."""
+        mine = self.members_of(k)
+        return member_networks(self.trainer.model(), slice(mine.start, mine.stop))
+
+    def elapsed(self) -> float:
+        return self.wall_before + time.perf_counter() - self.started
+
+    def card(self, k: int, nets: DATINetworks, wall: float) -> ModelCard:
+        route, mine = self.routes[k], self.members_of(k)
+        pretrained = {m: self.trainer.pretrained_metric[m] for m in mine}
+        space = self.sources[k].space
+        card = model_card(
+            route.settings, space, route.data, self.history(k), wall, self.steps, pretrained
+        )
+        card.seed = self.seeds[mine.start]
+        card.networks = NetworkCard(
+            seeds=nets.seeds, config=self.config.to_dict(), state_dim=nets.state_dim,
+            decision_dim=nets.decision_dim,
+        )  # fmt: skip
+        card.training.finished = self.route_done(k)
+        if len(self.routes) > 1:
+            card.training.routes_in_ensemble = len(self.routes)
+        return card
+
+    # ----------------------------------------------------------------------------- files
+    def identity(self) -> dict[str, Any]:
+        """What a checkpoint must match to be resumed by this run: the tracks, the seed and the
+        lane configuration (which sizes the networks)."""
+        s = self.routes[0].settings
+        return {"cluster": s.cluster, "seed": s.seed, "track_ids": self.routes[0].data.track_ids,
+                "lane": s.lane.to_dict()}  # fmt: skip
+
+    def resume(self) -> None:
+        """Continue from the route's checkpoint (`TrainSettings.resume`); without one, refuse to
+        resume a model whose training finished. A checkpoint of another run, or a damaged one,
+        is a one-line `UserError`."""
+        stem, path = self.routes[0].stem, self.checkpoint_path
+        if not self.routes[0].settings.resume or stem is None:
+            return
+        if path is not None and path.is_file():
+            doc = read_checkpoint(path, CHECKPOINT_ENTRIES)
+            check_identity(path, doc["identity"], self.identity())
+            try:
+                self.load_checkpoint(doc)
+            except UserError as exc:
+                raise UserError(f"checkpoint {path} is damaged: {exc}") from None
+            except (KeyError, IndexError, TypeError, ValueError, RuntimeError) as exc:
+                raise UserError(
+                    f"checkpoint {path} is damaged ({load_error(exc)}): delete it or drop --resume"
+                ) from None
+            self.resumed_from = len(self.trainer.history)  # >= 1: written after episodes
+        elif stem.with_suffix(".json").is_file():
+            self.refuse_finished(stem)
+
+    def load_checkpoint(self, doc: dict[str, Any]) -> None:
+        """Put the trainer, the episode orders, the log and the counters where `doc` (a
+        checkpoint of this run, `save`) left them."""
+        by_id = {r.label["track_id"]: r for r in self.sources[0].references}
+        unknown = [i for i in doc["current"] if int(i) not in by_id]
+        if unknown:
+            raise UserError(f"its episodes run on tracks {unknown} this run does not train on")
+        self.trainer.load_state_dict(doc["trainer"], [by_id[int(i)] for i in doc["current"]])
+        orders = doc["source"]  # each live member's episode order (one dict before ensembles)
+        orders = orders if isinstance(orders, list) else [orders] * len(self.trainer.envs)
+        for env, order in zip(self.trainer.envs, orders, strict=True):
+            env.source.load_state_dict(order)
+        self.log_lines[0] = [str(line) for line in doc["log_lines"]]
+        self.steps, self.wall_before = int(doc["steps"]), float(doc["wall_seconds"])
+
+    def refuse_finished(self, stem: Path) -> None:
+        """`--resume` of a model that finished training (and so left no checkpoint)."""
+        try:
+            old = read_json(stem.with_suffix(".json"))
+        except UserError:
+            old = {}
+        if not isinstance(old, dict) or not all(
+            isinstance(old.get(k, {}), dict) for k in ("data", "training")
+        ):
+            old = {}  # a damaged card: nothing to compare with (detect refuses it, naming why)
+        ids = self.routes[0].data.track_ids
+        same = old.get("seed") == self.routes[0].settings.seed
+        same = same and old.get("data", {}).get("track_ids") == ids
+        if same and old.get("training", {}).get("finished"):
+            raise UserError(
+                f"{stem.with_suffix('.pt')} has finished training: nothing to resume "
+                "(drop --resume to train again)"
             )
-        log = "".join(json.dumps(h.__dict__) + "\n" for h in history)
-        atomic_write_bytes(stem.with_suffix(".log.jsonl"), log.encode())
-        results.append(TrainResult(stem.with_suffix(".pt"), card, history, wall, steps))
-    return results
+
+    def save(self, routes: set[int]) -> None:
+        """Write the models of `routes` as they stand, and the checkpoint of a one-route run."""
+        wall = self.elapsed()
+        for k in sorted(routes):
+            stem = self.routes[k].stem
+            if stem is None:
+                continue
+            nets = self.networks(k)
+            save_networks(stem, nets, self.config, self.card(k, nets, wall).to_dict())
+            corridor = self.sources[k].space.corridor
+            if corridor is not None and not stem.with_suffix(".corridor.npz").is_file():
+                atomic_write_bytes(stem.with_suffix(".corridor.npz"), corridor.to_bytes())
+            atomic_write_bytes(stem.with_suffix(".log.jsonl"), "".join(self.log_lines[k]).encode())
+        if self.checkpoint_path is None:
+            return
+        if self.trainer.done:
+            self.checkpoint_path.unlink(missing_ok=True)
+            return
+        extra = {
+            "identity": self.identity(),
+            "source": [env.source.state_dict() for env in self.trainer.envs],
+            "current": [int(e.reference.label["track_id"]) for e in self.trainer.envs],
+            "log_lines": self.log_lines[0],
+            "steps": self.steps,
+            "wall_seconds": wall,
+        }
+        save_checkpoint(self.checkpoint_path, self.trainer, extra)
+
+    # ------------------------------------------------------------------------------- run
+    def run(self, on_step: Callback | None = None) -> list[TrainResult]:
+        """Pretrain (a fresh run), train until every member has stopped, and return each
+        route's model."""
+        self.started = time.perf_counter()
+        if not self.resumed_from:
+            self.trainer.pretrain(demonstrations(self.envs))
+        while not self.trainer.done:
+            logs = self.trainer.step()
+            self.steps += 1
+            for log in logs:
+                row = {**log.__dict__, "wall_seconds": round(self.elapsed(), 3)}
+                self.log_lines[self.route_of(log.member)].append(json.dumps(row) + "\n")
+            if logs:
+                self.save({self.route_of(log.member) for log in logs})
+            if on_step is not None:
+                on_step(self.trainer, logs)
+        wall = self.elapsed()
+        results = []
+        for k, route in enumerate(self.routes):
+            nets = self.networks(k)
+            model = route.stem.with_suffix(".pt") if route.stem else None
+            card = self.card(k, nets, wall)
+            results.append(
+                TrainResult(model, card, nets, self.config, self.sources[k].space.corridor,
+                            self.history(k), wall, self.steps, self.resumed_from)
+            )  # fmt: skip
+        return results
+
+
+CHECKPOINT_ENTRIES = ("identity", "source", "current", "log_lines", "steps", "wall_seconds")
+"""What `EnsembleRun.save` adds to the trainer's state in a checkpoint."""
+
+
+def check_identity(path: Path, theirs: Any, mine: dict[str, Any]) -> None:
+    """Refuse a checkpoint of another run (`EnsembleRun.identity`), saying what differs."""
+    if not isinstance(theirs, dict) or any(theirs.get(k) != mine[k] for k in RUN_IDENTITY):
+        raise UserError(
+            f"{path} belongs to another run (cluster, seed or training tracks differ); use the "
+            "same --seed/--max-tracks/--data, or train without --resume"
+        )
+    lane = theirs.get("lane")  # None: a checkpoint from before lane settings were recorded
+    if lane is not None and lane != mine["lane"]:
+        keys = [k for k in {**lane, **mine["lane"]} if lane.get(k) != mine["lane"].get(k)]
+        raise UserError(
+            f"the checkpoint {path} was written with --lane {lane_options(lane, keys)}, this run "
+            f"has {lane_options(mine['lane'], keys)}: pass the same --lane options or drop "
+            "--resume"
+        )
+
+
+RUN_IDENTITY = ("cluster", "seed", "track_ids")
+"""The entries of `EnsembleRun.identity` that say which run (the lane: how it was trained)."""
+
+
+def lane_options(lane: dict[str, Any], keys: Sequence[str]) -> str:
+    """`fourier=6 pretrain=50`: the lane settings `keys` as `--lane` takes them."""
+
+    def shown(value: Any) -> str:
+        if isinstance(value, bool):
+            return str(value).lower()
+        return f"{value:g}" if isinstance(value, float) else str(value)
+
+    return " ".join(f"{k}={shown(lane.get(k))}" for k in keys)
+
+
+def train_lanes(routes: Sequence[LaneRoute], on_step: Callback | None = None) -> list[TrainResult]:
+    """Train one DATI model per route as one batched ensemble (see `EnsembleRun`); the models'
+    cards are not calibrated yet (`aisdati.detectors.dati`)."""
+    torch.set_num_threads(1)  # small batched networks: one thread is fastest (3x on 2 cores)
+    run = EnsembleRun(routes)
+    run.resume()
+    return run.run(on_step)
+
+
+def train_ais(settings: TrainSettings, on_step: Callback | None = None) -> TrainResult:
+    """Train one DATI model on a cluster's tracks of the ingest folder (an ensemble of one
+    route); writes <out>/<stem>.pt, .json (the card) and .log.jsonl after every episode, and the
+    checkpoint <stem>.ckpt that `resume` continues from."""
+    tracks, data = training_set(settings)
+    return train_lanes([LaneRoute(settings, tracks, data)], on_step)[0]

@@ -1,7 +1,15 @@
-"""One interface for every detector (PyOD's `BaseDetector` is the model): fit on training
-tracks, score tracks (higher = more abnormal, in metres), and a flagging threshold calibrated on
+"""One interface for every detector, after PyOD's `BaseDetector`: `fit` on normal tracks,
+`decision_function` (higher = more abnormal, in metres), a flagging `threshold` calibrated on
 the training tracks' own scores (`contamination`: the share of normal traffic one accepts to
-flag), which does not depend on the test set."""
+flag, which does not depend on the test set), `predict`, `save` and `load`.
+
+    det = NearestDetector().fit(train_tracks)
+    flagged = det.predict(test_tracks, contamination=0.05)
+
+A detector is constructed with how to train it (`TrainSettings`: episodes, seed, lane
+configuration) and how to score (`ScoreSettings`); fitting or loading gives it a `card`
+(`ModelCard`), which says what it was trained on and holds its calibration scores.
+"""
 
 from __future__ import annotations
 
@@ -9,157 +17,151 @@ import json
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar, TypeVar
 
 import numpy as np
 
+from aisdati.ais.card import CalibratedWith, DataCard, ModelCard
+from aisdati.ais.corridor import Corridor
+from aisdati.ais.training import TrainSettings, check_settings
+from aisdati.detectors.registry import load_detector, register
+from aisdati.detectors.scoring import Scores, ScoreSettings
 from aisdati.errors import UserError
+from aisdati.model.readers import first_line
+from aisdati.model.trainer import Callback
+from aisdati.outdir import atomic_write_bytes
 from aisdati.tracks.store import Track
 
-SCORES = ("rollout", "step", "lane", "both")
-
-
-def tail_mean(values: np.ndarray, fraction: float) -> float:
-    """Mean of the largest `fraction` of the values (at least one): a short stretch far off
-    counts as much in a long track as in a short one."""
-    k = max(1, math.ceil(len(values) * fraction))
-    return float(np.partition(values, len(values) - k)[-k:].mean())
-
-
-@dataclass(frozen=True, kw_only=True)
-class ScoreSettings:
-    score: str = "lane"
-    """lane, rollout (the paper's), step (teacher-forced) or both; see
-    `aisdati.ais.policy`."""
-    rollouts: int = 10
-    """K: free rollouts per track (the rollout score is the best of K), and one-step draws
-    per report."""
-    lane_rollouts: int = 30
-    """Lane score: free rollouts per track that make up its lane (the K of the rollout score
-    and L - K more). A lane is where the policy goes, estimated from samples: on the Kitimat
-    routes over three seeds and several noise draws, DATI's pooled lane AUC (by position only)
-    averaged 0.879 with 10, 0.892 with 30 and 0.904 with 100 rollouts (README, "every route of
-    an area"); with the course weighed, 100 add little. 30 keeps scoring and calibration
-    affordable."""
-    lane_reach: float = 2.0
-    """Lane score: the rollouts run this many times the track's number of steps (the rollout
-    score always uses the track's own number). DATI's rollouts on Kitimat ran at half to twice
-    the real pace (SOG x dt), so over the track's number of steps a slow one stopped half-way
-    and every later report was "far from the lane"; twice as many steps cover a model at half
-    pace, and a fast one just goes on along the corridor."""
-    lane_course_km: float = 2.0
-    """Lane score: what sailing against the lane's course costs, km (across it: 0.7 x as
-    much); 0 judges position only. See `aisdati.geo.lane_distances`. 2 km gave DATI the best
-    pooled lane AUC averaged over two areas (Kitimat's fjord lanes, where 4 km was better, and
-    NY Harbor's ferry crossings, where 4 km was worse than none; README, "every route")."""
-    lane_traffic: bool = True
-    """Lane score of a learnt policy: each track's lane also holds one rollout from every
-    training track's start (`PolicyDetector.traffic`), so the lane is where the model's
-    traffic goes, not only where it goes from this track's start. A real track that starts
-    off the lane and joins it was judged only against rollouts that never reached the lane
-    it joined. With it DATI's pooled lane AUC rose 0.942 -> 0.966 on Kitimat and 0.945 ->
-    0.959 on NY Harbor (README, "every route of an area")."""
-    tail: float = 0.1
-    """Step and lane scores: the mean of the largest `tail` of a track's per-report distances.
-    Measured at 0.05-1 on both areas (`benchmarks/lane_score.py --tail`): 0.1 gave DATI the
-    best pooled lane AUC averaged over Kitimat and NY Harbor (0.15 was level; larger fractions
-    dilute a short jump or loiter on the ferry routes, smaller ones let a few stray reports
-    decide); README, "every route of an area"."""
-    near_km: float = 10.0
-    """`nearest`: compare with training tracks that start within this distance."""
-    seed: int = 0
-
-    def calibrated_with(self) -> dict[str, float | bool]:
-        """What a card records of the settings its calibration scores were computed with:
-        `Detector.threshold` refuses to flag with others."""
-        return {"lane_course_km": self.lane_course_km, "lane_traffic": self.lane_traffic}
-
-
-CALIBRATED_BEFORE: dict[str, float | bool] = {"lane_course_km": 0.0, "lane_traffic": False}
-"""What a card that does not record a calibration setting was calibrated with."""
-
-
-def _as_option(key: str, value: float | bool, named: bool = True) -> str:
-    """`--lane-course-km 2` (or `2` unnamed) / `--lane-traffic` / `--no-lane-traffic`."""
-    if isinstance(value, bool):
-        return f"--{'' if value else 'no-'}{key.replace('_', '-')}"
-    return f"--{key.replace('_', '-')} {value:g}" if named else f"{value:g}"
-
-
-@dataclass
-class Scores:
-    """What a detector says about N tracks."""
-
-    score_m: np.ndarray
-    """[N] raw scores, metres; higher = more abnormal."""
-    profiles: list[np.ndarray]
-    """Per track, the local deviation (m) at each of its points: where it strays."""
-    evidence: list[np.ndarray]
-    """Per track, what it was compared with ([m, 2] lon/lat): best rollout, nearest training
-    track, or the one-step predictions."""
-    parts: dict[str, np.ndarray] = field(default_factory=dict)
-    """Every score computed in the pass, by kind ([N] each, `score_m` among them)."""
+DEFAULT_CONTAMINATION = 0.05
+"""The share of normal traffic a threshold flags unless told otherwise (`aisdati evaluate`'s)."""
+D = TypeVar("D", bound="Detector")
 
 
 class Detector(ABC):
-    """A trained detector of one group of tracks (a cluster or route), saved as `<stem>.json`
-    (its card) beside method-specific files."""
+    """A detector of one group of tracks (a cluster or route), saved as `<stem>.json` (its
+    card) beside method-specific files; see the module docstring."""
 
     method: ClassVar[str]
-    format: ClassVar[str]
+    """The name it is registered and chosen (`--method`) under; its card's format."""
     lane_settings: ClassVar[tuple[str, ...]] = ("lane_course_km",)
     """The `ScoreSettings` its lane score depends on: a threshold needs them as calibrated."""
+    model_suffix: ClassVar[str] = ".json"
+    """The file `aisdati train` reports as the model."""
 
-    def __init__(self, name: str, card: dict[str, Any]):
-        self.name = name
-        self.card = card
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        if "method" in vars(cls):  # a concrete detector (not a shared base like PolicyDetector)
+            register(cls)
 
-    # ------------------------------------------------------------------ identity
+    def __init__(
+        self,
+        settings: TrainSettings | None = None,
+        how: ScoreSettings | None = None,
+        name: str | None = None,
+    ):
+        self.settings = settings or TrainSettings()
+        check_settings(self.settings)
+        self.how = how or ScoreSettings()
+        self.name = name or self.settings.stem or self.model_name(self.settings.cluster)
+        self.corridor: Corridor | None = None
+        """The corridor of the training tracks (`region="corridor"`), saved beside the model."""
+        self.resumed_from = 0
+        """Episodes a resumed training had done before this fit (DATI's `--resume`)."""
+        self.loaded_from: Path | None = None
+        """The card it was loaded from (`load_detector`); None when fitted here."""
+        self._card: ModelCard | None = None
+
+    @classmethod
+    def model_name(cls, cluster: str) -> str:
+        """The file stem of this method's model of `cluster`: `<cluster>-<method>`."""
+        return f"{cluster}-{cls.method}"
+
     @property
-    def training_ids(self) -> set[int]:
-        return {int(i) for i in self.card["data"]["track_ids"]}
+    def card(self) -> ModelCard:
+        if self._card is None:
+            raise UserError(f"the {self.method} detector is not fitted: fit it or load one")
+        return self._card
 
-    @property
-    def start_points(self) -> np.ndarray:
-        return np.asarray(self.card["data"]["start_points"], np.float64).reshape(-1, 2)
+    @card.setter
+    def card(self, card: ModelCard) -> None:
+        self._card = card
 
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        reg = self.card["region"]
-        return (
-            np.array([reg["lon"][0], reg["lat"][0]], np.float64),
-            np.array([reg["lon"][1], reg["lat"][1]], np.float64),
-        )
-
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        lo, hi = self.bounds
-        return np.all((points >= lo) & (points <= hi), axis=-1)
-
-    # ------------------------------------------------------------------- scoring
+    # ----------------------------------------------------------------------------- fitting
     @abstractmethod
+    def fit(
+        self: D,
+        tracks: Sequence[Track],
+        data: DataCard | None = None,
+        on_step: Callback | None = None,
+    ) -> D:
+        """Learn the normal traffic of `tracks` and calibrate the threshold on them; returns
+        the detector. `data` is the card's description of the tracks (`aisdati.ais.training.
+        training_set` reads it from an ingest folder; default: from the tracks themselves).
+        `on_step` follows DATI's training (`aisdati.model.trainer.Callback`)."""
+
+    @classmethod
+    def fit_routes(
+        cls,
+        settings: Sequence[TrainSettings],
+        training_sets: Sequence[tuple[list[Track], DataCard]],
+        how: ScoreSettings | None = None,
+        on_step: Callback | None = None,
+    ) -> list[Detector]:
+        """One detector per route (settings and training set each); the default fits them one
+        after the other, DATI trains them as one batched ensemble."""
+        return [
+            cls(s, how).fit(tracks, data, on_step)
+            for s, (tracks, data) in zip(settings, training_sets, strict=True)
+        ]
+
+    @staticmethod
+    def describe(tracks: Sequence[Track], data: DataCard | None) -> DataCard:
+        """The card's data section of the training tracks (`data` where the caller has it)."""
+        return data if data is not None else DataCard.of_tracks(tracks)
+
+    # ----------------------------------------------------------------------------- scoring
     def score(
-        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str] = ()
+        self, tracks: Sequence[Track], how: ScoreSettings | None = None, also: Sequence[str] = ()
     ) -> Scores:
-        """Score tracks the way `how.score` says (higher = more abnormal), and compute the
-        kinds in `also` in the same pass (into `Scores.parts`)."""
+        """Score tracks the way `how.score` says (default: the detector's `how`; higher = more
+        abnormal), and compute the kinds in `also` in the same pass (into `Scores.parts`).
+        Numbers a kernel refuses (`aisdati.dtw`: NaN or inf) are a one-line `UserError`
+        naming the model."""
+        try:
+            return self.score_tracks(tracks, how or self.how, also)
+        except ValueError as exc:
+            where = self.loaded_from or f"model {self.name}"
+            raise UserError(f"cannot score with {where}: {first_line(exc)}") from None
+
+    @abstractmethod
+    def score_tracks(
+        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
+    ) -> Scores:
+        """`score`'s work, with the settings chosen."""
+
+    def decision_function(self, tracks: Sequence[Track]) -> np.ndarray:
+        """Each track's score (metres, higher = more abnormal) of the detector's `how`."""
+        return self.score(tracks).score_m
 
     def calibration_key(self, how: ScoreSettings) -> str:
         return how.score
 
-    def threshold(self, how: ScoreSettings, contamination: float) -> float:
+    def threshold(
+        self, how: ScoreSettings | None = None, contamination: float = DEFAULT_CONTAMINATION
+    ) -> float:
         """The (1 - contamination) quantile of the training tracks' own scores."""
+        how = how or self.how
         key = self.calibration_key(how)
-        cal = self.card.get("calibration", {}).get(key)
+        cal = self.card.calibration.get(key)
         if not cal:
             raise UserError(
                 f"model {self.name} has no calibration scores for --score {how.score}: "
                 "retrain it, or flag with --threshold / --top-percent"
             )
-        recorded = {**CALIBRATED_BEFORE, **self.card.get("calibrated_with", {})}
+        recorded = self.card.calibrated_with or CalibratedWith()
         for name in self.lane_settings if key == "lane" else ():
-            was, now = recorded[name], getattr(how, name)
+            was, now = getattr(recorded, name), getattr(how, name)
             if not math.isclose(float(was), float(now)):
                 raise UserError(
                     f"model {self.name}'s lane scores were calibrated with "
@@ -168,8 +170,56 @@ class Detector(ABC):
                 )
         return float(np.quantile(np.asarray(cal, np.float64), 1.0 - contamination))
 
-    def save_card(self, stem: Path) -> None:
-        from aisdati.model.checkpoint import atomic_write_bytes
+    def predict(
+        self, tracks: Sequence[Track], contamination: float = DEFAULT_CONTAMINATION
+    ) -> np.ndarray:
+        """Whether each track is flagged: scored above `threshold(contamination=...)`."""
+        cut = self.threshold(contamination=contamination)  # no calibration: fail before scoring
+        return self.decision_function(tracks) > cut
 
-        doc = {"format": self.format, "method": self.method, **self.card}
-        atomic_write_bytes(stem.with_suffix(".json"), json.dumps(doc, indent=2).encode())
+    # ----------------------------------------------------------------------------- the area
+    @property
+    def start_points(self) -> np.ndarray:
+        return np.asarray(self.card.data.start_points, np.float64).reshape(-1, 2)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.card.region.bounds
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds
+        return np.all((points >= lo) & (points <= hi), axis=-1)
+
+    # ------------------------------------------------------------------------------- files
+    @abstractmethod
+    def save(self, stem: Path) -> None:
+        """Write <stem>.json (the card) and the method's own files beside it."""
+
+    @classmethod
+    def load(cls, stem: Path) -> Detector:
+        """The detector saved at `stem` (`load_detector`): any method when called on
+        `Detector`, this one when called on a detector's class."""
+        det = load_detector(stem)
+        if not isinstance(det, cls):
+            raise UserError(f"{stem} is a {det.method} model, not a {cls.__name__}")
+        return det
+
+    @classmethod
+    @abstractmethod
+    def from_files(cls: type[D], stem: Path, card: ModelCard) -> D:
+        """The detector saved at `stem`, whose card (already read and checked) is `card`."""
+
+    def save_card(self, stem: Path) -> None:
+        text = json.dumps(self.card.to_dict(), indent=2)
+        atomic_write_bytes(stem.with_suffix(".json"), text.encode())
+
+    def save_corridor(self, stem: Path) -> None:
+        if self.corridor is not None:
+            atomic_write_bytes(stem.with_suffix(".corridor.npz"), self.corridor.to_bytes())
+
+
+def _as_option(key: str, value: float | bool, named: bool = True) -> str:
+    """`--lane-course-km 2` (or `2` unnamed) / `--lane-traffic` / `--no-lane-traffic`."""
+    if isinstance(value, bool):
+        return f"--{'' if value else 'no-'}{key.replace('_', '-')}"
+    return f"--{key.replace('_', '-')} {value:g}" if named else f"{value:g}"

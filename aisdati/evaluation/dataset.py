@@ -19,10 +19,10 @@ import shapely
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import MIN_POINTS, Injected, inject
 from aisdati.geo import haversine_m, initial_bearing_deg
-from aisdati.model.checkpoint import atomic_write_bytes
+from aisdati.outdir import atomic_write_bytes, parquet_bytes
+from aisdati.tracks.schema import KNOT_MPS, POINTS_SCHEMA, UTC_US
 from aisdati.tracks.store import read_track_table, select_cluster
 
-KNOT_MPS = 1852.0 / 3600.0
 MIN_SPLIT = 4
 """Each side of the split needs at least this many tracks (and the held-out side twice this,
 half of it to take anomalies)."""
@@ -131,8 +131,6 @@ def build(
 
 
 def _points(track_id: int, mmsi: int, t0_us: int, got: Injected) -> pa.Table:
-    from aisdati.preprocess.output import POINTS_SCHEMA, UTC_US
-
     n = len(got.positions)
     sog, cog = _sog_cog(got.positions, got.times_s)
     time_us = t0_us + np.round(got.times_s * 1e6).astype(np.int64)
@@ -175,9 +173,7 @@ def _write(out: Path, points: pa.Table, tracks: pa.Table, labels: pd.DataFrame) 
     points = points.sort_by([("track_id", "ascending"), ("time", "ascending")])
     tracks = tracks.sort_by("track_id")
     for name, table in (("points.parquet", points), ("tracks.parquet", tracks)):
-        sink = pa.BufferOutputStream()
-        pq.write_table(table, sink)
-        atomic_write_bytes(out / name, sink.getvalue().to_pybytes())
+        atomic_write_bytes(out / name, parquet_bytes(table))
     buf = io.StringIO()
     labels.to_csv(buf, index=False)
     atomic_write_bytes(out / "labels.csv", buf.getvalue().encode())

@@ -1,4 +1,5 @@
-"""Ranking and flagging metrics of a detector against known labels (1 = anomaly)."""
+"""Ranking and flagging metrics of a detector against known labels (1 = anomaly): the only
+ROC AUC, precision, recall and F1 of aisdati (`aisdati evaluate` and `aisdati detect --labels`)."""
 
 from __future__ import annotations
 
@@ -8,14 +9,22 @@ import numpy as np
 from sklearn.metrics import average_precision_score, roc_auc_score
 
 
-def ranking(y: np.ndarray, score: np.ndarray) -> dict[str, float | None]:
-    """ROC AUC and average precision; None when only one class is present."""
+def roc_auc(y: np.ndarray, score: np.ndarray) -> float | None:
+    """Area under the ROC curve of `score` for labels `y`; None when only one class is present."""
     y = np.asarray(y, int)
     if y.min() == y.max():
+        return None
+    return float(roc_auc_score(y, score))
+
+
+def ranking(y: np.ndarray, score: np.ndarray) -> dict[str, float | None]:
+    """ROC AUC and average precision; None when only one class is present."""
+    auc = roc_auc(y, score)
+    if auc is None:
         return {"roc_auc": None, "average_precision": None}
     return {
-        "roc_auc": float(roc_auc_score(y, score)),
-        "average_precision": float(average_precision_score(y, score)),
+        "roc_auc": auc,
+        "average_precision": float(average_precision_score(np.asarray(y, int), score)),
     }
 
 
@@ -27,3 +36,11 @@ def flagging(y: np.ndarray, flagged: np.ndarray) -> dict[str, Any]:
     recall = tp / max(int(y.sum()), 1)
     f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
     return {"flagged": int(p.sum()), "precision": precision, "recall": recall, "f1": f1}
+
+
+def weighted_f1(y: np.ndarray, flagged: np.ndarray) -> float:
+    """The paper's F1: the F1 of each class (normal, anomaly) weighted by its support."""
+    y, p = np.asarray(y, bool), np.asarray(flagged, bool)
+    support = np.array([(~y).sum(), y.sum()], dtype=float)
+    f1s = np.array([flagging(~y, ~p)["f1"], flagging(y, p)["f1"]])
+    return float((support * f1s).sum() / support.sum())

@@ -25,8 +25,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from aisdati.ais import DEFAULT_PRESET
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
+from aisdati.detection.run import score_settings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
@@ -56,8 +58,8 @@ class EvaluateSettings:
     near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
-    preset: str = "lanes"
-    lane: LaneConfig = field(default_factory=lambda: PRESETS["lanes"])
+    preset: str = DEFAULT_PRESET
+    lane: LaneConfig = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
 
 
 @dataclass
@@ -146,22 +148,15 @@ class _Prepared:
 
 
 def _how(settings: EvaluateSettings) -> ScoreSettings:
-    return ScoreSettings(
-        score="both",
-        rollouts=settings.rollouts,
-        lane_rollouts=settings.lane_rollouts,
-        lane_course_km=settings.lane_course_km,
-        lane_traffic=settings.lane_traffic,
-        near_km=settings.near_km,
-        seed=settings.seed,
-    )
+    """How the held-out tracks are scored: `both`, whose one pass yields every score."""
+    return score_settings(settings, score="both")
 
 
 def _prepare(settings: EvaluateSettings) -> _Prepared:
     existing = _existing(settings)
     train_ids = None
     if existing:
-        train_ids = [int(i) for i in next(iter(existing.values())).card["data"]["track_ids"]]
+        train_ids = [int(i) for i in next(iter(existing.values())).card.data.track_ids]
         _same_region(settings, existing)
         for det in existing.values():  # calibrated as this run scores, before any work
             det.threshold(replace(_how(settings), score="lane"), settings.contamination)

@@ -40,9 +40,11 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from aisdati.model.buffers import DemonstrationBuffer
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import EnsembleLinear, MLPTrunk, NetworkConfig, Time2Vec
 from aisdati.model.rollout import Act, seed_generator
+from aisdati.model.trainer import EpisodeLog, Trainer
 
 
 # ------------------------------------------------------------------------------------------ BC
@@ -133,57 +135,9 @@ class BCPolicy(nn.Module):
         return nll - self.cfg.entropy_weight * entropy
 
 
-class BCData:
-    """The demonstrations seen so far by E members, as [E, capacity, ·] tensors (state scaled
-    into [0, 1], step index t, scaled perfect decision a_t) with a fill level per member."""
-
-    def __init__(self, members: int, capacity: int, state_dim: int, decision_dim: int):
-        self.state = torch.zeros(members, capacity, state_dim)
-        self.time = torch.zeros(members, capacity, 1)
-        self.action = torch.zeros(members, capacity, decision_dim)
-        self.size = [0] * members
-
-    def add(self, k: int, env: TrajectoryImitationEnv) -> int:
-        """Append the current reference of member k's environment; returns its step count."""
-        ref = env.reference
-        assert ref is not None
-        n, lo = ref.steps, self.size[k]
-        if lo + n > self.state.shape[1]:
-            grow = max(n, self.state.shape[1])
-            for name in ("state", "time", "action"):
-                old = getattr(self, name)
-                setattr(self, name, torch.cat([old, torch.zeros_like(old[:, :grow])], dim=1))
-        states, times, actions = env.demonstration(ref)
-        self.state[k, lo : lo + n] = torch.as_tensor(states)
-        self.time[k, lo : lo + n, 0] = torch.as_tensor(times)
-        self.action[k, lo : lo + n] = torch.as_tensor(actions)
-        self.size[k] += n
-        return n
-
-    def sample(self, batch: int, generators: Sequence[torch.Generator]) -> list[Tensor]:
-        """A batch per member drawn with replacement from everything it has seen."""
-        idx = torch.stack(
-            [
-                torch.randint(n, (batch,), generator=g)
-                for n, g in zip(self.size, generators, strict=True)
-            ]
-        )
-        return self._rows(idx)
-
-    def epoch(self, batch: int, generators: Sequence[torch.Generator]) -> list[list[Tensor]]:
-        """One shuffled pass over each member's data in batches (the last one may be smaller);
-        members hold as many pairs each (one reference of the family's τ per episode)."""
-        n = min(self.size)
-        order = torch.stack([torch.randperm(n, generator=g) for g in generators])
-        return [self._rows(order[:, i : i + batch]) for i in range(0, n, batch)]
-
-    def _rows(self, idx: Tensor) -> list[Tensor]:
-        rows = torch.arange(idx.shape[0])[:, None]
-        return [self.state[rows, idx], self.time[rows, idx], self.action[rows, idx]]
-
-
-class BCTrainer:
-    """Trains E BC members, one per (environment, seed), as one ensemble."""
+class BCTrainer(Trainer[BCPolicy]):
+    """Trains E BC members, one per (environment, seed), as one ensemble; a step is one
+    episode of every member (all stop together, after `BCConfig.episodes`)."""
 
     def __init__(
         self,
@@ -191,34 +145,45 @@ class BCTrainer:
         seeds: Sequence[int],
         config: BCConfig | None = None,
     ):
-        if len(envs) != len(seeds) or not envs:
-            raise ValueError("give one environment per seed, at least one")
+        super().__init__(envs, seeds)
         self.cfg = config or BCConfig()
-        self.envs = list(envs)
-        self.seeds = [int(s) for s in seeds]
         state_dim = envs[0].observation_space.shape[0] - 1
         self.policy = BCPolicy(state_dim, envs[0].action_space.shape[0], self.cfg, self.seeds)
         self.opt = torch.optim.Adam(self.policy.parameters(), lr=self.cfg.lr, fused=True)
-        self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
         capacity = self.cfg.episodes * envs[0].source.max_steps
-        self.data = BCData(len(envs), capacity, state_dim, envs[0].action_space.shape[0])
-        self.episode = 0
+        self.data = DemonstrationBuffer(
+            len(envs), capacity, state_dim, envs[0].action_space.shape[0]
+        )
         self.losses: list[np.ndarray] = []
+        """Each episode's mean loss of its updates per member [E] (NaN without updates)."""
 
-    def train_episode(self) -> np.ndarray:
+    def step(self) -> list[EpisodeLog]:
         """Draw one reference per member, add its pairs, then update (each episode, or after the
-        last one with `epochs`); returns the mean loss [E] of the updates made (NaN if none)."""
-        first = self.episode == 0
-        steps = 0
+        last one with `epochs`); logs the mean loss of the updates made (NaN if none)."""
+        first = self.episode[0] == 0
+        steps = []
         for k, (env, seed) in enumerate(zip(self.envs, self.seeds, strict=True)):
             env.reset(seed=seed if first else None)
-            steps = max(steps, self.data.add(k, env))
-        self.episode += 1
+            steps.append(self.data.add(k, env))
+        self.episode = [e + 1 for e in self.episode]
+        mean = self._update(max(steps))
+        self.losses.append(mean)
+        logs = [
+            EpisodeLog(
+                k, seed, self.episode[k], n, float("nan"), float("nan"), float(loss), self.done
+            )
+            for k, (seed, n, loss) in enumerate(zip(self.seeds, steps, mean, strict=True))
+        ]
+        self.history += logs
+        return logs
+
+    def _update(self, steps: int) -> np.ndarray:
+        """This episode's updates; the mean loss [E] of the updates made (NaN if none)."""
         cfg = self.cfg
         if cfg.epochs is None:
             updates = cfg.updates_per_episode or steps
             batches = (self.data.sample(cfg.batch_size, self.generators) for _ in range(updates))
-        elif self.episode == cfg.episodes:
+        elif self.episode[0] == cfg.episodes:
             gens, size = self.generators, cfg.batch_size
             batches = (b for _ in range(cfg.epochs) for b in self.data.epoch(size, gens))
         else:
@@ -231,15 +196,13 @@ class BCTrainer:
             self.opt.step()
             total += loss.detach()
             count += 1
-        mean = (total / count).numpy() if count else np.full(len(self.envs), np.nan)
-        self.losses.append(mean)
-        return mean
+        return (total / count).numpy() if count else np.full(len(self.envs), np.nan)
 
-    def train(self, on_episode: Callable[[int], None] | None = None) -> BCPolicy:
-        while self.episode < self.cfg.episodes:
-            self.train_episode()
-            if on_episode is not None:
-                on_episode(self.episode)
+    @property
+    def done(self) -> bool:
+        return self.episode[0] >= self.cfg.episodes
+
+    def model(self) -> BCPolicy:
         return self.policy
 
 
@@ -247,17 +210,26 @@ def bc_act(policy: BCPolicy, refs: int, seed: int = 0) -> Act:
     """The BC ensemble as a batched policy over [E, R] observations; each (member, reference)
     pair samples from its own generator keyed by (seed, member seed, reference)."""
     gens = [[seed_generator(seed, s, r) for r in range(refs)] for s in policy.seeds]
-    state_dim = policy.state_features.weight.shape[1]
 
-    def act(obs: np.ndarray) -> np.ndarray:
-        x = torch.as_tensor(obs, dtype=torch.float32)
-        with torch.no_grad():
-            mean, log_std = policy(x[..., :state_dim], x[..., state_dim:])
-        if policy.cfg.deterministic:
-            return mean.numpy()
-        eps = torch.stack(
-            [torch.stack([torch.randn(mean.shape[-1], generator=g) for g in row]) for row in gens]
+    def draw(shape: torch.Size) -> Tensor:
+        return torch.stack(
+            [torch.stack([torch.randn(shape[-1], generator=g) for g in row]) for row in gens]
         )
-        return (mean + log_std.exp() * eps).numpy()
 
-    return act
+    return lambda obs: sample_decisions(policy, obs, draw)
+
+
+def sample_decisions(
+    policy: BCPolicy, obs: np.ndarray, draw: Callable[[torch.Size], Tensor]
+) -> np.ndarray:
+    """BC's decisions [E, B, k] for observations [E, B, state + 1] (the state, then the time
+    input): the Gaussian's mean with `BCConfig.deterministic`, else mean + σ · `draw(shape)`
+    (standard normal noise of the mean's shape, from the caller's generators). The one place
+    BC samples, for the self-test's rollouts (`bc_act`) and the AIS detector's."""
+    state_dim = policy.state_features.weight.shape[1]
+    x = torch.as_tensor(obs, dtype=torch.float32)
+    with torch.no_grad():
+        mean, log_std = policy(x[..., :state_dim], x[..., state_dim:])
+    if policy.cfg.deterministic:
+        return mean.numpy()
+    return (mean + log_std.exp() * draw(mean.shape)).numpy()

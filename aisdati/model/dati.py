@@ -17,7 +17,7 @@ Per environment step and member (section 4 and appendix A.2):
    the reference's next point, and the transition is stored.
 Early stopping watches each member's own per-episode mean total loss (patience 10) and keeps the
 forward actor (with its Time2Vec) of the best episode; `keep="final"` keeps the last episode's
-instead (what the paper's code ends up doing, see `aisdati.selftest.protocol`).
+instead (what the paper's code ends up doing: the self-test's `paper` preset).
 
 Choices where the paper is silent (all configurable, see `DATIConfig`): the gradient penalty
 interpolates between real samples and the *current* actor's fakes (Gulrajani et al.); the L1 terms
@@ -37,8 +37,11 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from aisdati.model.env import TrajectoryImitationEnv
+from aisdati.model.buffers import EnsembleReplayBuffer
+from aisdati.model.env import Reference, TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig
+from aisdati.model.noise import LatentNoise, NoiseProcess
+from aisdati.model.trainer import EpisodeLog, Trainer
 
 KEPT_PARAMETERS = ("forward_actor.", "time2vec.")
 """What a member ends with (and what `DATIConfig.actor_average` averages)."""
@@ -97,6 +100,18 @@ class DATIConfig:
     def noise_process(self) -> NoiseProcess:
         return NoiseProcess(self.noise, self.ou_dt)
 
+    def latent_noise(
+        self,
+        generators: Sequence[torch.Generator],
+        processes: Sequence[NoiseProcess] | None = None,
+        rows: int = 1,
+    ) -> LatentNoise:
+        """Latent noise of this configuration's width and σ for one stream per generator, each
+        with its process (default: the configuration's), `rows` rows per stream."""
+        processes = list(processes or [self.noise_process] * len(generators))
+        dim = self.network.latent_dim
+        return LatentNoise(generators, processes, dim, self.noise_sigma, self.ou_theta, rows)
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
@@ -113,101 +128,7 @@ class DATIConfig:
         return replace(self, network=replace(self.network, **changes))
 
 
-@dataclass(frozen=True)
-class NoiseProcess:
-    """One member's latent noise process: "gaussian" or "ou" with its time step."""
-
-    kind: str = "gaussian"
-    ou_dt: float = 1e-2
-
-
-@dataclass
-class EpisodeLog:
-    """What one member did in one training episode."""
-
-    member: int
-    seed: int
-    episode: int
-    steps: int
-    mean_reward: float
-    final_dtw: float
-    mean_loss: float
-    stopped: bool
-    validation: float | None = None
-    """The validation score of the episode's actor, when the trainer validates."""
-
-
-class LatentNoise:
-    """Per-member latent noise η_t ([E, 1, latent]), Gaussian or Ornstein-Uhlenbeck, each member
-    drawing from its own generator and reset at the start of its episodes. `processes` gives
-    each member its own process (default: the config's for all)."""
-
-    def __init__(
-        self,
-        cfg: DATIConfig,
-        generators: list[torch.Generator],
-        processes: Sequence[NoiseProcess] | None = None,
-    ):
-        self.cfg = cfg
-        self.generators = generators
-        self.processes = list(processes or [cfg.noise_process] * len(generators))
-        if len(self.processes) != len(generators):
-            raise ValueError("give one noise process per member")
-        self.state = torch.zeros(len(generators), 1, cfg.network.latent_dim)
-
-    def draw(self, k: int, rows: int = 1) -> Tensor:
-        """A [rows, latent] draw of N(0, σ²) from member k's generator."""
-        shape = (rows, self.cfg.network.latent_dim)
-        return torch.randn(shape, generator=self.generators[k]) * self.cfg.noise_sigma
-
-    def reset(self, k: int) -> None:
-        self.state[k].zero_()
-
-    def sample(self) -> Tensor:
-        for k, process in enumerate(self.processes):
-            if process.kind == "ou":
-                x, dt = self.state[k], process.ou_dt
-                self.state[k] = x - self.cfg.ou_theta * x * dt + self.draw(k) * np.sqrt(dt)
-            else:
-                self.state[k] = self.draw(k)
-        return self.state.clone()
-
-    def keep(self, idx: list[int]) -> None:
-        self.generators = [self.generators[i] for i in idx]
-        self.processes = [self.processes[i] for i in idx]
-        self.state = self.state[idx]
-
-
-class EnsembleReplayBuffer:
-    """A ring buffer per member, stored as [E, capacity, dim] tensors."""
-
-    FIELDS = ("state", "action", "perfect", "reward", "noise", "time")
-
-    def __init__(self, members: int, capacity: int, dims: dict[str, int]):
-        self.capacity = capacity
-        self.data = {k: torch.zeros(members, capacity, dims[k]) for k in self.FIELDS}
-        self.size = 0
-        self.ptr = 0
-
-    def add(self, **batch: Tensor) -> None:
-        """Append one transition per member; each value is [E, dim]."""
-        for key in self.FIELDS:
-            self.data[key][:, self.ptr] = batch[key]
-        self.ptr = (self.ptr + 1) % self.capacity
-        self.size = min(self.size + 1, self.capacity)
-
-    def sample(self, batch_size: int, generators: list[torch.Generator]) -> dict[str, Tensor]:
-        idx = torch.stack(
-            [torch.randint(self.size, (batch_size,), generator=g) for g in generators]
-        )
-        rows = torch.arange(len(generators))[:, None]
-        return {k: v[rows, idx] for k, v in self.data.items()}
-
-    def keep(self, idx: list[int]) -> None:
-        self.data = {k: v[idx] for k, v in self.data.items()}
-
-
-def _gradient_penalty(
+def gradient_penalty(
     critic: Callable[..., Tensor],
     real: Tensor,
     fake: Tensor,
@@ -221,7 +142,7 @@ def _gradient_penalty(
     return ((grad.norm(dim=-1) - 1) ** 2).mean(dim=1)
 
 
-class DATITrainer:
+class DATITrainer(Trainer[DATINetworks]):
     """Trains E DATI members, one per (environment, seed) pair, as one batched ensemble."""
 
     def __init__(
@@ -234,14 +155,12 @@ class DATITrainer:
     ):
         """`validate(trainer, k)`, when given, scores live member k at the end of each of its
         episodes (lower is better); the best actor and early stopping then follow that score
-        instead of the episode's loss (see `aisdati.ais.training` for the AIS one: the DTW of the
+        instead of the episode's loss (the AIS training's validator scores the DTW of the
         actor's rollouts on validation tracks). `noise` gives each member its own latent noise
         process (default: the config's)."""
-        if len(envs) != len(seeds) or not envs:
-            raise ValueError("give one environment per seed, at least one")
+        super().__init__(envs, seeds)
         self.cfg = config or DATIConfig()
         self.validate = validate
-        self.seeds = [int(s) for s in seeds]
         self.state_dim = envs[0].observation_space.shape[0] - 1
         self.decision_dim = envs[0].action_space.shape[0]
         self.nets = DATINetworks(self.state_dim, self.decision_dim, self.cfg.network, self.seeds)
@@ -249,11 +168,11 @@ class DATITrainer:
         self.average = copy.deepcopy(self.nets) if self.cfg.actor_average else None
         """The moving average of the live forward actors (`DATIConfig.actor_average`)."""
         self._build_optimizers()
-        # member-indexed state, compacted together when members leave the ensemble
+        # member-indexed state (envs, generators, noise, buffer, the running episodes),
+        # compacted together when members leave the ensemble
         self.active = list(range(len(seeds)))
-        self.envs = list(envs)
-        self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
-        self.noise = LatentNoise(self.cfg, self.generators, noise)
+        """The members still training, by their index in `seeds`."""
+        self.noise = self.cfg.latent_noise(self.generators, noise)
         dims = {
             "state": self.state_dim,
             "action": self.decision_dim,
@@ -264,13 +183,11 @@ class DATITrainer:
         }
         self.buffer = EnsembleReplayBuffer(len(seeds), self.cfg.buffer_capacity, dims)
         n = len(seeds)
-        self.episode = [0] * n
         self.best_loss = [float("inf")] * n
         self.wait = [0] * n
         self.best_episode = [0] * n
         self.pretrained_metric: list[float | None] = [None] * n
         """Each member's validation score right after `pretrain` (None without it)."""
-        self.history: list[EpisodeLog] = []
         self._obs = [env.reset(seed=s)[0] for env, s in zip(self.envs, self.seeds, strict=True)]
         self._episode_loss = [0.0] * n
         self._episode_reward = [0.0] * n
@@ -280,7 +197,11 @@ class DATITrainer:
     # ------------------------------------------------------------------ setup
     def _build_optimizers(self) -> None:
         c, nets = self.cfg, self.nets
-        actors = [*nets.forward_actor.parameters(), *nets.backward_actor.parameters(), *nets._t2v()]
+        actors = [
+            *nets.forward_actor.parameters(),
+            *nets.backward_actor.parameters(),
+            *nets.time2vec_parameters(),
+        ]
         self.opt_critic = torch.optim.Adam(
             nets.critic_parameters(), lr=c.lr_critic, betas=c.betas, fused=True
         )
@@ -291,7 +212,7 @@ class DATITrainer:
         """Seed each member's buffer with `batch_size` near-perfect decisions on its first
         reference, so that training can start at the first step."""
         b = self.cfg.batch_size
-        rows: dict[str, list[Tensor]] = {k: [] for k in EnsembleReplayBuffer.FIELDS}
+        rows: dict[str, list[Tensor]] = {k: [] for k in self.buffer.fields}
         for k, env in enumerate(self.envs):
             gen = self.generators[k]
             ref = env.reference
@@ -315,7 +236,7 @@ class DATITrainer:
             self.buffer.add(**{key: v[:, i] for key, v in stacked.items()})
 
     # --------------------------------------------------------------- training
-    def _train_batch(self) -> Tensor:
+    def train_batch(self) -> Tensor:
         """One training batch per member; returns each member's total loss [E]."""
         c, nets = self.cfg, self.nets
         batch = self.buffer.sample(c.batch_size, self.generators)
@@ -338,8 +259,8 @@ class DATITrainer:
             fake_b = nets.backward_critic_input(fake_s, a_hat)
             loss_f = (cf(fake_f, r, t).mean(1) - cf(real_f, r, t).mean(1)).squeeze(-1)
             loss_b = (cb(fake_b, r, t).mean(1) - cb(real_b, r, t).mean(1)).squeeze(-1)
-            loss_f = loss_f + c.gradient_penalty * _gradient_penalty(cf, real_f, fake_f, r, t, u_f)
-            loss_b = loss_b + c.gradient_penalty * _gradient_penalty(cb, real_b, fake_b, r, t, u_b)
+            loss_f = loss_f + c.gradient_penalty * gradient_penalty(cf, real_f, fake_f, r, t, u_f)
+            loss_b = loss_b + c.gradient_penalty * gradient_penalty(cb, real_b, fake_b, r, t, u_b)
             critic_loss = loss_f + loss_b
             self.opt_critic.zero_grad(set_to_none=True)
             critic_loss.sum().backward()
@@ -443,15 +364,14 @@ class DATITrainer:
 
     def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         obs = torch.as_tensor(np.stack(self._obs), dtype=torch.float32)[:, None, :]
-        state, t = obs[..., : self.state_dim], obs[..., self.state_dim :]
         eta = self.noise.sample()
-        with torch.no_grad():
-            action = self.nets.forward_actor(state, eta, self.nets.time_features(t))
-        return state[:, 0], action[:, 0], eta[:, 0], t[:, 0]
+        action = self.nets.decide(obs, eta)
+        state, t = obs[:, 0, : self.state_dim], obs[:, 0, self.state_dim :]
+        return state, action[:, 0], eta[:, 0], t
 
     def step(self) -> list[EpisodeLog]:
         """One environment step of every active member (with its training batch first)."""
-        losses = self._train_batch()
+        losses = self.train_batch()
         self._update_average(self.cfg.actor_average)
         state, action, eta, t = self._act()
         rewards, perfect, ended = [], [], []
@@ -474,7 +394,7 @@ class DATITrainer:
             time=t,
         )
         logs = [self._end_episode(k, dtw) for k, dtw in ended]
-        self._drop([k for (k, _), log in zip(ended, logs, strict=True) if log.stopped])
+        self.remove_members([k for (k, _), log in zip(ended, logs, strict=True) if log.stopped])
         return logs
 
     def running_episode(self, k: int) -> tuple[int, float]:
@@ -528,8 +448,9 @@ class DATITrainer:
                 if name.startswith(KEPT_PARAMETERS):
                     p[member].copy_(live[name][k])
 
-    def _drop(self, leaving: list[int]) -> None:
-        """Remove stopped members from the ensemble: slice weights, optimiser state, buffers."""
+    def remove_members(self, leaving: list[int]) -> None:
+        """Remove active members `leaving` (positions in `active`) from the ensemble: slice
+        weights, optimiser state, buffers, noise and the running episodes."""
         if not leaving:
             return
         keep = [k for k in range(len(self.active)) if k not in leaving]
@@ -557,15 +478,104 @@ class DATITrainer:
         for lst in (self._episode_loss, self._episode_reward, self._episode_steps):
             lst[:] = [lst[k] for k in keep]
 
+    # ---------------------------------------------------------------- resume
+    def state_dict(self) -> dict[str, Any]:
+        """Everything the next steps depend on, taken between two steps: the live, final and
+        averaged networks, the three Adam optimisers, the replay buffer, every random stream
+        (the members' generators, which also drive their latent noise, and the environments'
+        numpy generators), the latent noise, the episode counters, the early-stopping state,
+        the history, the current observations and each environment's running episode. Only
+        tensors, lists, dicts and numbers, so it loads with `torch.load(weights_only=True)`.
+        The references the environments are on are the caller's to save: see
+        `load_state_dict`."""
+        buffer = self.buffer.state_dict()
+        return {
+            "nets": self.nets.state_dict(),
+            "final": self.final.state_dict(),
+            "average": None if self.average is None else self.average.state_dict(),
+            "opt_critic": self.opt_critic.state_dict(),
+            "opt_actor": self.opt_actor.state_dict(),
+            "opt_l1": self.opt_l1.state_dict(),
+            "buffer": buffer["data"],
+            "buffer_size": buffer["size"],
+            "buffer_ptr": buffer["ptr"],
+            "generators": [g.get_state() for g in self.generators],
+            "env_rng": [env.np_random.bit_generator.state for env in self.envs],
+            "env_episodes": [
+                _map_leaves(env.episode_state(), np.ndarray, torch.as_tensor) for env in self.envs
+            ],
+            "noise": self.noise.state.clone(),
+            "active": list(self.active),
+            "episode": list(self.episode),
+            "best_loss": list(self.best_loss),
+            "wait": list(self.wait),
+            "best_episode": list(self.best_episode),
+            "pretrained_metric": list(self.pretrained_metric),
+            "history": [dict(log.__dict__) for log in self.history],
+            "obs": [torch.as_tensor(o) for o in self._obs],
+            "episode_loss": list(self._episode_loss),
+            "episode_reward": list(self._episode_reward),
+            "episode_steps": list(self._episode_steps),
+        }
+
+    def load_state_dict(self, state: dict[str, Any], references: Sequence[Reference]) -> None:
+        """Continue exactly from `state_dict`, in a trainer freshly built with the same
+        environments, seeds and configuration; `references[k]` is the reference that active
+        member k's environment was on (each environment is reset onto it, then given its
+        running episode: the members of an ensemble end their episodes at different steps)."""
+        active = [int(a) for a in state["active"]]
+        if len(active) < len(self.active):
+            self.remove_members([k for k, m in enumerate(self.active) if m not in active])
+        self.nets.load_state_dict(state["nets"])
+        self.final.load_state_dict(state["final"])
+        if self.average is not None:
+            self.average.load_state_dict(state["average"])
+        self.opt_critic.load_state_dict(state["opt_critic"])
+        self.opt_actor.load_state_dict(state["opt_actor"])
+        self.opt_l1.load_state_dict(state["opt_l1"])
+        self.buffer.load_state_dict(
+            {"data": state["buffer"], "size": state["buffer_size"], "ptr": state["buffer_ptr"]}
+        )
+        for g, s in zip(self.generators, state["generators"], strict=True):
+            g.set_state(s)
+        episodes = state.get("env_episodes") or [None] * len(references)  # older: all at t = 0
+        for env, ref, rng_state, episode in zip(
+            self.envs, references, state["env_rng"], episodes, strict=True
+        ):
+            env.reset(options={"reference": ref})
+            env.np_random.bit_generator.state = rng_state
+            if episode is not None:
+                env.load_episode_state(_map_leaves(episode, torch.Tensor, torch.Tensor.numpy))
+        self.noise.state = state["noise"].clone()
+        self.episode = [int(x) for x in state["episode"]]
+        self.best_loss = [float(x) for x in state["best_loss"]]
+        self.wait = [int(x) for x in state["wait"]]
+        self.best_episode = [int(x) for x in state["best_episode"]]
+        self.pretrained_metric = list(state.get("pretrained_metric", self.pretrained_metric))
+        self.history = [EpisodeLog(**h) for h in state["history"]]
+        self._obs = [o.numpy().copy() for o in state["obs"]]
+        self._episode_loss = [float(x) for x in state["episode_loss"]]
+        self._episode_reward = [float(x) for x in state["episode_reward"]]
+        self._episode_steps = [int(x) for x in state["episode_steps"]]
+
     @property
     def done(self) -> bool:
         return not self.active
 
-    def train(self, on_step: Callable[[list[EpisodeLog]], None] | None = None) -> DATINetworks:
-        """Run until every member has stopped; returns the networks holding each member's kept
-        (best or final) forward actor."""
-        while not self.done:
-            logs = self.step()
-            if on_step is not None:
-                on_step(logs)
+    def model(self) -> DATINetworks:
+        """The networks holding each member's kept (best or final) forward actor."""
         return self.final
+
+
+def _map_leaves(state: dict[str, Any], kind: type, to: Callable[[Any], Any]) -> dict[str, Any]:
+    """`state` with every `kind` leaf (nested dicts included) passed through `to`: an
+    environment's numpy arrays become tensors for a checkpoint (`weights_only` loads no numpy)
+    and back."""
+    out: dict[str, Any] = {}
+    for key, value in state.items():
+        if isinstance(value, dict):
+            value = _map_leaves(value, kind, to)
+        elif isinstance(value, kind):
+            value = to(value)
+        out[key] = value
+    return out

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -34,10 +34,12 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from aisdati.model.dati import EnsembleReplayBuffer
+from aisdati.model.buffers import EnsembleReplayBuffer
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import EnsembleLinear, MLPTrunk, NetworkConfig, SplitLinear, Time2Vec
+from aisdati.model.noise import OUNoise, ou_step
 from aisdati.model.rollout import Act, seed_generator
+from aisdati.model.trainer import EpisodeLog, Trainer
 
 
 @dataclass(frozen=True)
@@ -142,36 +144,7 @@ class DDPGTIActor(nn.Module):
         return self.head(self.features(obs))
 
 
-def ou_step(cfg: DDPGTIConfig, x: Any, draws: Any) -> Any:
-    """One step of the Ornstein-Uhlenbeck process with mean 0 (SB3's
-    `OrnsteinUhlenbeckActionNoise`) from x, given standard normal draws of its shape."""
-    return x + cfg.noise_theta * -x * cfg.noise_dt + cfg.noise_sigma * np.sqrt(cfg.noise_dt) * draws
-
-
-class OUNoise:
-    """Ornstein-Uhlenbeck noise per member (`ou_step`, started and reset at 0), each member
-    drawing from its own generator."""
-
-    def __init__(self, cfg: DDPGTIConfig, members: int, dim: int):
-        self.cfg = cfg
-        self.state = torch.zeros(members, dim)
-
-    def sample(self, generators: Sequence[torch.Generator]) -> Tensor:
-        draws = torch.stack([torch.randn(self.state.shape[1], generator=g) for g in generators])
-        self.state = ou_step(self.cfg, self.state, draws)
-        return self.state
-
-    def reset(self, k: int) -> None:
-        self.state[k] = 0.0
-
-
-class TransitionBuffer(EnsembleReplayBuffer):
-    """SB3's replay of (obs, decision, reward, next obs, done), one ring per member."""
-
-    FIELDS = ("obs", "action", "reward", "next_obs", "done")
-
-
-class DDPGTITrainer:
+class DDPGTITrainer(Trainer[DDPGTIActor]):
     """Trains E DDPG-TI members, one per (environment, seed), as one ensemble in lockstep."""
 
     def __init__(
@@ -180,13 +153,10 @@ class DDPGTITrainer:
         seeds: Sequence[int],
         config: DDPGTIConfig | None = None,
     ):
-        if len(envs) != len(seeds) or not envs:
-            raise ValueError("give one environment per seed, at least one")
+        super().__init__(envs, seeds)
         if len({env.source.max_steps for env in envs}) > 1:
             raise ValueError("members of one DDPG-TI ensemble need episodes of equal length")
         self.cfg = c = config or DDPGTIConfig()
-        self.envs = list(envs)
-        self.seeds = [int(s) for s in seeds]
         obs_dim = envs[0].observation_space.shape[0]
         k = envs[0].action_space.shape[0]
         gens = [torch.Generator().manual_seed(s) for s in self.seeds]
@@ -202,16 +172,17 @@ class DDPGTITrainer:
             p.requires_grad_(False)
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=c.lr_actor, fused=True)
         self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=c.lr_critic, fused=True)
-        self.generators = [torch.Generator().manual_seed(s + 1) for s in self.seeds]
-        self.noise = OUNoise(c, len(envs), k)
+        self.noise = OUNoise(len(envs), k, c.noise_sigma, c.noise_theta, c.noise_dt)
         dims = {"obs": obs_dim, "action": k, "reward": 1, "next_obs": obs_dim, "done": 1}
-        self.buffer = TransitionBuffer(len(envs), c.buffer_size, dims)
+        self.buffer = EnsembleReplayBuffer(len(envs), c.buffer_size, dims)
         self._obs = np.stack(
             [env.reset(seed=s)[0] for env, s in zip(envs, self.seeds, strict=True)]
         )
         self.timesteps = 0
         self.updates = 0
-        self.episodes = [0] * len(envs)
+        self._episode_reward = np.zeros(len(envs))
+        self._episode_loss = torch.zeros(len(envs))
+        self._episode_updates = np.zeros(len(envs), dtype=int)
 
     def _decide(self) -> Tensor:
         """Each member's decision for its current observation: uniform in [−1, 1] while fewer
@@ -225,18 +196,19 @@ class DDPGTITrainer:
                 action = self.actor(obs)[:, 0]
         return (action + self.noise.sample(self.generators)).clamp(-1.0, 1.0)
 
-    def step(self) -> list[int]:
+    def step(self) -> list[EpisodeLog]:
         """One environment step of every member, then one update once past `learning_starts`;
-        returns the members whose episode ended."""
+        logs the episodes that ended (their mean loss: critic plus actor, over the episode's
+        updates, NaN before the first)."""
         action = self._decide()
         next_obs, rewards, dones, ended = [], [], [], []
         for k, env in enumerate(self.envs):
-            obs, reward, terminated, truncated, _ = env.step(action[k].numpy())
+            obs, reward, terminated, truncated, info = env.step(action[k].numpy())
             next_obs.append(obs)  # the terminal observation when the episode ends
             rewards.append(reward)
             dones.append(float(terminated))  # a time limit is not a terminal state (SB3)
             if terminated or truncated:
-                ended.append(k)
+                ended.append((k, info["dtw_smoothed"]))
         self.timesteps += 1
         self.buffer.add(
             obs=torch.as_tensor(self._obs, dtype=torch.float32),
@@ -246,13 +218,33 @@ class DDPGTITrainer:
             done=torch.tensor(dones, dtype=torch.float32)[:, None],
         )
         self._obs = np.stack(next_obs)
-        for k in ended:
-            self.episodes[k] += 1
-            self.noise.reset(k)
-            self._obs[k] = self.envs[k].reset()[0]
+        self._episode_reward += rewards
         if self.timesteps > self.cfg.learning_starts:
-            self.update(self.buffer.sample(self.cfg.batch_size, self.generators))
-        return ended
+            critic, actor = self.update(self.buffer.sample(self.cfg.batch_size, self.generators))
+            self._episode_loss += critic + actor
+            self._episode_updates += 1
+        return [self._end_episode(k, dtw) for k, dtw in ended]
+
+    def _end_episode(self, k: int, final_dtw: float) -> EpisodeLog:
+        self.episode[k] += 1
+        self.noise.reset(k)
+        steps = self.envs[k].t
+        self._obs[k] = self.envs[k].reset()[0]
+        updates = int(self._episode_updates[k])
+        loss = float(self._episode_loss[k]) / updates if updates else float("nan")
+        log = EpisodeLog(
+            k,
+            self.seeds[k],
+            self.episode[k],
+            steps,
+            float(self._episode_reward[k]) / steps,
+            final_dtw,
+            loss,
+            self.episode[k] >= self.cfg.episodes,
+        )
+        self.history.append(log)
+        self._episode_reward[k], self._episode_loss[k], self._episode_updates[k] = 0.0, 0.0, 0
+        return log
 
     def update(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
         """One gradient step of every member on its batch ([E, B, ·] per field), as SB3's
@@ -295,13 +287,11 @@ class DDPGTITrainer:
                 torch._foreach_mul_(target, 1 - tau)
                 torch._foreach_add_(target, live, alpha=tau)
 
-    def train(self, on_episode: Callable[[int, int], None] | None = None) -> DDPGTIActor:
-        """`episodes` episodes of every member; `on_episode(k, n)` after member k's n-th."""
-        total = self.cfg.episodes * self.envs[0].source.max_steps
-        while self.timesteps < total:
-            for k in self.step():
-                if on_episode is not None:
-                    on_episode(k, self.episodes[k])
+    @property
+    def done(self) -> bool:
+        return self.timesteps >= self.cfg.episodes * self.envs[0].source.max_steps
+
+    def model(self) -> DDPGTIActor:
         return self.actor
 
 
@@ -320,7 +310,7 @@ def ddpg_ti_act(
         if not cfg.inference_noise:
             return out
         draws = np.stack([[torch.randn(k, generator=g).numpy() for g in row] for row in gens])
-        state[:] = ou_step(cfg, state, draws)
+        state[:] = ou_step(state, draws, cfg.noise_theta, cfg.noise_dt, cfg.noise_sigma)
         return np.clip(out + state, -1.0, 1.0)
 
     return act

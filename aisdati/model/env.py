@@ -8,8 +8,8 @@ else -1. A move that would leave the region keeps the agent where it is ("sticki
 
 Observation: (x, y) of the agent scaled into [0, 1] by the region's box, and the step index t.
 The references, the region and the DTW normalisation come from a `ReferenceSource`, so the same
-environment serves the synthetic families (aisdati.selftest.sources) and real AIS tracks
-(aisdati.ais.training): this module knows neither.
+environment serves the self-test's synthetic families and real AIS tracks: this module knows
+neither.
 """
 
 from __future__ import annotations

@@ -237,15 +237,33 @@ class DATINetworks(nn.Module):
     def members(self) -> int:
         return len(self.seeds)
 
-    def actor_parameters(self) -> list[nn.Parameter]:
-        return [*self.forward_actor.parameters(), *self.backward_actor.parameters(), *self._t2v()]
+    @property
+    def state_dim(self) -> int:
+        return self.forward_actor.input_features.weight.shape[1]
+
+    @property
+    def decision_dim(self) -> int:
+        return self.forward_actor.out.weight.shape[2]
+
+    def decide(self, obs: Tensor, noise: Tensor) -> Tensor:
+        """The forward actors' decisions [E, B, k] (scaled into [-1, 1]) for observations
+        [E, B, state + 1] (the state features, then the time input) and latent noise
+        [E, B, latent], without gradient: how the trainer and every rollout act."""
+        state, t = obs[..., : self.state_dim], obs[..., self.state_dim :]
+        with torch.no_grad():
+            time = self.time_features(t.contiguous())
+            return self.forward_actor(state.contiguous(), noise, time)
 
     def critic_parameters(self) -> list[nn.Parameter]:
-        return [*self.forward_critic.parameters(), *self.backward_critic.parameters(), *self._t2v()]
+        return [
+            *self.forward_critic.parameters(),
+            *self.backward_critic.parameters(),
+            *self.time2vec_parameters(),
+        ]
 
     def policy_parameters(self) -> list[nn.Parameter]:
         """What a rollout needs: the forward actor and its Time2Vec."""
-        return [*self.forward_actor.parameters(), *self._t2v()]
+        return [*self.forward_actor.parameters(), *self.time2vec_parameters()]
 
     def project_(self) -> None:
         """Re-impose the critics' non-negative reward kernels after an optimiser step."""
@@ -253,5 +271,6 @@ class DATINetworks(nn.Module):
             if critic.reward_features is not None:
                 critic.reward_features.project_()
 
-    def _t2v(self) -> list[nn.Parameter]:
+    def time2vec_parameters(self) -> list[nn.Parameter]:
+        """The shared Time2Vec layer's parameters (none without time embedding)."""
         return list(self.time2vec.parameters()) if self.time2vec is not None else []

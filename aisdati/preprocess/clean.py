@@ -10,16 +10,15 @@ dropping rows, so each dropped row is counted under one reason.
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 import pyarrow as pa
 
-from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg
+from aisdati.geo import haversine_m, haversine_one_m, initial_bearing_deg
 from aisdati.preprocess.report import CODE
 from aisdati.preprocess.roi import in_roi
 from aisdati.preprocess.settings import IngestSettings
+from aisdati.tracks.schema import KNOT_MPS
 
 SENTINEL_LAT = 91.0
 SENTINEL_LON = 181.0
@@ -32,8 +31,6 @@ not read, since the pipeline does not use it, so it rejects nothing)."""
 POSITION_TOLERANCE_M = 50.0
 """Slack on the implied-speed test: GPS noise and whole-second timestamps make two honest
 reports a few seconds apart look faster than they are."""
-
-KNOT_MPS = 1852.0 / 3600.0
 
 
 def _mark(codes: np.ndarray, mask: np.ndarray, reason: str) -> None:
@@ -80,14 +77,7 @@ reference was the outlier (a bad first report), and those reports are kept from 
 @numba.njit(cache=True)
 def _too_fast(i, j, time_us, lon, lat, max_mps, tolerance_m):
     """Whether report j cannot be reached from report i at `max_mps` (plus GPS tolerance)."""
-    to_rad = math.pi / 180.0
-    lat1 = lat[i] * to_rad
-    lat2 = lat[j] * to_rad
-    a = (
-        math.sin((lat2 - lat1) / 2) ** 2
-        + math.cos(lat1) * math.cos(lat2) * math.sin((lon[j] - lon[i]) * to_rad / 2) ** 2
-    )
-    dist = 2 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(a, 0.0), 1.0)))
+    dist = haversine_one_m(lon[i], lat[i], lon[j], lat[j])
     return dist > max_mps * abs(time_us[j] - time_us[i]) / 1e6 + tolerance_m
 
 

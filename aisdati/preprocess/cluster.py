@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-CLUSTERS = ("up", "down", "other")
-
 
 def is_up(cog_deg: np.ndarray) -> np.ndarray:
     """Per report: is the course within [-90, 90] deg (COG normalised into [0, 360))?"""

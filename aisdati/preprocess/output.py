@@ -1,6 +1,8 @@
-"""The ingest outputs (DESIGN.md's data contracts) and how they reach the disk: every file is
-written under a temporary name in the output folder and renamed only once the run succeeded, so
-an interrupted or failed run never leaves a half-written `points.parquet`."""
+"""The ingest outputs (their contracts are `aisdati.tracks.schema`'s) and how they reach the
+disk: every file is written under a temporary name in the run's staging folder and renamed to
+its name there once the run succeeded (`commit_all`); the staging folder then lands in --out as
+one set (`aisdati.outdir.staged_outputs`). An interrupted or failed run never leaves a
+half-written `points.parquet`, nor a new `points.parquet` beside an earlier run's tracks."""
 
 from __future__ import annotations
 
@@ -16,56 +18,11 @@ import shapely
 
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m
-from aisdati.options import raise_if_interrupted
+from aisdati.interrupts import raise_if_interrupted
+from aisdati.outdir import temporary_path
 from aisdati.preprocess.cluster import cluster_tracks
-
-UTC_US = pa.timestamp("us", tz="UTC")
-POINTS_SCHEMA = pa.schema(
-    [
-        ("track_id", pa.int64()),
-        ("mmsi", pa.int64()),
-        ("time", UTC_US),
-        ("lon", pa.float64()),
-        ("lat", pa.float64()),
-        ("sog", pa.float32()),
-        ("cog", pa.float32()),
-    ]
-)
-TRACKS_SCHEMA = pa.schema(
-    [
-        ("track_id", pa.int64()),
-        ("mmsi", pa.int64()),
-        ("start", UTC_US),
-        ("end", UTC_US),
-        ("n_points", pa.int64()),
-        ("length_km", pa.float64()),
-        ("cluster", pa.string()),
-        ("lon0", pa.float64()),
-        ("lat0", pa.float64()),
-        ("route", pa.string()),
-        ("stage", pa.string()),
-        ("geometry", pa.binary()),
-    ]
-)
-REJECTS_SCHEMA = pa.schema(
-    [
-        ("source", pa.string()),
-        ("reason", pa.string()),
-        ("mmsi", pa.int64()),
-        ("time", UTC_US),
-        ("lon", pa.float64()),
-        ("lat", pa.float64()),
-        ("sog", pa.float64()),
-        ("cog", pa.float64()),
-        ("raw", pa.string()),
-    ]
-)
-GEO_METADATA = {
-    "version": "1.1.0",
-    "primary_column": "geometry",
-    "columns": {"geometry": {"encoding": "WKB", "geometry_types": ["LineString"]}},
-}
-"""GeoParquet metadata of tracks.parquet; no `crs` means OGC:CRS84 (WGS84 lon/lat)."""
+from aisdati.preprocess.routes import ROUTE_FILES
+from aisdati.tracks.schema import GEO_METADATA, POINTS_SCHEMA, TRACKS_SCHEMA, UTC_US
 
 
 def build_tracks(
@@ -129,18 +86,17 @@ OUTPUT_NAMES = (
     "tracks.parquet",
     "ingest_report.json",
     "rejects.parquet",
-    "routes.parquet",
-    "routes.geojson",
-    "routes.png",
+    *ROUTE_FILES,
 )
-"""Every file ingest may write into its output folder."""
+"""Every file ingest may write into its output folder: a run replaces them as one set and
+removes those of an earlier run it does not write (no `--keep-rejects`, `--clusters direction`)."""
+REPORT_NAME = "ingest_report.json"
+"""The report of the set, written last."""
 
 
 def commit_all(staged: list[StagedFile]) -> None:
-    """Rename every staged file to its final name; if one rename fails (the final name became a
-    folder, the disk went read-only), the temporaries left are removed and the failure is one
-    `UserError`. Renames are atomic one by one, not as a set: the output folder is checked
-    beforehand (`prepare_output_dir`) so that this does not happen in practice."""
+    """Rename every staged file to its final name in the staging folder; if one rename fails,
+    the temporaries left are removed and the failure is one `UserError`."""
     raise_if_interrupted()
     for i, f in enumerate(staged):
         try:
@@ -156,7 +112,7 @@ class StagedFile:
 
     def __init__(self, final: Path) -> None:
         self.final = final
-        self.tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+        self.tmp = temporary_path(final)
 
     def commit(self) -> None:
         os.replace(self.tmp, self.final)

@@ -4,17 +4,38 @@ Cleaning and segmentation need all of a vessel's reports in time order, but a mo
 not fit in memory. Rows that survive the row-wise filters are spilled to `n` Arrow IPC files by a
 hash of their MMSI, so each file holds whole vessels and can be processed on its own (by this
 process today, by a distributed engine mapping the same functions tomorrow).
+
+One vessel can still send more rows than memory holds (a zip bomb of one MMSI). A partition of
+more than `max_rows` rows is therefore split again, in passes over its file that each hold one
+record batch (plus a few numbers per vessel, and a time histogram per large vessel: one pass to
+count the vessels, one per 16 large ones to place their cuts, one to spill the pieces), into
+pieces of at most a quarter of that (`PIECES_PER_BOUND`: a flood that overflows its partition
+then costs well under the memory of a full one), given in (MMSI, time) order: whole vessels by
+MMSI, and the history of a vessel with more rows than a piece holds cut at times. The per-vessel
+stages see a vessel's reports on both sides of a gap longer than `gap_s` independently (its
+track ends there, the outlier test and the derived speeds start anew, a stop cannot span it), so
+where such gaps allow, the pieces give exactly the results of the whole partition. A vessel
+reporting without such a gap for more than a piece's rows is cut anyway, at a time: its track
+is split there. Reports at one and the same time are never split up.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+PIECES_PER_BOUND = 4
+MAX_BINS = 1 << 18
+"""Time bins of the histogram in which a large vessel's cuts are sought (2 MiB of counts; for two
+months of reports, bins of 20 seconds)."""
+HISTOGRAMS_PER_PASS = 16
+"""Large vessels whose histograms one pass over a partition file builds (32 MiB at most)."""
 
 
 def partition_of(mmsi: np.ndarray, n: int) -> np.ndarray:
@@ -26,12 +47,23 @@ def partition_of(mmsi: np.ndarray, n: int) -> np.ndarray:
 
 class VesselPartitions:
     """`n` spill files under `folder`; `write` splits a table between them, iterating reads each
-    back as one table (and deletes it)."""
+    back as one table (and deletes it), splitting those of more than `max_rows` rows into
+    pieces in (MMSI, time) order (see the module docstring)."""
 
-    def __init__(self, folder: Path, n: int, schema: pa.Schema) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        n: int,
+        schema: pa.Schema,
+        max_rows: int | None = None,
+        gap_s: float = math.inf,
+    ) -> None:
         self.paths = [folder / f"part-{i:04d}.arrow" for i in range(n)]
         self.schema = schema
+        self.max_rows = max_rows
+        self.gap_us = math.ceil(gap_s * 1e6) if math.isfinite(gap_s) else None
         self._writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+        self._rows = np.zeros(n, dtype=np.int64)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -40,12 +72,9 @@ class VesselPartitions:
         if table.num_rows == 0:
             return
         part = partition_of(table.column("mmsi").to_numpy(), len(self.paths))
-        order = np.argsort(part, kind="stable")
-        bounds = np.r_[0, np.cumsum(np.bincount(part, minlength=len(self.paths)))]
-        table = table.take(pa.array(order))
-        for i in np.flatnonzero(np.diff(bounds)):
-            chunk = table.slice(bounds[i], bounds[i + 1] - bounds[i])
-            self._writer(int(i)).write_table(chunk)
+        for i, chunk in split_rows(table, part, len(self.paths)):
+            self._writer(i).write_table(chunk)
+            self._rows[i] += chunk.num_rows
 
     def _writer(self, i: int) -> pa.ipc.RecordBatchStreamWriter:
         if i not in self._writers:
@@ -57,12 +86,182 @@ class VesselPartitions:
             writer.close()
 
     def __iter__(self) -> Iterator[pa.Table]:
-        """Each partition as one table, in a fixed order (empty ones as empty tables)."""
+        """Each partition as one table (or, when large, as pieces in (MMSI, time) order), in a
+        fixed order (empty ones as empty tables)."""
         for i, path in enumerate(self.paths):
             if i not in self._writers:
                 yield self.schema.empty_table()
-                continue
-            with pa.OSFile(str(path)) as f:
+            elif self.max_rows is not None and self._rows[i] > self.max_rows:
+                yield from self._pieces(path, self.max_rows // PIECES_PER_BOUND)
+            else:
+                with pa.OSFile(str(path)) as f:
+                    table = pa.ipc.open_stream(f).read_all()
+                path.unlink()
+                yield table
+
+    def _pieces(self, path: Path, piece_rows: int) -> Iterator[pa.Table]:
+        """A large partition's pieces, each read whole (and deleted) in turn."""
+        plan = plan_pieces(path, max(piece_rows, 1), self.gap_us)
+        paths = [path.with_name(f"{path.stem}-piece-{k:05d}.arrow") for k in range(plan.count)]
+        writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+        for batch in _batches(path):
+            table = pa.Table.from_batches([batch])
+            for k, chunk in split_rows(table, plan.piece_of(batch), plan.count):
+                if k not in writers:
+                    writers[k] = pa.ipc.new_stream(str(paths[k]), self.schema)
+                writers[k].write_table(chunk)
+        for writer in writers.values():
+            writer.close()
+        path.unlink()
+        for k in sorted(writers):
+            with pa.OSFile(str(paths[k])) as f:
                 table = pa.ipc.open_stream(f).read_all()
-            path.unlink()
+            paths[k].unlink()
             yield table
+
+
+def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int, pa.Table]]:
+    """The rows of `table` by their part number (0 .. n - 1), each part in the table's order."""
+    order = np.argsort(part, kind="stable")
+    bounds = np.r_[0, np.cumsum(np.bincount(part, minlength=n))]
+    table = table.take(pa.array(order))
+    for i in np.flatnonzero(np.diff(bounds)):
+        yield int(i), table.slice(bounds[i], bounds[i + 1] - bounds[i])
+
+
+def _batches(path: Path) -> Iterator[pa.RecordBatch]:
+    with pa.OSFile(str(path)) as f:
+        yield from pa.ipc.open_stream(f)
+
+
+def _keys(batch: pa.RecordBatch) -> tuple[np.ndarray, np.ndarray]:
+    """The MMSIs and times (microseconds) of a batch's rows."""
+    mmsi = batch.column("mmsi").to_numpy()
+    return mmsi, batch.column("time").to_numpy().view(np.int64)
+
+
+@dataclass(frozen=True)
+class PiecePlan:
+    """Where a partition's rows go: `first_piece[v]` is the piece of the v-th of the sorted
+    `mmsi`, and of a vessel with time cuts (`cuts[v]`, sorted) its first piece."""
+
+    mmsi: np.ndarray
+    first_piece: np.ndarray
+    cuts: dict[int, np.ndarray]
+    count: int
+
+    def piece_of(self, batch: pa.RecordBatch) -> np.ndarray:
+        mmsi, time_us = _keys(batch)
+        vessel = np.searchsorted(self.mmsi, mmsi)
+        piece = self.first_piece[vessel]
+        for v, cuts in self.cuts.items():
+            rows = np.flatnonzero(vessel == v)
+            piece[rows] += np.searchsorted(cuts, time_us[rows], side="right")
+        return piece
+
+
+def plan_pieces(path: Path, max_rows: int, gap_us: int | None) -> PiecePlan:
+    """Pieces of at most about `max_rows` rows: vessels packed whole in MMSI order, and a vessel
+    of more rows cut at times (`vessel_cuts`)."""
+    mmsi, counts, first, last = _vessel_spans(path)
+    cuts = time_cuts(path, mmsi, first, last, np.flatnonzero(counts > max_rows), max_rows, gap_us)
+    first_piece = np.zeros(len(mmsi), dtype=np.int64)
+    piece, rows = 0, 0
+    for v in range(len(mmsi)):
+        if rows and (v in cuts or rows + counts[v] > max_rows):
+            piece, rows = piece + 1, 0
+        first_piece[v] = piece
+        if v in cuts:
+            piece += len(cuts[v]) + 1
+        else:
+            rows += int(counts[v])
+    return PiecePlan(mmsi, first_piece, cuts, piece + 1 if rows else piece)
+
+
+def time_cuts(
+    path: Path,
+    mmsi: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+    large: np.ndarray,
+    max_rows: int,
+    gap_us: int | None,
+) -> dict[int, np.ndarray]:
+    """The cut times (`vessel_cuts`) of each of the `large` vessels (indices into the sorted
+    `mmsi`), from histograms of their times built `HISTOGRAMS_PER_PASS` at a time."""
+    cuts: dict[int, np.ndarray] = {}
+    for start in range(0, len(large), HISTOGRAMS_PER_PASS):
+        bins = {
+            int(v): _Bins(int(first[v]), int(last[v]))
+            for v in large[start : start + HISTOGRAMS_PER_PASS]
+        }
+        for batch in _batches(path):
+            ids, time_us = _keys(batch)
+            vessel = np.searchsorted(mmsi, ids)
+            for v, hist in bins.items():
+                hist.add(time_us[vessel == v])
+        cuts |= {v: vessel_cuts(hist, max_rows, gap_us) for v, hist in bins.items()}
+    return cuts
+
+
+def _vessel_spans(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sorted MMSIs of a partition file, and each one's row count, first and last time."""
+    parts = []
+    for batch in _batches(path):
+        parts.append(_spans(*_keys(batch), np.ones(batch.num_rows, dtype=np.int64)))
+    mmsi, counts, first, last = (np.concatenate(a) for a in zip(*parts, strict=True))
+    return _spans(mmsi, first, counts, last)
+
+
+def _spans(
+    mmsi: np.ndarray, first: np.ndarray, counts: np.ndarray, last: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rows (or partial spans) grouped by MMSI: (MMSI, count, min first, max last)."""
+    last = first if last is None else last
+    order = np.argsort(mmsi, kind="stable")
+    mmsi, first, last, counts = mmsi[order], first[order], last[order], counts[order]
+    starts = np.flatnonzero(np.r_[True, mmsi[1:] != mmsi[:-1]])
+    return (
+        mmsi[starts],
+        np.add.reduceat(counts, starts),
+        np.minimum.reduceat(first, starts),
+        np.maximum.reduceat(last, starts),
+    )
+
+
+class _Bins:
+    """A histogram of one vessel's report times: `MAX_BINS` bins (or one per microsecond)."""
+
+    def __init__(self, first_us: int, last_us: int) -> None:
+        self.start = first_us
+        self.width = max(1, math.ceil((last_us - first_us + 1) / MAX_BINS))
+        self.counts = np.zeros((last_us - first_us) // self.width + 1, dtype=np.int64)
+
+    def add(self, time_us: np.ndarray) -> None:
+        self.counts += np.bincount((time_us - self.start) // self.width, minlength=len(self.counts))
+
+
+def vessel_cuts(bins: _Bins, max_rows: int, gap_us: int | None) -> np.ndarray:
+    """Times at which to cut one vessel's history into pieces of at most about `max_rows` rows:
+    in a gap longer than `gap_us` where one lies in reach (a bin boundary after enough empty bins
+    that the reports on either side are more than `gap_us` apart), else at the last bin boundary
+    in reach. A bin of more rows than `max_rows` is a piece of its own."""
+    cum = np.r_[0, np.cumsum(bins.counts)]  # rows before each bin boundary
+    n = len(bins.counts)
+    safe = np.zeros(n + 1, dtype=bool)
+    if gap_us is not None:
+        need = math.ceil(gap_us / bins.width)  # empty bins before a boundary, for a safe cut
+        busy = np.r_[0, np.cumsum(bins.counts > 0)]
+        j = np.arange(need, n + 1)
+        safe[j] = busy[j] == busy[j - need]
+    safe_at = np.flatnonzero(safe)
+    cuts, at = [], 0
+    while cum[n] - cum[at] > max_rows:
+        reach = int(np.searchsorted(cum, cum[at] + max_rows, side="right")) - 1
+        k = int(np.searchsorted(safe_at, reach, side="right")) - 1
+        cut = int(safe_at[k]) if k >= 0 and safe_at[k] > at else reach
+        if cut <= at:  # the next bin alone holds more than max_rows
+            cut = at + 1
+        cuts.append(cut)
+        at = cut
+    return bins.start + np.asarray(cuts, dtype=np.int64) * bins.width

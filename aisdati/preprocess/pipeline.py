@@ -23,13 +23,13 @@ import pyarrow as pa
 from rich.progress import Progress
 
 from aisdati.errors import UserError
-from aisdati.options import hold_lock, prepare_output_dir
+from aisdati.outdir import OutputSet, hold_lock, staged_outputs
 from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
+from aisdati.preprocess.convert import PARTITION_SCHEMA, to_canonical
+from aisdati.preprocess.inputs import Source, describe_read_error, sources_of
 from aisdati.preprocess.output import (
     OUTPUT_NAMES,
-    POINTS_SCHEMA,
-    REJECTS_SCHEMA,
-    TRACKS_SCHEMA,
+    REPORT_NAME,
     StagedFile,
     StagedParquet,
     build_tracks,
@@ -38,18 +38,9 @@ from aisdati.preprocess.output import (
     write_tracks,
 )
 from aisdati.preprocess.partition import VesselPartitions
-from aisdati.preprocess.read import (
-    PARTITION_SCHEMA,
-    READ_ERRORS,
-    Source,
-    SourceReader,
-    describe_read_error,
-    sources_of,
-    to_canonical,
-)
+from aisdati.preprocess.read import TableReader, open_reader
 from aisdati.preprocess.report import REASONS, IngestCounts, no_tracks_message
 from aisdati.preprocess.routes import (
-    ROUTE_FILES,
     route_summary,
     route_tracks,
     write_routes,
@@ -58,6 +49,8 @@ from aisdati.preprocess.routes import settings_of as route_settings
 from aisdati.preprocess.segment import segment
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.preprocess.stops import dwell_rules
+from aisdati.preprocess.streams import READ_ERRORS
+from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, TRACKS_SCHEMA
 
 MAX_PARTITIONS = 256
 
@@ -96,76 +89,96 @@ def ingest(
     progress: Progress | None = None,
 ) -> IngestResult:
     """Run the whole pipeline on local files and write points.parquet, tracks.parquet,
-    ingest_report.json (and rejects.parquet) into `out_dir`. Raises `UserError` for bad input;
-    nothing is left under a final name unless the run succeeded."""
+    ingest_report.json (and rejects.parquet, the route files) into `out_dir`, as one set
+    (`aisdati.outdir.staged_outputs`). Raises `UserError` for bad input; `out_dir` is left as it
+    was unless the run succeeded."""
     started = time.perf_counter()
     if settings.min_points < 2:
         raise UserError("--min-points must be at least 2 (a track is a line)")
     _check_route_settings(settings)
     sources = [s for path in inputs for s in sources_of(path)]
-    readers = [SourceReader(s) for s in sources]  # every header checked before any work
+    readers = [open_reader(s) for s in sources]  # every header checked before any work
+    with staged_outputs(out_dir, OUTPUT_NAMES, REPORT_NAME) as outputs:
+        staged: list[StagedFile] = []
+        try:
+            result = _run(readers, sources, outputs, staged, settings, (roi, roi_name), progress)
+            result.seconds = time.perf_counter() - started
+            staged.append(write_json(outputs.folder / REPORT_NAME, result.as_dict()))
+        except BaseException:
+            for f in staged:
+                f.discard()
+            raise
+        commit_all(staged)
+        outputs.commit()
+    return result
+
+
+def _run(
+    readers: list[TableReader],
+    sources: list[Source],
+    outputs: OutputSet,
+    staged: list[StagedFile],
+    settings: IngestSettings,
+    area: tuple[Any, str],
+    progress: Progress | None,
+) -> IngestResult:
+    """Every stage, the outputs written into the staging folder and added to `staged` as they
+    come (`area`: the region of interest and its name); the result, but for the report and the
+    run's time."""
+    started = time.perf_counter()
+    roi, roi_name = area
+    stage = outputs.folder
     counts = IngestCounts()
-    n_parts = _partition_count(sources, settings)
-    prepare_output_dir(out_dir, "--out", OUTPUT_NAMES)
-    staged: list[StagedFile] = []
-    try:
-        with (
-            tempfile.TemporaryDirectory(dir=out_dir, prefix=f".ingest-{os.getpid()}-") as tmp,
-            hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
-        ):
-            rejects = (
-                StagedParquet(out_dir / "rejects.parquet", REJECTS_SCHEMA)
-                if settings.keep_rejects
-                else None
+    with (
+        tempfile.TemporaryDirectory(dir=outputs.out, prefix=f".ingest-{os.getpid()}-") as tmp,
+        hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
+    ):
+        rejects = (
+            StagedParquet(stage / "rejects.parquet", REJECTS_SCHEMA)
+            if settings.keep_rejects
+            else None
+        )
+        if rejects:
+            staged.append(rejects)
+        # reports further apart than both the stop gap and the dwell time are independent
+        independent_s = max(settings.stop_gap_s, settings.dwell_time_s)
+        n_parts = _partition_count(sources, settings)
+        parts = VesselPartitions(
+            Path(tmp), n_parts, PARTITION_SCHEMA, settings.rows_per_bucket, independent_s
+        )
+        for src, reader in enumerate(readers):
+            _read_source(reader, src, parts, counts, settings, roi, rejects, progress)
+        parts.close()
+        stage_seconds = {"read_clean_filter": time.perf_counter() - started}
+        if counts.rows_read == 0:
+            raise UserError(
+                "no data rows in the input (only headers?): " + ", ".join(s.label for s in sources)
             )
-            if rejects:
-                staged.append(rejects)
-            parts = VesselPartitions(Path(tmp), n_parts, PARTITION_SCHEMA)
-            for src, reader in enumerate(readers):
-                _read_source(reader, src, parts, counts, settings, roi, rejects, progress)
-            parts.close()
-            stage_seconds = {"read_clean_filter": time.perf_counter() - started}
-            if counts.rows_read == 0:
-                raise UserError(
-                    "no data rows in the input (only headers?): "
-                    + ", ".join(s.label for s in sources)
-                )
-            points = StagedParquet(out_dir / "points.parquet", POINTS_SCHEMA)
-            staged.append(points)
-            labels = [s.label for s in sources]
-            tracks = _vessel_stages(parts, counts, settings, points, rejects, labels, progress)
-            if not tracks:
-                raise UserError(no_tracks_message(counts))
-            points.close()
-            stage_seconds["vessel_segment_cluster"] = (
-                time.perf_counter() - started - stage_seconds["read_clean_filter"]
-            )
-            if rejects:
-                rejects.close()
-            routed_at = time.perf_counter()
-            what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
-            table, route_files, routes = _route_stage(tracks, out_dir, settings, what, progress)
-            stage_seconds["routes"] = time.perf_counter() - routed_at
-            staged.extend(route_files)
-            staged.append(write_tracks(out_dir / "tracks.parquet", [table]))
-        result = IngestResult(counts, settings, roi_name, seconds=time.perf_counter() - started)
-        result.stage_seconds = {k: round(v, 3) for k, v in stage_seconds.items()}
-        result.routes = routes
-        result.outputs = {_output_key(f.final): str(f.final) for f in staged}
-        result.outputs["ingest_report"] = str(out_dir / "ingest_report.json")
-        if not counts.balanced():
-            raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
-        staged.append(write_json(out_dir / "ingest_report.json", result.as_dict()))
-    except BaseException:
-        for f in staged:
-            f.discard()
-        raise
-    commit_all(staged)
-    if not settings.keep_rejects:  # an earlier --keep-rejects run's file would now mislead
-        (out_dir / "rejects.parquet").unlink(missing_ok=True)
-    if settings.clusters != "routes":  # no stale routes of an earlier run beside new tracks
-        for name in ROUTE_FILES:
-            (out_dir / name).unlink(missing_ok=True)
+        points = StagedParquet(stage / "points.parquet", POINTS_SCHEMA)
+        staged.append(points)
+        labels = [s.label for s in sources]
+        tracks = _vessel_stages(parts, counts, settings, points, rejects, labels, progress)
+        if not tracks:
+            raise UserError(no_tracks_message(counts))
+        points.close()
+        stage_seconds["vessel_segment_cluster"] = (
+            time.perf_counter() - started - stage_seconds["read_clean_filter"]
+        )
+        if rejects:
+            rejects.close()
+        routed_at = time.perf_counter()
+        what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
+        table, route_files, routes = _route_stage(tracks, stage, settings, what, progress)
+        stage_seconds["routes"] = time.perf_counter() - routed_at
+        staged.extend(route_files)
+        staged.append(write_tracks(stage / "tracks.parquet", [table]))
+    if not counts.balanced():
+        raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
+    result = IngestResult(counts, settings, roi_name)
+    result.stage_seconds = {k: round(v, 3) for k, v in stage_seconds.items()}
+    result.routes = routes
+    result.outputs = {_output_key(f.final): str(outputs.final(f.final)) for f in staged}
+    result.outputs["ingest_report"] = str(outputs.out / REPORT_NAME)
     return result
 
 
@@ -212,7 +225,7 @@ def _partition_count(sources: list[Source], settings: IngestSettings) -> int:
 
 
 def _read_source(
-    reader: SourceReader,
+    reader: TableReader,
     src: int,
     parts: VesselPartitions,
     counts: IngestCounts,
@@ -227,7 +240,7 @@ def _read_source(
     rows = 0
     try:
         for batch in reader.batches():
-            table, codes = to_canonical(batch, reader.columns, src)
+            table, codes = to_canonical(batch, reader.columns, src, reader.time_format)
             table = check_values(table, codes)
             filter_area_speed(table, codes, roi, settings)
             rows += len(codes)
@@ -239,15 +252,17 @@ def _read_source(
                 progress.update(task, completed=reader.done)
     except READ_ERRORS as exc:
         raise describe_read_error(reader.source, exc) from None
-    malformed = len(reader.malformed)
-    counts.rows_read += rows + malformed
-    counts.add("malformed_row", malformed)
-    if rejects and malformed:
-        rejects.write(_malformed_rows(reader.malformed, label))
+    skipped = reader.skipped  # lines that gave no row (malformed CSV, unusable NMEA), by reason
+    n_skipped = sum(len(texts) for texts in skipped.values())
+    counts.rows_read += rows + n_skipped
+    for reason, texts in skipped.items():
+        counts.add(reason, len(texts))
+        if rejects and texts:
+            rejects.write(_malformed_rows(texts, label, reason))
     counts.files.append(
         {
             "source": label,
-            "rows": rows + malformed,
+            "rows": rows + n_skipped,
             "columns": reader.columns,
             "derived": [c for c in ("sog", "cog") if c not in reader.columns],
         }
@@ -328,10 +343,10 @@ def _reject_rows(table: pa.Table, codes: np.ndarray, source: str | list[str]) ->
     )
 
 
-def _malformed_rows(texts: list[str], source: str) -> pa.Table:
+def _malformed_rows(texts: list[str | None], source: str, reason: str) -> pa.Table:
     n = len(texts)
     columns = {name: pa.nulls(n, REJECTS_SCHEMA.field(name).type) for name in REJECTS_SCHEMA.names}
     columns["source"] = pa.array([source] * n, pa.string())
-    columns["reason"] = pa.array(["malformed_row"] * n, pa.string())
+    columns["reason"] = pa.array([reason] * n, pa.string())
     columns["raw"] = pa.array(texts, pa.string())
     return pa.table(columns, schema=REJECTS_SCHEMA)

@@ -11,29 +11,34 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from rich.table import Table
 
 KEPT = 0
 
 # code -> (stage, reason, description); the order is the order in which checks are applied.
 REASONS: dict[int, tuple[str, str, str]] = {
     1: ("read", "malformed_row", "too many or too few fields"),
-    2: ("read", "missing_value", "blank MMSI, time, position, SOG or COG"),
-    3: ("read", "bad_number", "non-numeric LAT, LON, SOG or COG"),
-    4: ("read", "bad_mmsi", "MMSI not a positive integer"),
-    5: ("read", "bad_time", "unparsable time, or not in 1990-2099"),
-    6: ("clean", "sentinel_lat", "LAT 91 (not available)"),
-    7: ("clean", "sentinel_lon", "LON 181 (not available)"),
-    8: ("clean", "sentinel_sog", "SOG 102.3 (not available)"),
-    9: ("clean", "sentinel_cog", "COG 360 (not available)"),
-    10: ("clean", "out_of_range", "LAT/LON/SOG/COG outside their valid ranges"),
-    11: ("filter", "outside_roi", "outside the region of interest"),
-    12: ("filter", "slow", "SOG at or below --min-sog"),
-    13: ("vessel", "duplicate", "exact duplicate of another report"),
-    14: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
-    15: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
-    16: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
-    17: ("segment", "dwell", "inside a stop: within --dwell-radius for at least --dwell-time"),
+    2: ("read", "header_line", "header repeated mid-file (joined files); later rows read under it"),
+    3: ("read", "not_ais", "NMEA line that is no AIS sentence (other sentences, noise)"),
+    4: ("read", "bad_checksum", "NMEA sentence whose checksum does not match"),
+    5: ("read", "truncated", "NMEA sentence cut short or empty, or message with parts missing"),
+    6: ("read", "not_position", "AIS message that is no position report (not 1-3, 18, 19, 27)"),
+    7: ("read", "no_time", "AIS message without a time (tag block, timestamp column, $PGHP)"),
+    8: ("read", "missing_value", "blank (or NaN) MMSI, time, position, SOG or COG"),
+    9: ("read", "bad_number", "non-numeric or infinite LAT, LON, SOG or COG"),
+    10: ("read", "bad_mmsi", "MMSI not a positive integer of at most 18 digits"),
+    11: ("read", "bad_time", "unparsable time, or not in 1990-2099"),
+    12: ("clean", "sentinel_lat", "LAT 91 (not available)"),
+    13: ("clean", "sentinel_lon", "LON 181 (not available)"),
+    14: ("clean", "sentinel_sog", "SOG 102.3 (not available)"),
+    15: ("clean", "sentinel_cog", "COG 360 (not available)"),
+    16: ("clean", "out_of_range", "LAT/LON/SOG/COG outside their valid ranges"),
+    17: ("filter", "outside_roi", "outside the region of interest"),
+    18: ("filter", "slow", "SOG at or below --min-sog"),
+    19: ("vessel", "duplicate", "exact duplicate of another report"),
+    20: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
+    21: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
+    22: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
+    23: ("segment", "dwell", "inside a stop: within --dwell-radius for at least --dwell-time"),
 }
 CODE = {reason: code for code, (_, reason, _) in REASONS.items()}
 N_CODES = max(REASONS) + 1
@@ -92,26 +97,3 @@ def no_tracks_message(counts: IngestCounts) -> str:
         f"no track kept: {counts.rows_read:,} rows read, rejected: {where}; nothing written "
         "(loosen --min-points, --min-sog, --stop-gap, --dwell-time or --roi, or check the input)"
     )
-
-
-def summary_table(counts: IngestCounts) -> Table:
-    """The per-stage summary: rows read, rejected per stage and reason, kept, tracks per cluster."""
-    table = Table(title="aisdati ingest", show_lines=False)
-    table.add_column("stage")
-    table.add_column("reason")
-    table.add_column("rows", justify="right")
-    table.add_column("what", style="dim")
-    table.add_row("read", "rows read", f"{counts.rows_read:,}", f"{len(counts.files)} file(s)")
-    for code, (stage, reason, description) in REASONS.items():
-        n = int(counts.rejected[code])
-        if n:
-            table.add_row(stage, reason, f"-{n:,}", description)
-    table.add_row("[bold]kept", "points", f"[bold]{counts.kept_points:,}", "in tracks")
-    total = sum(counts.tracks.values())
-    table.add_row(
-        "[bold]cluster",
-        "tracks",
-        f"[bold]{total:,}",
-        ", ".join(f"{name} {n:,}" for name, n in counts.tracks.items()),
-    )
-    return table

@@ -54,26 +54,10 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import shapely
-from numba import njit, prange
 
-from aisdati.dtw import _cost_and_length, _prepare
-from aisdati.geo import EARTH_RADIUS_M, haversine_m
-
-HAVERSINE = 1
-"""`aisdati.dtw`'s code of the great-circle metric."""
-
-ROUTE_PREFIX = "route-"
-ROUTE_COLUMNS = [
-    "route",
-    "n_tracks",
-    "entry_lon",
-    "entry_lat",
-    "exit_lon",
-    "exit_lat",
-    "median_length_km",
-    "medoid_track_id",
-    "spread_km",
-]
+from aisdati.dtw import pairs_mean_dtw_m, prepare_lonlat
+from aisdati.geo import EARTH_RADIUS_M, haversine_m, unit_vectors
+from aisdati.tracks.schema import GEO_METADATA, ROUTE_COLUMNS, ROUTE_PREFIX, ROUTES_SCHEMA
 
 
 @dataclass(frozen=True)
@@ -112,9 +96,7 @@ class Routes:
 # ------------------------------------------------------------------------------ geometry
 def earth_xyz_km(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
     """Earth-centred coordinates in km of points in degrees, [..., 3]."""
-    lon, lat = np.radians(lon), np.radians(lat)
-    r = EARTH_RADIUS_M / 1000.0
-    return r * np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], -1)
+    return EARTH_RADIUS_M / 1000.0 * unit_vectors(np.stack([lon, lat], axis=-1))
 
 
 def resample(lines: list[np.ndarray], k: int) -> np.ndarray:
@@ -134,36 +116,18 @@ def resample(lines: list[np.ndarray], k: int) -> np.ndarray:
     return out
 
 
-def _prepared(paths: np.ndarray) -> np.ndarray:
-    """[n, k, 3]: each path in `aisdati.dtw`'s prepared form (radians, cos lat)."""
-    out = np.empty((paths.shape[0], paths.shape[1], 3))
-    for i in range(paths.shape[0]):
-        out[i] = _prepare(np.ascontiguousarray(paths[i]), HAVERSINE)
-    return out
-
-
-@njit(cache=True, parallel=True)
-def _pair_mean_dtw(a, b, pairs):  # pragma: no cover - compiled
-    """Mean great-circle DTW (m) of a[pairs[p, 0]] against b[pairs[p, 1]], in parallel."""
-    out = np.empty(pairs.shape[0])
-    for p in prange(pairs.shape[0]):
-        cost, length = _cost_and_length(a[pairs[p, 0]], b[pairs[p, 1]], 1)
-        out[p] = cost / length
-    return out
-
-
 class ShapeDistance:
     """Mean great-circle DTW (km) between resampled tracks, both ways round."""
 
     def __init__(self, paths: np.ndarray) -> None:
-        self.fwd = _prepared(paths)
+        self.fwd = prepare_lonlat(paths)
         self.rev = np.ascontiguousarray(self.fwd[:, ::-1])
 
     def pairs(self, i: np.ndarray, j: np.ndarray, reverse: bool = False) -> np.ndarray:
         if len(i) == 0:
             return np.zeros(0)
         pairs = np.ascontiguousarray(np.stack([i, j], axis=1).astype(np.int64))
-        return _pair_mean_dtw(self.fwd, self.rev if reverse else self.fwd, pairs) / 1000.0
+        return pairs_mean_dtw_m(self.fwd, self.rev if reverse else self.fwd, pairs) / 1000.0
 
     def matrix(self, idx: np.ndarray) -> np.ndarray:
         """Symmetric matrix of the distances among tracks `idx`."""
@@ -328,17 +292,7 @@ def cluster_routes(
             paths.append((members, medoid, tau))
     lap("split")
 
-    routes: list[tuple[np.ndarray, int]] = []
-    for merged in merge_paths(paths, shapes, first, last):
-        members = np.sort(np.concatenate([paths[p][0] for p in merged]))
-        if len(members) < settings.min_tracks:
-            continue
-        medoid = paths[merged[0]][1]
-        if len(merged) > 1:  # the merged paths' medoid nearest to (a sample of) all members
-            candidates = np.array([paths[p][1] for p in merged])
-            sample = _sample(members, settings.max_sample, rng)
-            medoid = int(candidates[_medoid(shapes.cross(candidates, sample))])
-        routes.append((members, medoid))
+    routes = _merged_routes(paths, shapes, first, last, settings, rng)
     routes.sort(key=lambda r: (-len(r[0]), int(track_ids[r[0]].min())))
     lap("merge")
 
@@ -367,6 +321,30 @@ def cluster_routes(
     return Routes(labels, table, medoids, seconds)
 
 
+def _merged_routes(
+    paths: list[tuple[np.ndarray, int, float]],
+    shapes: ShapeDistance,
+    first: np.ndarray,
+    last: np.ndarray,
+    settings: RouteSettings,
+    rng: np.random.Generator,
+) -> list[tuple[np.ndarray, int]]:
+    """The routes (member track indices, medoid track index) of the paths `merge_paths` joins,
+    those with fewer than `min_tracks` tracks left out."""
+    routes: list[tuple[np.ndarray, int]] = []
+    for merged in merge_paths(paths, shapes, first, last):
+        members = np.sort(np.concatenate([paths[p][0] for p in merged]))
+        if len(members) < settings.min_tracks:
+            continue
+        medoid = paths[merged[0]][1]
+        if len(merged) > 1:  # the merged paths' medoid nearest to (a sample of) all members
+            candidates = np.array([paths[p][1] for p in merged])
+            sample = _sample(members, settings.max_sample, rng)
+            medoid = int(candidates[_medoid(shapes.cross(candidates, sample))])
+        routes.append((members, medoid))
+    return routes
+
+
 def _tolerance(length_km: np.ndarray, settings: RouteSettings) -> float:
     if settings.eps_km is not None:
         return float(settings.eps_km)
@@ -385,28 +363,7 @@ def lines_from_wkb(wkb: list[bytes]) -> list[np.ndarray]:
     return np.split(coords, cuts) if len(coords) else []
 
 
-def route_distance_km(a: np.ndarray, b: np.ndarray, samples: int = 32) -> float:
-    """Mean great-circle DTW (km) between two lon/lat lines resampled as the routes compare
-    them (for tests and reports)."""
-    shapes = ShapeDistance(resample([a, b], samples))
-    return float(shapes.pairs(np.array([0]), np.array([1]))[0])
-
-
 # ------------------------------------------------------------------------- ingest outputs
-ROUTES_SCHEMA = pa.schema(
-    [
-        ("route", pa.string()),
-        ("n_tracks", pa.int64()),
-        ("entry_lon", pa.float64()),
-        ("entry_lat", pa.float64()),
-        ("exit_lon", pa.float64()),
-        ("exit_lat", pa.float64()),
-        ("median_length_km", pa.float64()),
-        ("medoid_track_id", pa.int64()),
-        ("spread_km", pa.float64()),
-        ("geometry", pa.binary()),
-    ]
-)
 ROUTE_FILES = ("routes.parquet", "routes.geojson", "routes.png")
 
 
@@ -462,8 +419,8 @@ def routes_geojson(routes: Routes) -> dict[str, Any]:
 
 def write_routes(out_dir: Path, routes: Routes, lines: list[np.ndarray], title: str) -> list:
     """routes.parquet, routes.geojson and routes.png, staged (renamed when the run commits)."""
-    from aisdati.plots import plot_routes
-    from aisdati.preprocess.output import GEO_METADATA, StagedFile
+    from aisdati.preprocess.figures import plot_routes
+    from aisdati.preprocess.output import StagedFile
 
     parquet = StagedFile(out_dir / "routes.parquet")
     table = routes_arrow(routes).replace_schema_metadata({"geo": json.dumps(GEO_METADATA)})

@@ -41,16 +41,15 @@ tracks and drops the short ones.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-from aisdati.geo import EARTH_RADIUS_M, haversine_m
+from aisdati.geo import haversine_m, haversine_one_m
+from aisdati.tracks.schema import KNOT_MPS
 
-KNOT_MPS = 1852.0 / 3600.0
 MIN_STOP_SPEED_KN = 0.5
 """Floor on the speed `DwellGapSplitter` assumes across a gap, so that `--min-sog 0` does not make
 every gap look like a stop."""
@@ -177,21 +176,13 @@ def _stop_runs(mmsi, time_us, lon, lat, radius_m, min_duration_us):  # pragma: n
     scan resumes after it."""
     n = mmsi.shape[0]
     stop = np.zeros(n, dtype=np.bool_)
-    to_rad = math.pi / 180.0
     s = 0
     while s < n:
-        lat_s = lat[s] * to_rad
-        cos_s = math.cos(lat_s)
         e = s
         while (
             e + 1 < n and mmsi[e + 1] == mmsi[s] and time_us[e + 1] - time_us[e] < min_duration_us
         ):
-            lat_e = lat[e + 1] * to_rad
-            h = (
-                math.sin((lat_e - lat_s) / 2) ** 2
-                + cos_s * math.cos(lat_e) * math.sin((lon[e + 1] - lon[s]) * to_rad / 2) ** 2
-            )
-            if 2 * EARTH_RADIUS_M * math.asin(math.sqrt(min(max(h, 0.0), 1.0))) > radius_m:
+            if haversine_one_m(lon[s], lat[s], lon[e + 1], lat[e + 1]) > radius_m:
                 break
             e += 1
         if e > s and time_us[e] - time_us[s] >= min_duration_us:

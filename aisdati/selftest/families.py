@@ -171,9 +171,6 @@ FAMILIES: dict[str, Family] = {
 }
 """The registry of families by lower-case name; the paper's four come first."""
 
-PAPER_DATI = {"fixedstart": 0.065, "ushaped": 0.231, "circles": 0.058, "ribbons": 0.033}
-"""Table 1 of the paper, DATI row: best normalised smoothed DTW over 10 seeds x 10 references."""
-
 
 def register_family(family: Family) -> Family:
     """Make a user-defined family available by name (to the environment and `selftest`)."""

@@ -20,11 +20,8 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from aisdati.errors import UserError
+from aisdati.tracks.schema import CLUSTERS, ROUTE_PREFIX, TRACK_COLUMNS, UNROUTED
 
-CLUSTERS = ("up", "down", "other")
-UNROUTED = "unrouted"
-ROUTE_PREFIX = "route-"
-TRACK_COLUMNS = ["track_id", "mmsi", "start", "end", "n_points", "length_km", "cluster", "route"]
 MIN_ROUTE_TRACKS = 5
 """Fewest tracks a route needs to be trained on (ingest's default --route-min-tracks, so every
 route of a default ingest qualifies)."""
@@ -145,9 +142,7 @@ def routes_with(data_dir: Path, command: str, needed: int = MIN_ROUTE_TRACKS) ->
     one cluster, "train" or "evaluate")."""
     table = read_track_table(data_dir)
     counts = table["route"].dropna().value_counts() if "route" in table.columns else {}
-    chosen = sorted(
-        (str(r) for r, n in counts.items() if n >= needed), key=lambda r: int(r.split("-")[1])
-    )
+    chosen = sorted((str(r) for r, n in counts.items() if n >= needed), key=_route_number)
     if not chosen:
         raise UserError(
             f"no route in {data_dir} has {needed} tracks or more: ingest with --clusters "

@@ -1,4 +1,4 @@
-"""Detectors that judge tracks with a learnt policy: `dati` (the paper's) and `bc`.
+"""What the detectors that judge tracks with a learnt policy share: `dati` (the paper's) and `bc`.
 
 Both score the same ways (`aisdati.ais.policy`): free rollouts (`rollout`, the paper's),
 teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
@@ -9,43 +9,39 @@ the median training track scores 2). The step profile stands for `both` on maps.
 
 from __future__ import annotations
 
-import io
+from abc import abstractmethod
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import torch
 
+from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
-from aisdati.ais.policy import Act, AISPolicy, dati_act
+from aisdati.ais.policy import Act, AISPolicy
 from aisdati.ais.space import AISSpace
-from aisdati.detectors.base import Detector, Scores, ScoreSettings, tail_mean
+from aisdati.detectors.base import Detector
+from aisdati.detectors.scoring import Scores, ScoreSettings, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
 from aisdati.geo import lane_distances
-from aisdati.model.bc import BCConfig, BCPolicy
-from aisdati.model.checkpoint import atomic_write_bytes, load_networks
-from aisdati.model.dati import DATIConfig
-from aisdati.model.networks import DATINetworks
 from aisdati.tracks.store import Track
 
 
 class PolicyDetector(Detector):
     """A detector built on an `AISPolicy`; subclasses say how the policy acts."""
 
-    corridor: Corridor | None = None
     lane_settings = ("lane_course_km", "lane_traffic")
 
     def policy(self) -> AISPolicy:
         return AISPolicy(AISSpace.from_card(self.card, self.corridor), self.make_act)
 
+    @abstractmethod
     def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        raise NotImplementedError
+        """The policy for a batch of n rows (`aisdati.ais.policy.MakeAct`)."""
 
-    def score(
-        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str] = ()
+    def score_tracks(
+        self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
     ) -> Scores:
         policy = self.policy()
         positions = [t.positions for t in tracks]
@@ -83,7 +79,7 @@ class PolicyDetector(Detector):
                 np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
             ]
         if "both" in wanted:
-            cal = self.card.get("calibration", {})
+            cal = self.card.calibration
             if not cal.get("rollout") or not cal.get("step"):
                 raise UserError(f"model {self.name} has no calibration scores: retrain it")
             parts["both"] = sum(parts[k] / float(np.median(cal[k])) for k in ("rollout", "step"))
@@ -101,99 +97,23 @@ class PolicyDetector(Detector):
         track's lane, so a track that starts off the lane and joins it is judged against the
         lane it joins, not only against where the policy goes from its odd start."""
         starts = self.start_points
-        steps = max(1, round(self.card["data"]["points"] / len(starts)) - 1)
+        steps = max(1, round(self.card.data.points / len(starts)) - 1)
         stream = int(np.random.SeedSequence([how.seed, 2]).generate_state(1)[0])
         paths = policy.generate(starts, np.full(len(starts), steps), 1, stream, how.lane_reach)
         return list(paths)
 
-    def calibrate(self, tracks: Sequence[Track], how: ScoreSettings) -> None:
+    def calibrate(self, tracks: Sequence[Track], how: ScoreSettings | None = None) -> None:
         """Score the training tracks every way; `threshold` and `both` read these."""
+        how = how or self.how
         parts = self.score(tracks, replace(how, score="rollout"), also=("step", "lane")).parts
         cal = {k: [round(float(v), 2) for v in parts[k]] for k in ("rollout", "step", "lane")}
         both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
-        self.card["calibration"] = {**cal, "both": [round(float(v), 4) for v in both]}
-        self.card["calibrated_with"] = how.calibrated_with()
+        self.card.calibration = {**cal, "both": [round(float(v), 4) for v in both]}
+        self.card.calibrated_with = how.calibrated_with()
 
 
-# ----------------------------------------------------------------------------------- DATI
-class DATIDetector(PolicyDetector):
-    method = "dati"
-    format = "aisdati-dati/1"
-
-    def __init__(self, name: str, card: dict[str, Any], nets: DATINetworks, config: DATIConfig):
-        super().__init__(name, card)
-        self.nets, self.config = nets, config
-
-    @classmethod
-    def load(cls, stem: Path, card: dict[str, Any]) -> DATIDetector:
-        nets, config, meta = load_networks(stem)
-        members = (meta.get("lane_config") or {}).get("members", 1)
-        if nets.members != members or meta.get("decision_dim", 3) != 3:
-            raise UserError(f"{stem}: expected a model of {members} member(s) with 3 decisions")
-        det = cls(stem.name, meta, nets, config)
-        det.corridor = _corridor(stem, meta)
-        return det
-
-    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        return dati_act(self.nets, self.config, None)(n, seed, temporal)
-
-
-# ------------------------------------------------------------------------------------- BC
-class BCDetector(PolicyDetector):
-    """Behavioural cloning (a Gaussian policy on position and step index, the self-test's BC),
-    rolled out and scored exactly like DATI: the learnt baseline DATI has to beat."""
-
-    method = "bc"
-    format = "aisdati-bc/1"
-
-    def __init__(self, name: str, card: dict[str, Any], policy: BCPolicy):
-        super().__init__(name, card)
-        self.bc = policy
-
-    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        gen = torch.Generator().manual_seed(int(seed))
-
-        def act(obs: np.ndarray) -> np.ndarray:
-            x = torch.as_tensor(obs)[None]
-            with torch.no_grad():
-                mean, log_std = self.bc(x[..., :-1], x[..., -1:])
-            if self.bc.cfg.deterministic:
-                return mean[0].numpy()
-            eps = torch.randn(mean.shape, generator=gen)
-            return (mean + log_std.exp() * eps)[0].numpy()
-
-        return act
-
-    def save(self, stem: Path) -> None:
-        buf = io.BytesIO()
-        torch.save(self.bc.state_dict(), buf)
-        atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
-        self.card["config"] = self.bc.cfg.to_dict()
-        self.card["seeds"] = self.bc.seeds
-        self.save_card(stem)
-
-    @classmethod
-    def load(cls, stem: Path, card: dict[str, Any]) -> BCDetector:
-        try:
-            cfg = BCConfig.from_dict(card["config"])
-            state_dim = AISSpace.from_card(card).state_dim
-            policy = BCPolicy(state_dim, 3, cfg, card["seeds"])
-            state = torch.load(stem.with_suffix(".pt"), map_location="cpu", weights_only=True)
-            policy.load_state_dict(state)
-        except Exception as exc:  # damaged or foreign files: one line, never a traceback
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise UserError(f"cannot load model {stem}: {first}") from None
-        det = cls(stem.name, card, policy)
-        det.corridor = _corridor(stem, card)
-        return det
-
-
-def _corridor(stem: Path, card: dict[str, Any]) -> Corridor | None:
+def saved_corridor(stem: Path, card: ModelCard) -> Corridor | None:
     """The corridor saved beside a model trained with `region="corridor"`."""
-    if (card.get("lane_config") or {}).get("region") != "corridor":
+    if card.lane_config.region != "corridor":
         return None
-    path = stem.with_suffix(".corridor.npz")
-    try:
-        return Corridor.from_file(path)
-    except (OSError, ValueError, KeyError) as exc:
-        raise UserError(f"cannot load {path}: {str(exc).splitlines()[0]}") from None
+    return Corridor.from_file(stem.with_suffix(".corridor.npz"))

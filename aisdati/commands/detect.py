@@ -1,0 +1,110 @@
+"""`aisdati detect`: score test tracks against trained models, write the report, print the
+flagged tracks (and, with hand labels, how well they were found)."""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime
+from pathlib import Path
+
+from rich.markup import escape
+
+from aisdati.ais.card import unfinished_models
+from aisdati.commands.common import console, err_console, spinner, warn
+from aisdati.commands.tables import detection_table
+from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
+from aisdati.detection.run import Detection, DetectSettings, check_settings, detect
+from aisdati.detectors import parse_detectors
+from aisdati.options import check_options
+from aisdati.outdir import staged_outputs
+
+
+def run(
+    data: Path,
+    models_dir: Path,
+    model: list[str] | None,
+    method: str,
+    score: str,
+    out: Path | None,
+    cluster: str,
+    track: list[int] | None,
+    rollouts: int,
+    lane_rollouts: int,
+    lane_course_km: float,
+    lane_traffic: bool,
+    threshold: float,
+    top_percent: float | None,
+    contamination: float | None,
+    near_km: float,
+    seed: int,
+    labels: Path | None,
+    quiet: bool,
+    as_json: bool,
+) -> None:
+    """`aisdati detect` with its options (see `aisdati.cli.detect`)."""
+    check_options(
+        {
+            "--threshold": threshold,
+            "--top-percent": top_percent,
+            "--contamination": contamination,
+            "--near-km": near_km,
+            "--lane-course-km": lane_course_km,
+            "--seed": seed,
+        }
+    )
+    settings = DetectSettings(
+        data_dir=data,
+        models_dir=models_dir,
+        out_dir=out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
+        models=tuple(model or ()),
+        method=parse_detectors(method)[0],
+        cluster=cluster.strip().lower(),
+        track_ids=tuple(track or ()),
+        score=score.strip().lower(),
+        rollouts=rollouts,
+        lane_rollouts=lane_rollouts,
+        lane_course_km=lane_course_km,
+        lane_traffic=lane_traffic,
+        threshold=threshold,
+        top_percent=top_percent,
+        contamination=contamination,
+        near_km=near_km,
+        seed=seed,
+        labels=labels,
+    )
+    check_settings(settings)
+    with staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs:
+        for message in unfinished_models(models_dir, settings.models, settings.method):
+            warn(message)
+        with spinner(err_console if as_json else console, "scoring", show=not quiet):
+            result = detect(settings)
+            files = [outputs.final(f) for f in write_outputs(result, outputs.folder)]
+        outputs.commit()
+    if as_json:
+        doc = report_dict(result)
+        doc["files"] = [str(f) for f in files]
+        print(json.dumps(doc, default=str))
+    elif not quiet:
+        print_detection(result, files, settings.out_dir)
+
+
+def print_detection(result: Detection, files: list[Path], out: Path) -> None:
+    """The flagged tracks, the scores against hand labels if given, and what was written."""
+    console.print(detection_table(result.scores))
+    if result.metrics is not None:
+        m = result.metrics
+        auc = "n/a (one class only)" if m["roc_auc"] is None else f"{m['roc_auc']:.3f}"
+        console.print(
+            f"against {m['labelled_tracks']} labelled tracks ({m['anomalies_labelled']} "
+            f"anomalies): precision {m['precision']:.3f}, recall {m['recall']:.3f}, "
+            f"weighted F1 {m['f1_weighted']:.3f} (paper: 0.78), ROC AUC {auc}",
+            highlight=False,
+        )
+    t = result.timings
+    console.print(
+        f"scoring {t['score_s']:.1f} s; "
+        f"wrote {escape(', '.join(f.name for f in files if f.parent == out))}"
+        f"{' and evidence/' if any(f.parent != out for f in files) else ''} "
+        f"to [bold]{escape(str(out))}[/]",
+        highlight=False,
+    )

@@ -1,0 +1,196 @@
+"""`aisdati evaluate`: the detection benchmark on the user's own data, with a spinner or bars
+while each detector trains, and the results table."""
+
+from __future__ import annotations
+
+import glob
+import json
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from rich.markup import escape
+
+from aisdati.ais.training import TrainSettings
+from aisdati.commands.common import console, err_console, lane_settings, spinner
+from aisdati.commands.tables import pooled_table, results_table
+from aisdati.detectors import ScoreSettings, parse_detectors
+from aisdati.detectors.train import Trained, train_detector, train_routes
+from aisdati.evaluation.inject import parse_kinds, parse_params
+from aisdati.evaluation.outputs import (
+    REPORT,
+    RESULTS,
+    report,
+    routes_report,
+    write,
+    write_routes,
+)
+from aisdati.evaluation.run import (
+    ALL_ROUTES,
+    EvaluateSettings,
+    check,
+    evaluate,
+    evaluate_routes,
+)
+from aisdati.options import check_options
+from aisdati.outdir import OutputSet, staged_outputs
+from aisdati.progress import EpisodeProgress, TrainingProgress
+from aisdati.tracks.store import read_track_table, routes_with, select_cluster
+
+
+def run(
+    cluster: str,
+    data: Path,
+    out: Path | None,
+    detectors: str,
+    kinds: str,
+    param: list[str] | None,
+    train_fraction: float,
+    models: Path | None,
+    preset: str,
+    lane: list[str] | None,
+    episodes: int,
+    patience: int,
+    rollouts: int,
+    lane_rollouts: int,
+    lane_course_km: float,
+    lane_traffic: bool,
+    near_km: float,
+    contamination: float,
+    seed: int,
+    quiet: bool,
+    as_json: bool,
+) -> None:
+    """`aisdati evaluate` with its options (see `aisdati.cli.evaluate`)."""
+    check_options(
+        {
+            "--train-fraction": train_fraction,
+            "--near-km": near_km,
+            "--lane-course-km": lane_course_km,
+            "--contamination": contamination,
+            "--seed": seed,
+        }
+    )
+    settings = EvaluateSettings(
+        data_dir=data,
+        cluster=cluster.strip().lower(),
+        out_dir=out or Path("runs") / f"evaluate-{datetime.now():%Y%m%d-%H%M%S}",
+        detectors=parse_detectors(detectors),
+        kinds=parse_kinds(kinds),
+        params=parse_params(param),
+        train_fraction=train_fraction,
+        seed=seed,
+        episodes=episodes,
+        patience=patience,
+        rollouts=rollouts,
+        lane_rollouts=lane_rollouts,
+        lane_course_km=lane_course_km,
+        lane_traffic=lane_traffic,
+        near_km=near_km,
+        contamination=contamination,
+        models_dir=models,
+        **lane_settings(preset, lane),
+    )
+    check(settings)
+    every_route = settings.cluster == ALL_ROUTES
+    owned = RESULTS
+    if every_route:  # each route's results too (fail before any work when there is no route)
+        routes = [glob.escape(r) for r in routes_with(data, "evaluate")]
+        owned += tuple(f"{route}/{name}" for route in routes for name in RESULTS)
+    else:
+        select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work
+    with staged_outputs(settings.out_dir, owned, REPORT) as outputs:
+        outputs.retire_earlier()  # the data and models it describes are about to change
+        shown = Display(settings, show=not (quiet or as_json))
+        if every_route:
+            evaluate_every_route(settings, shown, outputs, quiet, as_json)
+        else:
+            evaluate_one(settings, shown, outputs, quiet, as_json)
+
+
+class Display:
+    """What the operator sees while the evaluation runs (nothing when not `show`): a dim line
+    per stage, bars while DATI trains, a spinner while the other detectors train."""
+
+    def __init__(self, settings: EvaluateSettings, show: bool):
+        self.settings = settings
+        self.show = show
+
+    def stage(self, text: str) -> None:
+        """The evaluation's `on_stage`: what it is doing now."""
+        if self.show:
+            err_console.print(f"[dim]{escape(text)}[/]", highlight=False)
+
+    def train(self, method: str, train_settings: TrainSettings, how: ScoreSettings) -> Trained:
+        """The evaluation's `train_detector`: `train_detector` with a bar or a spinner."""
+        if method != "dati" or not self.show:
+            with spinner(err_console, f"training {method}", self.show):
+                return train_detector(method, train_settings, how)
+        with TrainingProgress(self.settings.episodes, "training dati") as bar:
+
+            def on_step(trainer: Any, logs: list[Any]) -> None:
+                for log in logs:
+                    bar.episode_done(log.episode, log.mean_reward, log.final_dtw)
+
+            return train_detector(method, train_settings, how, on_step=on_step)
+
+    def train_routes(
+        self, method: str, group: list[TrainSettings], how: ScoreSettings
+    ) -> list[Trained]:
+        """The evaluation's `train_routes`: `train_routes` with a bar over every member."""
+        members = len(group) * self.settings.lane.members
+        label = f"training {method} on {len(group)} routes"
+        with EpisodeProgress(members, self.settings.episodes, label, disable=not self.show) as bars:
+            return train_routes(method, group, how, on_step=bars.on_step)
+
+
+def evaluate_one(
+    settings: EvaluateSettings, shown: Display, outputs: OutputSet, quiet: bool, as_json: bool
+) -> None:
+    """One cluster or route: evaluate, write, print the table and the timings."""
+    result = evaluate(settings, shown.stage, shown.train)
+    files = write(result, outputs.folder)
+    outputs.commit()
+    if as_json:
+        print(json.dumps(report(result), default=str))
+        return
+    if quiet:
+        return
+    console.print(results_table(result, console.width))
+    for method, t in result.timings.items():
+        line = f"{method}: training {t['train_s']:.1f} s, scoring {t['score_s']:.1f} s"
+        console.print(line, highlight=False)
+    console.print(
+        f"wrote {escape(', '.join(f.name for f in files))}, data/ and models/ to "
+        f"[bold]{escape(str(settings.out_dir))}[/]",
+        highlight=False,
+    )
+
+
+def evaluate_every_route(
+    settings: EvaluateSettings, shown: Display, outputs: OutputSet, quiet: bool, as_json: bool
+) -> None:
+    """`--cluster routes`: each route judged by its own model, pooled into one table."""
+    routes = evaluate_routes(settings, shown.stage, shown.train, shown.train_routes)
+    files = write_routes(routes, outputs.folder)
+    outputs.commit()
+    if as_json:
+        print(json.dumps(routes_report(routes), default=str))
+        return
+    if quiet:
+        return
+    console.print(pooled_table(routes, console.width))
+    for ev in routes.routes:
+        times = ", ".join(
+            f"{m} {t['train_s']:.0f} + {t['score_s']:.0f} s" for m, t in ev.timings.items()
+        )
+        console.print(
+            f"{escape(ev.settings.cluster)}: {len(ev.split.train_ids)} training / "
+            f"{len(ev.split.heldout_ids)} held-out tracks; training + scoring: {times}",
+            highlight=False,
+        )
+    console.print(
+        f"wrote {escape(', '.join(f.name for f in files))} and one folder per route to "
+        f"[bold]{escape(str(settings.out_dir))}[/]",
+        highlight=False,
+    )

@@ -1,0 +1,309 @@
+"""Every rich table the commands print, one builder per table: the computing modules return plain
+data, and only this module decides how it looks on a terminal. Rich reads every string in a table
+as markup, so each name that comes from the user or the data (clusters, routes, models, paths)
+goes through `escape`: `a[/]b` and `[x]` are printed as they are."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import pandas as pd
+from rich import box
+from rich.markup import escape
+from rich.table import Table
+
+from aisdati.preprocess.report import REASONS, IngestCounts
+
+if TYPE_CHECKING:
+    from aisdati.detectors.train import Trained
+    from aisdati.evaluation.run import Evaluation, RoutesEvaluation
+
+
+# ----------------------------------------------------------------------------------- ingest
+def summary_table(counts: IngestCounts) -> Table:
+    """The per-stage summary: rows read, rejected per stage and reason, kept, tracks per cluster."""
+    table = Table(title="aisdati ingest", show_lines=False)
+    table.add_column("stage")
+    table.add_column("reason")
+    table.add_column("rows", justify="right")
+    table.add_column("what", style="dim")
+    table.add_row("read", "rows read", f"{counts.rows_read:,}", f"{len(counts.files)} file(s)")
+    for code, (stage, reason, description) in REASONS.items():
+        n = int(counts.rejected[code])
+        if n:
+            table.add_row(stage, reason, f"-{n:,}", description)
+    table.add_row("[bold]kept", "points", f"[bold]{counts.kept_points:,}", "in tracks")
+    total = sum(counts.tracks.values())
+    table.add_row(
+        "[bold]cluster",
+        "tracks",
+        f"[bold]{total:,}",
+        escape(", ".join(f"{name} {n:,}" for name, n in counts.tracks.items())),
+    )
+    return table
+
+
+def routes_table(summary: dict[str, Any], limit: int = 25) -> Table:
+    """The routes found by ingest: size, entry, exit and median length, largest first."""
+    rows = summary["routes"]
+    table = Table(
+        title=f"{len(rows)} routes ({summary['routed_tracks']:,} tracks; "
+        f"{summary['unrouted_tracks']:,} fit no route)"
+    )
+    for col in ("route", "tracks", "entry (lat, lon)", "exit (lat, lon)", "median length"):
+        table.add_column(col, justify="right" if col in ("tracks", "median length") else "left")
+    for r in rows[:limit]:
+        table.add_row(
+            escape(str(r["route"])),
+            f"{r['n_tracks']:,}",
+            f"{r['entry_lat']:.4f}, {r['entry_lon']:.4f}",
+            f"{r['exit_lat']:.4f}, {r['exit_lon']:.4f}",
+            f"{r['median_length_km']:,.1f} km",
+        )
+    if len(rows) > limit:
+        table.caption = f"... and {len(rows) - limit} more in routes.parquet"
+    return table
+
+
+# --------------------------------------------------------------------------------- selftest
+def _ours(value: float, paper: float | None, sd: float = float("nan")) -> str:
+    """Our number, green where it is at or below the paper's; `± sd` over repeats when known."""
+    style = "green" if paper is not None and value <= paper else "yellow"
+    spread = "" if math.isnan(sd) else f" ± {sd:.3f}"  # NaN: a single repeat
+    return f"[{style}]{value:.3f}{spread}[/]"
+
+
+def _best_label(rows: list[dict[str, Any]], what: str) -> str:
+    repeats = max((r.get("repeats", 1) for r in rows), default=1)
+    return what if repeats == 1 else f"{what}, mean ± sd of {repeats} repeats"
+
+
+def _paper(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def _method_label(method: str) -> str:
+    from aisdati.selftest.settings import METHODS  # here: it loads torch, which ingest needs not
+
+    return METHODS.get(method, method)
+
+
+def selftest_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
+    """Ours beside the paper's Table 1 (lower is better); one row per method x family."""
+    methods = list(dict.fromkeys(r.get("method", "dati") for r in rows))
+    name = "DATI" if methods == ["dati"] else "Table 1"
+    table = Table(
+        title=f"{name} self-test: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
+    )
+    cols = (
+        "method",
+        "family",
+        _best_label(rows, "best (paper's metric)"),
+        "paper",
+        "median",
+        "IQM [95% CI]",
+        "episodes",
+    )
+    for col in cols:
+        table.add_column(col, justify="left" if col in ("method", "family") else "right")
+    for r in rows:
+        table.add_row(
+            _method_label(r.get("method", "dati")),
+            r["family"],
+            _ours(r["best"], r["paper_best"], r.get("best_sd", float("nan"))),
+            _paper(r["paper_best"]),
+            f"{r['median']:.3f}",
+            f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
+            f"{r['mean_episodes']:.1f}",
+        )
+    return table
+
+
+def ablation_table(rows: list[dict[str, Any]], wall_seconds: float) -> Table:
+    """Ours beside the paper's Table 2: top-1 and top-2 per DATI variant (lower is better)."""
+    table = Table(
+        title=f"DATI ablation: normalised smoothed DTW (wall time {wall_seconds / 60:.1f} min)"
+    )
+    cols = (
+        "variant",
+        "family",
+        _best_label(rows, "top-1"),
+        "paper",
+        _best_label(rows, "top-2"),
+        "paper",
+        "median",
+        "IQM [95% CI]",
+        "episodes",
+    )
+    for col in cols:
+        table.add_column(col, justify="left" if col in ("variant", "family") else "right")
+    for r in rows:
+        table.add_row(
+            _method_label(r["method"]),
+            r["family"],
+            _ours(r["best"], r["paper_best"], r.get("best_sd", float("nan"))),
+            _paper(r["paper_best"]),
+            _ours(r["second_best"], r["paper_second_best"], r.get("second_best_sd", float("nan"))),
+            _paper(r["paper_second_best"]),
+            f"{r['median']:.3f}",
+            f"{r['iqm']:.3f} [{r['iqm_ci_low']:.3f}, {r['iqm_ci_high']:.3f}]",
+            f"{r['mean_episodes']:.1f}",
+        )
+    return table
+
+
+# ------------------------------------------------------------------------------------ train
+def dati_model_table(cluster: str, result: Trained) -> Table:
+    """One trained DATI model: its data, episodes, last reward and DTW, speed and wall time."""
+    card = result.card
+    tr = card["training"]
+    used = card["data"]["tracks_used"]
+    table = Table(title=f"DATI model of cluster {escape(repr(cluster))}")
+    table.add_column("item")
+    table.add_column("value", justify="right")
+    rows = [
+        ("resumed after episode", str(result.resumed_from)) if result.resumed_from else None,
+        ("training tracks", f"{used} of {card['data']['tracks_in_cluster']}"),
+        ("episodes run", f"{tr['episodes_run']} (best: {tr['best_episode']})"),
+        ("mean reward, last episode", f"{tr['mean_reward'][-1]:+.3f}"),
+        ("smoothed DTW at horizon, last", f"{tr['final_dtw_m'][-1]:,.0f} m"),
+        ("steps/s", f"{tr['steps_per_second']}"),
+        ("wall time", f"{result.wall_seconds:.1f} s"),
+    ]
+    for row in rows:
+        if row:
+            table.add_row(*row)
+    return table
+
+
+def route_models_table(method: str, routes: list[str], trained: list[Trained]) -> Table:
+    """The models of `train --cluster routes`: one row per route."""
+    table = Table(title=f"{method} models of {len(routes)} routes")
+    for col in ("route", "tracks", "episodes", "model"):
+        table.add_column(col, justify="left" if col in ("route", "model") else "right")
+    for route, t in zip(routes, trained, strict=True):
+        runs = t.card.get("training", {}).get("episodes_run", "-")
+        used = str(t.card["data"]["tracks_used"])
+        table.add_row(escape(route), used, str(runs), escape(str(t.model)))
+    return table
+
+
+# --------------------------------------------------------------------------------- evaluate
+def results_table(ev: Evaluation, width: int = 120) -> Table:
+    """The table; on a terminal narrower than 100 columns, without AP, P and R (they stay in
+    evaluation.json)."""
+    title = (
+        f"Detection of injected anomalies: cluster {escape(repr(ev.settings.cluster))}, "
+        f"{len(ev.split.train_ids)} training / {len(ev.split.heldout_ids)} held-out tracks "
+        f"({int(ev.split.labels['label'].sum())} altered)"
+    )
+    caption = (
+        "AUC (ROC) and AP (average precision) rank altered against normal held-out tracks; "
+        "P/R/F1 at each detector's calibrated threshold; normal/altered: median scores in km "
+        "('both' is unitless)"
+    )
+    return _evaluation_table(ev.table, title, caption, width, ratio=False)
+
+
+def pooled_table(rev: RoutesEvaluation, width: int = 120) -> Table:
+    """The pooled table of `--cluster routes` (scores in multiples of each route's threshold)."""
+    held = sum(len(ev.split.heldout_ids) for ev in rev.routes)
+    altered = sum(int(ev.split.labels["label"].sum()) for ev in rev.routes)
+    names = escape(", ".join(ev.settings.cluster for ev in rev.routes))
+    title = (
+        f"Detection of injected anomalies over {len(rev.routes)} routes ({names}): "
+        f"{held} held-out tracks ({altered} altered), each judged by its route's model"
+    )
+    caption = (
+        "Pooled: each score divided by its route model's calibrated threshold, then ranked "
+        "together; normal/altered: median multiples of the threshold (above 1 is flagged)"
+    )
+    if rev.skipped:
+        caption += f"; skipped (too few tracks to split): {escape(', '.join(rev.skipped))}"
+    return _evaluation_table(rev.table, title, caption, width, ratio=True)
+
+
+def _distance(value: float | None, score: str, ratio: bool = False) -> str:
+    if value is None or value != value:
+        return "-"
+    return f"{value:.2f}" if ratio or score == "both" else f"{value / 1000:.2f}"
+
+
+def _figure(v: float | None, digits: int = 3) -> str:
+    return "-" if v is None or v != v else f"{v:.{digits}f}"
+
+
+def _evaluation_table(
+    frame: pd.DataFrame, title: str, caption: str, width: int, ratio: bool
+) -> Table:
+    t = Table(title=title, box=box.SIMPLE_HEAD)
+    cols = ["detector", "score", "kind", "n", "AUC", "AP", "P", "R", "F1", "normal", "altered"]
+    narrow = width < 100
+    if narrow:
+        cols = [c for c in cols if c not in ("AP", "P", "R")]
+    for c in cols:
+        left = c in ("detector", "score", "kind")
+        t.add_column(c, justify="left" if left else "right", no_wrap=True)
+    last = None
+    for r in frame.itertuples():
+        if last is not None and (r.detector, r.score) != last:
+            t.add_section()
+        last = (r.detector, r.score)
+        auc = _figure(r.roc_auc)
+        if r.roc_auc is not None and r.roc_auc == r.roc_auc:
+            style = "green" if r.roc_auc >= 0.9 else "yellow" if r.roc_auc >= 0.7 else "red"
+            auc = f"[{style}]{auc}[/]"
+        cells = {
+            "detector": r.detector,
+            "score": "dtw" if r.score == "nearest" else r.score,
+            "kind": "d+j+l" if narrow and "+" in r.kind else r.kind,
+            "n": str(r.anomalies),
+            "AUC": auc,
+            "AP": _figure(r.average_precision),
+            "P": _figure(r.precision, 2),
+            "R": _figure(r.recall, 2),
+            "F1": _figure(r.f1, 2),
+            "normal": _distance(r.median_normal_m, r.score, ratio),
+            "altered": _distance(r.median_anomalous_m, r.score, ratio),
+        }
+        t.add_row(*(cells[c] for c in cols))
+    t.caption = caption
+    return t
+
+
+# ----------------------------------------------------------------------------------- detect
+def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
+    """The flagged tracks (or, if none, the top of the ranking) with where they deviate most."""
+    flagged = scores[scores["flagged"]].sort_values("rank")
+    shown = flagged if len(flagged) else scores.sort_values("rank")
+    title = (
+        f"{len(flagged)} of {len(scores)} test tracks flagged"
+        if len(flagged)
+        else f"no track flagged among {len(scores)}; the highest scores"
+    )
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False)
+    cols = ["rank", "track", "mmsi", "score", "mean dist", "max dev", "at (lat, lon)"]
+    several = scores["model"].nunique() > 1
+    if several:
+        cols.insert(3, "model")
+    for col in cols:
+        table.add_column(
+            col, justify="left" if col in ("model", "at (lat, lon)") else "right", no_wrap=True
+        )
+    for r in shown.head(limit).itertuples():
+        row = [
+            str(r.rank),
+            str(r.track_id),
+            str(r.mmsi),
+            f"[{'red' if r.flagged else 'white'}]{r.score:.3f}[/]",
+            f"{r.score_m / 1000:,.2f} km",
+            f"{r.max_dev_m / 1000:,.2f} km",
+            f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
+        ]
+        if several:
+            row.insert(3, escape(str(r.model)))
+        table.add_row(*row)
+    if len(shown) > limit:
+        table.caption = f"... and {len(shown) - limit} more in scores.parquet"
+    return table

@@ -1,0 +1,79 @@
+// The detection page's script: builds the Leaflet layers from the page's JSON data
+// (aisdati/detection/webmap.py writes both into one self-contained HTML file).
+const D = JSON.parse(document.getElementById('aisdati-data').textContent);
+const map = L.map('map', {zoomSnap: 0.25, preferCanvas: false});
+document.getElementById('map').style.background = D.style.water;
+map.attributionControl.setPrefix('Leaflet');
+L.control.scale().addTo(map);
+
+function table(p) {
+  const t = document.createElement('table');
+  for (const [k, v] of Object.entries(p)) {
+    if (k === 'colour' || k === 'max_dev_lon' || k === 'max_dev_lat') continue;
+    const r = t.insertRow();
+    r.insertCell().textContent = k;
+    r.insertCell().textContent = v;
+  }
+  return t;
+}
+function label(p) {
+  if (p.label) return p.label;
+  const s = (p.score_m !== undefined) ? ` — ${p.score_m} m` : '';
+  return `track ${p.track_id}${s}`;
+}
+function lines(fc, style, popup) {
+  return L.geoJSON(fc, {
+    style: f => Object.assign({}, style, f.properties.colour ? {color: f.properties.colour} : {}),
+    onEachFeature: (f, layer) => {
+      layer.bindTooltip(label(f.properties), {sticky: true});
+      if (popup) layer.bindPopup(() => table(f.properties));
+    },
+  });
+}
+const overlays = {};
+if (D.land) {
+  overlays[D.names.coast] = L.geoJSON(D.land, {interactive: false, attribution: D.coast_attribution,
+    style: {color: D.style.coast, weight: 0.7, fillColor: D.style.land, fillOpacity: 1}});
+}
+const L_ = D.layers;
+if (D.optional.medoids) overlays[D.names.medoids] = lines(D.optional.medoids,
+  {color: '#7b3294', weight: 3, dashArray: '8 6'}, false);
+overlays[D.names.tracks] = lines(L_.tracks, {weight: 1.6, opacity: 0.85}, true);
+if (D.optional.best) overlays[D.names.best] = lines(D.optional.best,
+  {color: '#6baed6', weight: 1.5, opacity: 0.7}, false);
+overlays[D.names.rollouts] = lines(L_.rollouts, {color: '#1f77b4', weight: 2}, false);
+const flagged = lines(L_.flagged, {weight: 3}, true);
+L.geoJSON(L_.deviations, {
+  pointToLayer: (f, ll) => L.circleMarker(ll, {radius: 6, color: 'black', weight: 2, fill: true, fillOpacity: 0.3}),
+  onEachFeature: (f, layer) => {
+    layer.bindTooltip(`track ${f.properties.track_id}: largest deviation ${f.properties.max_dev_m} m`);
+    layer.bindPopup(() => table(f.properties));
+  },
+}).eachLayer(l => flagged.addLayer(l));
+overlays[D.names.flagged] = flagged;
+if (D.optional.stretches) overlays[D.names.stretches] = lines(D.optional.stretches,
+  {color: '#ff7f0e', weight: 6, opacity: 0.8}, false);
+const boxes = L.layerGroup(D.regions.map(b => L.rectangle(b, {color: 'black', weight: 1, dashArray: '5', fill: false, interactive: false})));
+overlays[D.names.regions] = boxes;
+for (const [name, layer] of Object.entries(overlays)) {
+  if (name !== D.names.best) layer.addTo(map);
+}
+const offline = L.layerGroup().addTo(map);
+const tiles = L.tileLayer(D.tile_url, {maxZoom: 18, attribution: '&copy; OpenStreetMap contributors'});
+const bases = {};
+bases[D.names.offline] = offline;
+bases[D.names.tiles] = tiles;
+L.control.layers(bases, overlays, {collapsed: false}).addTo(map);
+const bar = L.control({position: 'bottomright'});
+bar.onAdd = () => {
+  const div = L.DomUtil.create('div', 'aisdati-legend');
+  const [lo, hi] = D.legend.range;
+  div.innerHTML = '<div>track score</div><div class="aisdati-bar"></div>' +
+    `<div><span>${lo.toPrecision(3)}</span><span style="float:right">${hi.toPrecision(3)}</span></div>` +
+    '<div><span class="aisdati-swatch" style="background:#d62728"></span> flagged</div>';
+  div.querySelector('.aisdati-bar').style.background =
+    `linear-gradient(to right, ${D.legend.stops.join(', ')})`;
+  return div;
+};
+bar.addTo(map);
+if (D.bounds) map.fitBounds(D.bounds, {padding: [10, 10]}); else map.setView([0, 0], 2);

@@ -1,0 +1,330 @@
+"""The maps of `aisdati detect`: map.png, map.html and evidence/track-<id>.png.
+
+map.png draws the test tracks over the offline coastline, the flagged ones in red with what they
+were compared with; map.html is the same as a zoomable page that works offline
+(`aisdati.detection.webmap`); each evidence figure shows one
+flagged track, what it was compared with and its deviation profile, to say why it stands out."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from aisdati.detection.webmap import html_detection_map
+from aisdati.plots import draw_land, plain_text, save, set_map_limits
+
+if TYPE_CHECKING:
+    from aisdati.detection.run import Detection
+
+EVIDENCE_FIGURES = 20
+"""At most this many flagged tracks (the highest ranked) get an evidence figure."""
+
+
+
+# ------------------------------------------------------------------------------- map.png
+@plain_text()  # its texts may hold model names: drawn as they are
+def plot_detection_map(
+    tracks: Sequence[np.ndarray],
+    rollouts: Sequence[np.ndarray],
+    flagged: np.ndarray,
+    max_dev: np.ndarray,
+    regions: Sequence[tuple[np.ndarray, np.ndarray]],
+    path: Path,
+    title: str = "",
+    evidence_label: str = "nearest rollout",
+) -> None:
+    """Test tracks grey, flagged tracks red with their nearest rollout blue and a cross where they
+    deviate most, the models' regions dashed, over the offline coastline (aisdati.coastline, cut
+    to the map's box at any scale; lon/lat, the longitude axis stretched by 1/cos(latitude) so
+    that shapes are true)."""
+    fig, ax = plt.subplots(figsize=(9, 7.5))
+    for xy, f in zip(tracks, flagged, strict=True):
+        if not f:
+            ax.plot(xy[:, 0], xy[:, 1], color="0.55", lw=0.6, alpha=0.7, zorder=1)
+    for xy, roll, f in zip(tracks, rollouts, flagged, strict=True):
+        if f:
+            ax.plot(roll[:, 0], roll[:, 1], color="tab:blue", lw=1.0, zorder=2)
+            ax.plot(xy[:, 0], xy[:, 1], color="tab:red", lw=1.4, zorder=3)
+            ax.plot(*xy[0], "o", color="tab:red", ms=3, zorder=3)
+    if flagged.any():
+        ax.plot(max_dev[flagged, 0], max_dev[flagged, 1], "kx", ms=7, mew=1.6, zorder=4)
+    for lo, hi in regions:
+        ax.plot(
+            [lo[0], hi[0], hi[0], lo[0], lo[0]],
+            [lo[1], lo[1], hi[1], hi[1], lo[1]],
+            "k--",
+            lw=0.8,
+            zorder=1,
+        )
+    allpts = np.concatenate([*tracks, *[np.stack([lo, hi]) for lo, hi in regions]])
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    pad = np.maximum((hi - lo) * 0.04, 0.01)
+    set_map_limits(ax, lo - pad, hi + pad)
+    draw_land(ax)
+    handles = [
+        plt.Line2D([], [], color="0.55", lw=1, label="test track"),
+        plt.Line2D([], [], color="tab:red", lw=1.4, label="flagged track"),
+        plt.Line2D([], [], color="tab:blue", lw=1, label=evidence_label),
+        plt.Line2D([], [], color="k", marker="x", ls="", label="largest deviation"),
+        plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
+    ]
+    ax.legend(handles=handles, fontsize=8, loc="best")
+    ax.set_title(title or "DATI anomalies")
+    save(fig, path)
+
+
+# ------------------------------------------------------------------------------ map.html
+def _widen(lo: np.ndarray, hi: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grow a lon/lat box about its centre to a width / height ratio (in true distance)."""
+    coslat = np.cos(np.radians((lo[1] + hi[1]) / 2))
+    w, h = (hi[0] - lo[0]) * coslat, hi[1] - lo[1]
+    w, h = max(w, h * ratio), max(h, w / ratio)
+    mid = (lo + hi) / 2
+    half = np.array([w / coslat, h]) / 2
+    return mid - half, mid + half
+
+
+@plain_text()  # its texts may hold model names: drawn as they are
+def plot_track_evidence(
+    track: np.ndarray,
+    rollout: np.ndarray | None,
+    profile: np.ndarray,
+    stretch: tuple[int, int] | None,
+    title: str,
+    path: Path,
+    *,
+    hours: np.ndarray | None = None,
+    profile_label: str = "deviation from the rollout (m)",
+    pad_frac: float = 0.15,
+    pad_deg: float = 0.01,
+    context: Sequence[np.ndarray] = (),
+    evidence_label: str = "rollout",
+) -> None:
+    """Why one track stands out, in two panels.
+
+    Left, a map: the coastline (at the map's scale), other tracks for context (`context`, light
+    grey), the track (black, a green dot at its start), its rollout (blue dashed, when given),
+    the stretch `track[i0:i1]` in red and a cross at the point of largest `profile`. The box is
+    the track's and rollout's, padded by `pad_frac` of its span and at least `pad_deg` degrees.
+    Right: `profile` ([n] metres, one value per track point: e.g. distance to the matched
+    rollout point, a teacher-forced step error) against the point index, or against `hours`
+    ([n] hours since the start) when given, with the stretch shaded.
+
+    `stretch` is a Python slice (i0, i1): points i0..i1-1. Saved through a temporary name."""
+    track = np.asarray(track, dtype=float)
+    profile = np.asarray(profile, dtype=float)
+    n = len(track)
+    if track.ndim != 2 or track.shape[1] != 2 or n == 0:
+        raise ValueError(f"track must be [n, 2] lon/lat, got shape {track.shape}")
+    if profile.shape != (n,):
+        raise ValueError(f"profile must have one value per track point ({n}), got {profile.shape}")
+    x = np.arange(n) if hours is None else np.asarray(hours, dtype=float)
+    if x.shape != (n,):
+        raise ValueError(f"hours must have one value per track point ({n}), got {x.shape}")
+    if stretch is not None:
+        i0, i1 = max(0, int(stretch[0])), min(n, int(stretch[1]))
+        stretch = (i0, i1) if i1 > i0 else None
+    peak = int(np.nanargmax(profile)) if np.isfinite(profile).any() else None
+
+    fig, (ax, axp) = plt.subplots(1, 2, figsize=(13, 5.6), gridspec_kw={"width_ratios": [1.15, 1]})
+    pts = [track] + ([np.asarray(rollout, dtype=float)] if rollout is not None else [])
+    allpts = np.concatenate(pts)
+    allpts = allpts[np.isfinite(allpts).all(axis=1)]
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    pad = np.maximum((hi - lo) * pad_frac, pad_deg)
+    lo, hi = _widen(lo - pad, hi + pad, ratio=1.25)
+    _evidence_map(ax, track, rollout, profile, stretch, peak, context, evidence_label)
+    set_map_limits(ax, lo, hi)
+    draw_land(ax)
+    ax.legend(fontsize=8, loc="best")
+    _profile_panel(axp, x, profile, stretch, peak, profile_label, hours is None)
+    fig.suptitle(title)
+    save(fig, path)
+
+
+def _evidence_map(
+    ax: plt.Axes,
+    track: np.ndarray,
+    rollout: np.ndarray | None,
+    profile: np.ndarray,
+    stretch: tuple[int, int] | None,
+    peak: int | None,
+    context: Sequence[np.ndarray],
+    evidence_label: str,
+) -> None:
+    """The lines of the evidence figure's map panel (see `plot_track_evidence`)."""
+    for xy in context:
+        ax.plot(xy[:, 0], xy[:, 1], color="0.7", lw=0.6, alpha=0.8, zorder=1)
+    if rollout is not None:
+        ax.plot(
+            rollout[:, 0],
+            rollout[:, 1],
+            "--",
+            color="tab:blue",
+            lw=1.3,
+            zorder=2,
+            label=evidence_label,
+        )
+    ax.plot(track[:, 0], track[:, 1], color="black", lw=1.4, zorder=3, label="track")
+    ax.plot(*track[0], "o", color="tab:green", ms=7, mec="black", zorder=5, label="start")
+    if stretch is not None:
+        seg = track[stretch[0] : max(stretch[1], stretch[0] + 2)]
+        ax.plot(seg[:, 0], seg[:, 1], color="tab:red", lw=3, zorder=4, label="stretch")
+    if peak is not None:
+        ax.plot(
+            *track[peak],
+            "x",
+            color="tab:red",
+            ms=10,
+            mew=2.2,
+            zorder=6,
+            label=f"max {profile[peak]:,.0f} m",
+        )
+
+
+def _profile_panel(
+    axp: plt.Axes,
+    x: np.ndarray,
+    profile: np.ndarray,
+    stretch: tuple[int, int] | None,
+    peak: int | None,
+    profile_label: str,
+    by_index: bool,
+) -> None:
+    """The evidence figure's deviation profile against the point index (`by_index`) or hours."""
+    axp.plot(x, profile, color="black", lw=1.2)
+    if stretch is not None:
+        axp.axvspan(
+            x[stretch[0]],
+            x[stretch[1] - 1],
+            color="tab:red",
+            alpha=0.18,
+            label=f"stretch [{stretch[0]}, {stretch[1]})",
+        )
+    if peak is not None:
+        axp.plot(x[peak], profile[peak], "x", color="tab:red", ms=10, mew=2.2)
+    axp.set_xlabel("point index" if by_index else "hours since the start")
+    axp.set_ylabel(profile_label)
+    span = float(x[-1] - x[0]) or 1.0
+    axp.set_xlim(x[0] - 0.015 * span, x[-1] + 0.015 * span)
+    axp.set_ylim(bottom=min(0.0, float(np.nanmin(profile))) if peak is not None else 0.0)
+    axp.grid(alpha=0.3)
+    if stretch is not None:
+        axp.legend(fontsize=8, loc="best")
+
+
+# ------------------------------------------------------------------ a detection's maps
+def deviation_stretch(profile: np.ndarray) -> tuple[int, int]:
+    """The contiguous stretch around a profile's peak where it stays above half the peak: where
+    the track strays most, as an index range [start, end)."""
+    k = int(np.argmax(profile))
+    above = profile >= profile[k] / 2
+    a = k
+    while a > 0 and above[a - 1]:
+        a -= 1
+    b = k + 1
+    while b < len(profile) and above[b]:
+        b += 1
+    return a, b
+
+
+def write_maps(result: Detection, out: Path) -> list[Path]:
+    """map.png, map.html and the evidence figures of a detection, in `out`."""
+    flagged = result.scores["flagged"].to_numpy()
+    stretches = [deviation_stretch(p) for p in result.profiles]
+    title = _map_title(result)
+    tracks = [t.positions for t in result.tracks]
+    regions = [m.bounds for m in result.models]
+    png = out / "map.png"
+    plot_detection_map(
+        tracks,
+        result.rollouts,
+        flagged,
+        result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy(),
+        regions,
+        png,
+        title=title,
+        evidence_label=result.evidence_kind,
+    )
+    page = out / "map.html"
+    html_detection_map(
+        tracks,
+        result.rollouts,
+        [_track_props(r) for r in result.scores.itertuples()],
+        flagged,
+        regions,
+        page,
+        stretches=[
+            (f"track {t.track_id}", t.positions[a:b])
+            for t, (a, b), f in zip(result.tracks, stretches, flagged, strict=True)
+            if f
+        ],
+        title=title,
+    )
+    return [png, page, *evidence_figures(result, out / "evidence", stretches)]
+
+
+def evidence_figures(
+    result: Detection, folder: Path, stretches: list[tuple[int, int]]
+) -> list[Path]:
+    """evidence/track-<id>.png for the highest-ranked flagged tracks: the track, what it was
+    compared with, the stretch of largest deviation and the deviation profile along it."""
+    s = result.settings
+    label = "one-step prediction error (m)" if s and s.score == "step" else "deviation (m)"
+    if s and s.score == "lane":
+        label = "distance to the lane (m)"
+    elif s and s.method == "nearest":
+        label = "distance to the nearest training track (m)"
+    rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
+    index = {t.track_id: i for i, t in enumerate(result.tracks)}
+    files = []
+    if len(rows):
+        folder.mkdir(parents=True, exist_ok=True)
+    for row in rows.itertuples():
+        i = index[int(row.track_id)]
+        track = result.tracks[i]
+        hours = np.r_[0.0, np.cumsum(track.dts)]
+        path = folder / f"track-{int(row.track_id)}.png"
+        plot_track_evidence(
+            track.positions,
+            result.rollouts[i],
+            result.profiles[i],
+            stretches[i],
+            f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
+            f"score {row.score_m / 1000:.2f} km, model {row.model}",
+            path,
+            hours=hours,
+            profile_label=label,
+            evidence_label=result.evidence_kind,
+        )
+        files.append(path)
+    return files
+
+
+def _track_props(row: Any) -> dict[str, Any]:
+    return {
+        "track_id": int(row.track_id),
+        "mmsi": int(row.mmsi),
+        "rank": int(row.rank),
+        "score": round(float(row.score), 4),
+        "score_m": round(float(row.score_m), 1),
+        "max_dev_m": round(float(row.max_dev_m), 1),
+        "max_dev_lon": float(row.max_dev_lon),
+        "max_dev_lat": float(row.max_dev_lat),
+        "judged by": str(row.model),
+    }
+
+
+def _map_title(result: Detection) -> str:
+    """What the maps show: the method and score, and how many tracks were flagged by what rule."""
+    s = result.settings
+    n, f = len(result.scores), int(result.scores["flagged"].sum())
+    rule = f"top {s.top_percent:g}%" if s and s.top_percent else f"score > {s.threshold:g}"
+    if s and s.contamination is not None:
+        rule = f"calibrated, contamination {s.contamination:g}"
+    what = f"{s.method} ({s.score})" if s else "DATI"
+    return f"{what} anomalies: {f} of {n} test tracks flagged ({rule})"

@@ -1,0 +1,103 @@
+"""`bc`: behavioural cloning (a Gaussian policy on position and step index, the self-test's BC,
+`aisdati.model.bc`), rolled out and scored exactly like DATI: the learnt baseline DATI has to
+beat. One model, whatever the lane configuration's seed ensemble (`members` is DATI's)."""
+
+from __future__ import annotations
+
+import io
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import torch
+
+from aisdati.ais.card import DataCard, ModelCard, NetworkCard, TrainingReport
+from aisdati.ais.policy import Act
+from aisdati.ais.source import build_source, make_env
+from aisdati.ais.space import AISSpace
+from aisdati.ais.training import TrainSettings, base_card
+from aisdati.detectors.policy import PolicyDetector, saved_corridor
+from aisdati.detectors.scoring import ScoreSettings
+from aisdati.errors import UserError
+from aisdati.model.bc import BCConfig, BCPolicy, BCTrainer, sample_decisions
+from aisdati.model.persistence import load_weights
+from aisdati.model.readers import first_line
+from aisdati.model.trainer import Callback
+from aisdati.outdir import atomic_write_bytes
+from aisdati.tracks.store import Track
+
+
+class BCDetector(PolicyDetector):
+    method = "bc"
+
+    def __init__(
+        self,
+        settings: TrainSettings | None = None,
+        how: ScoreSettings | None = None,
+        name: str | None = None,
+    ):
+        super().__init__(settings, how, name)
+        self.bc: BCPolicy | None = None
+
+    def fit(
+        self,
+        tracks: Sequence[Track],
+        data: DataCard | None = None,
+        on_step: Callback | None = None,
+    ) -> BCDetector:
+        """Train BC for `settings.episodes` episodes (its training reports no steps: `on_step`
+        is DATI's), then score the training tracks to calibrate."""
+        t0 = time.perf_counter()
+        torch.set_num_threads(1)
+        # a card's seeds number its members: the baseline is one model
+        source = build_source(tracks, replace(self.settings.lane, members=1))
+        self.card = base_card("bc", self.settings, source.space, self.describe(tracks, data))
+        trainer = BCTrainer(
+            [make_env(source)], [self.settings.seed], BCConfig(episodes=self.settings.episodes)
+        )
+        self.bc = trainer.train()
+        self.card.training = TrainingReport(
+            episodes_run=trainer.episode[0],
+            finished=True,
+            details={"final_loss": float(trainer.losses[-1][0])},
+        )
+        self.card.networks = NetworkCard(seeds=self.bc.seeds, config=self.bc.cfg.to_dict())
+        self.corridor = source.space.corridor
+        self.calibrate(tracks)
+        self.card.training.wall_seconds = time.perf_counter() - t0
+        return self
+
+    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
+        policy = self.trained()
+        gen = torch.Generator().manual_seed(int(seed))
+
+        def draw(shape: torch.Size) -> torch.Tensor:
+            return torch.randn(shape, generator=gen)
+
+        return lambda obs: sample_decisions(policy, obs[None], draw)[0]
+
+    def trained(self) -> BCPolicy:
+        if self.bc is None:
+            raise UserError("the bc detector is not fitted: fit it or load one")
+        return self.bc
+
+    def save(self, stem: Path) -> None:
+        buf = io.BytesIO()
+        torch.save(self.trained().state_dict(), buf)
+        atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
+        self.save_card(stem)
+        self.save_corridor(stem)
+
+    @classmethod
+    def from_files(cls, stem: Path, card: ModelCard) -> BCDetector:
+        assert card.networks is not None  # a bc card has them (`ModelCard.from_dict`)
+        try:  # the card's sizes are bounded (`ModelCard.from_dict`), its other entries not
+            cfg = BCConfig.from_dict(card.networks.config)
+            policy = BCPolicy(AISSpace.from_card(card).state_dim, 3, cfg, card.networks.seeds)
+        except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+            raise UserError(f"cannot load model {stem}: {first_line(exc)}") from None
+        load_weights(policy, stem.with_suffix(".pt"))
+        det = cls(name=stem.name)
+        det.card, det.bc, det.corridor = card, policy, saved_corridor(stem, card)
+        return det

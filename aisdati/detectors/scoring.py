@@ -1,0 +1,85 @@
+"""What scoring tracks is asked for (`ScoreSettings`) and what it returns (`Scores`), for every
+detector: a score per track in metres (higher = more abnormal), where along the track it strays,
+and what it was compared with."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aisdati.ais.card import CalibratedWith
+
+SCORES = ("rollout", "step", "lane", "both")
+
+
+def tail_mean(values: np.ndarray, fraction: float) -> float:
+    """Mean of the largest `fraction` of the values (at least one): a short stretch far off
+    counts as much in a long track as in a short one."""
+    k = max(1, math.ceil(len(values) * fraction))
+    return float(np.partition(values, len(values) - k)[-k:].mean())
+
+
+@dataclass(frozen=True, kw_only=True)
+class ScoreSettings:
+    score: str = "lane"
+    """lane, rollout (the paper's), step (teacher-forced) or both; see
+    `aisdati.ais.policy`."""
+    rollouts: int = 10
+    """K: free rollouts per track (the rollout score is the best of K), and one-step draws
+    per report."""
+    lane_rollouts: int = 30
+    """Lane score: free rollouts per track that make up its lane (the K of the rollout score
+    and L - K more). A lane is where the policy goes, estimated from samples: on the Kitimat
+    routes over three seeds and several noise draws, DATI's pooled lane AUC (by position only)
+    averaged 0.879 with 10, 0.892 with 30 and 0.904 with 100 rollouts (README, "every route of
+    an area"); with the course weighed, 100 add little. 30 keeps scoring and calibration
+    affordable."""
+    lane_reach: float = 2.0
+    """Lane score: the rollouts run this many times the track's number of steps (the rollout
+    score always uses the track's own number). DATI's rollouts on Kitimat ran at half to twice
+    the real pace (SOG x dt), so over the track's number of steps a slow one stopped half-way
+    and every later report was "far from the lane"; twice as many steps cover a model at half
+    pace, and a fast one just goes on along the corridor."""
+    lane_course_km: float = 2.0
+    """Lane score: what sailing against the lane's course costs, km (across it: 0.7 x as
+    much); 0 judges position only. See `aisdati.geo.lane_distances`. 2 km gave DATI the best
+    pooled lane AUC averaged over two areas (Kitimat's fjord lanes, where 4 km was better, and
+    NY Harbor's ferry crossings, where 4 km was worse than none; README, "every route")."""
+    lane_traffic: bool = True
+    """Lane score of a learnt policy: each track's lane also holds one rollout from every
+    training track's start (`PolicyDetector.traffic`), so the lane is where the model's
+    traffic goes, not only where it goes from this track's start. A real track that starts
+    off the lane and joins it was judged only against rollouts that never reached the lane
+    it joined. With it DATI's pooled lane AUC rose 0.942 -> 0.966 on Kitimat and 0.945 ->
+    0.959 on NY Harbor (README, "every route of an area")."""
+    tail: float = 0.1
+    """Step and lane scores: the mean of the largest `tail` of a track's per-report distances.
+    Measured at 0.05-1 on both areas (`benchmarks/lane_score.py --tail`): 0.1 gave DATI the
+    best pooled lane AUC averaged over Kitimat and NY Harbor (0.15 was level; larger fractions
+    dilute a short jump or loiter on the ferry routes, smaller ones let a few stray reports
+    decide); README, "every route of an area"."""
+    near_km: float = 10.0
+    """`nearest`: compare with training tracks that start within this distance."""
+    seed: int = 0
+
+    def calibrated_with(self) -> CalibratedWith:
+        """What a card records of the settings its calibration scores were computed with:
+        `Detector.threshold` refuses to flag with others."""
+        return CalibratedWith(lane_course_km=self.lane_course_km, lane_traffic=self.lane_traffic)
+
+
+@dataclass
+class Scores:
+    """What a detector says about N tracks."""
+
+    score_m: np.ndarray
+    """[N] raw scores, metres; higher = more abnormal."""
+    profiles: list[np.ndarray]
+    """Per track, the local deviation (m) at each of its points: where it strays."""
+    evidence: list[np.ndarray]
+    """Per track, what it was compared with ([m, 2] lon/lat): best rollout, nearest training
+    track, or the one-step predictions."""
+    parts: dict[str, np.ndarray] = field(default_factory=dict)
+    """Every score computed in the pass, by kind ([N] each, `score_m` among them)."""

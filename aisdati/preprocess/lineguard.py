@@ -1,0 +1,374 @@
+"""The line guard: the CSV bytes between a (decompressed) source and pyarrow's CSV reader, cleaned
+so that one bad line costs one counted row instead of the file (see `LineGuard`)."""
+
+from __future__ import annotations
+
+import codecs
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numba
+import numpy as np
+
+from aisdati.preprocess.streams import ForwardOnly
+
+BLOCK_SIZE = 4 << 20
+"""Bytes of CSV per record batch: large enough for pyarrow's threads, small enough for memory
+(pyarrow parses several blocks ahead, each also held as Python bytes: 16 MiB blocks held 350 MB
+more while reading a 590 MB file than these, and were no faster)."""
+MAX_LINE_BYTES = 1 << 20
+"""A line longer than this is no AIS report (they take 100-300 bytes): it is cut out of the stream
+and counted as one malformed row, so one giant line neither fails the file on pyarrow's block size
+nor holds more than this much memory."""
+RAW_TEXT_CHARS = 1000
+"""How much of a malformed row's text is kept (for rejects.parquet)."""
+HEADER_MARKS = (b"MMSI", b"mmsi", b"Mmsi")
+"""Every header line names the MMSI column, so only lines holding one of these can be a header
+repeated mid-file (two exports joined with `cat`): a search at memory speed, then a real check of
+the few lines found."""
+
+
+@dataclass(frozen=True)
+class HeaderLine:
+    """A header line met mid-file: its column names and its text (for rejects.parquet)."""
+
+    names: list[str]
+    text: str
+
+
+def shorten(text: str) -> str:
+    """A malformed row's text as kept: at most `RAW_TEXT_CHARS` characters."""
+    if len(text) <= RAW_TEXT_CHARS:
+        return text
+    return f"{text[:RAW_TEXT_CHARS]}... ({len(text):,} characters)"
+
+
+class LineGuard(ForwardOnly):
+    """The CSV bytes as pyarrow can parse them line by line, between the (decompressed) source and
+    pyarrow's reader. It drops the header line (read already by `SourceReader`), ends lines at LF
+    whatever the file used (CRLF or old-Mac CR), replaces bytes that are not UTF-8 (so a row with
+    random bytes fails its own checks, or is kept when they sit in a column we do not read,
+    instead of failing the file), and cuts out, as one malformed row each, lines longer than
+    `MAX_LINE_BYTES` and lines that end inside a quoted field (pyarrow would carry the quote on
+    over the following lines and swallow up to a block of good rows into one bad one).
+
+    Clean blocks (the usual case) pass as views of what was read, without a copy: the checks
+    are searches over the block, and only a block that needs a change is copied and cut.
+
+    The first `header_lines` lines (blank lines, then the header) are dropped. A later line that
+    `header_of` takes for a header (its column names, or None) ends the stream there, as if the
+    file ended: the reader takes it with `next_header` and reads on under it."""
+
+    def __init__(
+        self,
+        raw: Any,
+        on_malformed: Callable[[str], None],
+        header_lines: int = 1,
+        header_of: Callable[[bytes], list[str] | None] | None = None,
+    ) -> None:
+        self.raw = raw
+        self.on_malformed = on_malformed
+        self.header_of = header_of
+        self.closed = False
+        self._ready: deque[bytes | memoryview | HeaderLine] = deque()  # whole lines, in order
+        self._header: HeaderLine | None = None  # met, and not taken yet: the stream ends there
+        self._carry = b""  # the start of a line whose end has not arrived yet
+        self._header_left = header_lines
+        self._dropping: str | None = "header"  # or "long": skipping to the end of a line
+        self._dropped = 0
+        self._dropped_head = b""
+        self._eof = False
+
+    def read(self, n: int = -1) -> bytes | memoryview:
+        """Whole lines, at most `n` bytes (pyarrow reads blocks of `BLOCK_SIZE`; a shorter block
+        is fine as long as it ends at a line end); empty only at the end."""
+        want = BLOCK_SIZE if n is None or n < 0 else max(n, 1)
+        while not self._ready and not self._eof and self._header is None:
+            chunk = self.raw.read(want)
+            if chunk:
+                self._feed(chunk)
+            else:
+                self._eof = True
+                self._finish()
+        if not self._ready or self._header is not None:
+            return b""
+        piece = self._ready.popleft()
+        if isinstance(piece, HeaderLine):
+            self._header = piece
+            return b""
+        if len(piece) > want:  # grown by UTF-8 replacement characters: the rest comes next
+            self._ready.appendleft(piece[want:])
+            piece = piece[:want]
+        return piece
+
+    def next_header(self) -> HeaderLine | None:
+        """The header line the stream stopped at (then reading goes on after it), or None at the
+        end of the file."""
+        header, self._header = self._header, None
+        return header
+
+    def close(self) -> None:
+        self.closed = True
+        self.raw.close()
+
+    def _feed(self, chunk: bytes) -> None:
+        if b"\r" in chunk:
+            chunk = chunk.replace(b"\r", b"\n")  # CRLF leaves an empty line: pyarrow skips it
+        start = 0
+        while self._dropping is not None or self._carry:
+            first = chunk.find(b"\n", start)
+            if first < 0:
+                self._hold(chunk[start:])
+                return
+            if self._dropping is not None:
+                self._drop_more(chunk[start:first])
+                self._end_drop()
+            else:
+                line, self._carry = self._carry + chunk[start : first + 1], b""
+                self._emit(line, 0, len(line))
+            start = first + 1
+        cut = chunk.rfind(b"\n") + 1
+        if cut > start:
+            self._emit(chunk, start, cut)
+        else:
+            cut = start
+        if cut < len(chunk):
+            self._hold(chunk[cut:])
+
+    def _hold(self, part: bytes) -> None:
+        """Keep the start of an unfinished line; past `MAX_LINE_BYTES` it is dropped instead."""
+        if self._dropping is not None:
+            self._drop_more(part)
+            return
+        self._carry += part
+        if len(self._carry) > MAX_LINE_BYTES:
+            self._dropping = "long"
+            self._drop_more(self._carry)
+            self._carry = b""
+
+    def _finish(self) -> None:
+        if self._dropping is not None:
+            self._end_drop()
+        tail, self._carry = self._carry, b""
+        if tail:
+            self._emit(tail, 0, len(tail))
+
+    def _drop_more(self, data: bytes) -> None:
+        if len(self._dropped_head) < RAW_TEXT_CHARS:
+            self._dropped_head += data[: RAW_TEXT_CHARS - len(self._dropped_head)]
+        self._dropped += len(data)
+
+    def _end_drop(self) -> None:
+        if self._dropping == "long":
+            self._report(self._dropped_head, self._dropped)
+        if self._dropping == "header":
+            self._header_left -= 1
+        if self._dropping == "long" or self._header_left <= 0:
+            self._dropping = None
+        self._dropped, self._dropped_head = 0, b""
+
+    def _report(self, line: bytes, size: int | None = None) -> None:
+        text = line[:RAW_TEXT_CHARS].decode("utf-8", errors="replace")
+        size = len(line) if size is None else size
+        if size > RAW_TEXT_CHARS:
+            text += f"... ({size:,} bytes)"
+        self.on_malformed(text)
+
+    def _emit(self, buf: bytes, a: int, b: int) -> None:
+        """Queue the whole lines buf[a:b], and a `HeaderLine` in place of each header among them."""
+        for start, end, header in self._headers_in(buf, a, b):
+            self._queue(buf, a, start)
+            self._ready.append(header)
+            a = end
+        self._queue(buf, a, b)
+
+    def _headers_in(self, buf: bytes, a: int, b: int) -> list[tuple[int, int, HeaderLine]]:
+        """The header lines [start, end) of the whole lines buf[a:b] (see `HEADER_MARKS`)."""
+        if self.header_of is None:
+            return []
+        lines = set()
+        for mark in HEADER_MARKS:
+            pos = buf.find(mark, a, b)
+            while pos >= 0:
+                start = max(buf.rfind(b"\n", a, pos) + 1, a)
+                end = buf.find(b"\n", pos, b)
+                end = b if end < 0 else end + 1
+                lines.add((start, end))
+                pos = buf.find(mark, end, b)
+        found = []
+        for start, end in sorted(lines):
+            line = bytes(buf[start:end]).rstrip(b"\n")
+            names = self.header_of(line)
+            if names is not None:
+                text = line[:RAW_TEXT_CHARS].decode("utf-8", errors="replace")
+                found.append((start, end, HeaderLine(names, text)))
+        return found
+
+    def _queue(self, buf: bytes, a: int, b: int) -> None:
+        """Queue the whole lines buf[a:b]: as a view when they need nothing, else cleaned."""
+        if a >= b:
+            return
+        clean = not (b - a > MAX_LINE_BYTES and _may_hold_long_line(buf, a, b))
+        if clean and not buf.isascii():
+            try:
+                codecs.utf_8_decode(memoryview(buf)[a:b], "strict", True)
+            except UnicodeDecodeError:
+                clean = False
+        if clean and buf.find(b'"', a, b) >= 0 and _unterminated_spans(buf, a, b):
+            clean = False
+        if clean:
+            self._ready.append(memoryview(buf)[a:b])
+        else:
+            cleaned = self._clean(buf[a:b])
+            if cleaned:  # (an empty block would read as the end of the file)
+                self._ready.append(cleaned)
+
+    def _clean(self, body: bytes) -> bytes:
+        """Whole lines (or the file's last, unended one) made safe for pyarrow."""
+        if _may_hold_long_line(body, 0, len(body)):
+            starts = _line_starts(body)
+            ends = np.r_[starts[1:], len(body)]
+            long = np.flatnonzero(ends - starts > MAX_LINE_BYTES + 1)
+            body = self._cut(body, [(int(starts[i]), int(ends[i])) for i in long])
+        if not body.isascii():
+            try:
+                body.decode("utf-8")
+            except UnicodeDecodeError:
+                body = body.decode("utf-8", errors="replace").encode("utf-8")
+        if b'"' in body:
+            body = self._cut(body, _unterminated_spans(body, 0, len(body)))
+        return body
+
+    def _cut(self, body: bytes, spans: list[tuple[int, int]]) -> bytes:
+        """`body` without the lines [start, end) of `spans` (each reported as a malformed row)."""
+        if not spans:
+            return body
+        pieces, pos = [], 0
+        for a, b in sorted(spans):
+            pieces.append(body[pos:a])
+            self._report(body[a:b].rstrip(b"\n"))
+            pos = b
+        pieces.append(body[pos:])
+        return b"".join(pieces)
+
+
+def _unterminated_spans(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
+    """The lines [start, end) of buf[a:b] (whole lines) that end inside a quoted field. Only lines
+    holding a quote can; with few of them each is checked on its own, with many (a file that
+    quotes every field) the rest of the block is scanned at once."""
+    spans: list[tuple[int, int]] = []
+    pos, checked = buf.find(b'"', a, b), 0
+    while pos >= 0:
+        line = max(buf.rfind(b"\n", a, pos) + 1, a)
+        if checked == 1000:  # quotes everywhere: one compiled pass over what is left
+            return spans + _scan_unterminated(buf, line, b)
+        end = buf.find(b"\n", pos, b)
+        end = b if end < 0 else end + 1
+        if end - line > 10_000:
+            spans += _scan_unterminated(buf, line, end)
+        elif _ends_in_quotes(buf[line:end]):
+            spans.append((line, end))
+        checked += 1
+        pos = buf.find(b'"', end, b) if end < b else -1
+    return spans
+
+
+def _ends_in_quotes(line: bytes) -> bool:
+    """Whether one line ends inside a quoted field (`_unterminated_lines`'s rules, in Python: a
+    few lines per block hold quotes, and compiling is not worth it for them)."""
+    state, i, n = 0, 0, len(line)  # 0: field start, 1: unquoted or after closing quote, 2: quoted
+    while i < n:
+        c = line[i]
+        if state == 2:
+            if c == 34:
+                if i + 1 < n and line[i + 1] == 34:
+                    i += 1
+                else:
+                    state = 1
+            elif c == 10:
+                return True
+        elif c == 10:
+            return False
+        elif c == 44:
+            state = 0
+        elif state == 0:
+            state = 2 if c == 34 else 1
+        i += 1
+    return state == 2
+
+
+def _scan_unterminated(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
+    view = np.frombuffer(buf, np.uint8, count=b - a, offset=a)
+    starts = np.empty(64, np.int64)
+    found = _unterminated_lines(view, starts)
+    if found > len(starts):
+        starts = np.empty(found, np.int64)
+        _unterminated_lines(view, starts)
+    spans = []
+    for s in starts[:found]:
+        end = buf.find(b"\n", a + int(s), b)
+        spans.append((a + int(s), b if end < 0 else end + 1))
+    return spans
+
+
+@numba.njit(cache=True)
+def _unterminated_lines(buf: np.ndarray, out: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Start offsets (into `out`, as many as fit) of the lines of `buf` that end inside a quoted
+    field, and how many there are. pyarrow's dialect: a quote opens a field only at its start,
+    `""` inside it is an escaped quote, the first other quote closes it, and after that (as in an
+    unquoted field) a quote is a literal character. Only lines holding a quote are parsed; the
+    rest are skipped at memory speed."""
+    found = 0
+    n = buf.shape[0]
+    done = 0  # everything before this offset is settled
+    i = 0
+    while True:
+        while i < n and buf[i] != 34:  # the next quote
+            i += 1
+        if i >= n:
+            return found
+        line = i
+        while line > done and buf[line - 1] != 10:  # back to the start of its line
+            line -= 1
+        state = 0  # 0: field start, 1: unquoted field or after a closing quote, 2: quoted
+        i = line
+        while i < n:
+            c = buf[i]
+            if state == 2:
+                if c == 34:
+                    if i + 1 < n and buf[i + 1] == 34:
+                        i += 1
+                    else:
+                        state = 1
+                elif c == 10:
+                    break
+            elif c == 10:
+                break
+            elif c == 44:  # ,
+                state = 0
+            elif state == 0:
+                state = 2 if c == 34 else 1
+            i += 1
+        if state == 2:  # the line ended (or the buffer did) inside the quotes
+            if found < out.shape[0]:
+                out[found] = line
+            found += 1
+        i += 1
+        done = i
+
+
+def _may_hold_long_line(buf: bytes, a: int, b: int) -> bool:
+    """Cheap test: some window of half `MAX_LINE_BYTES` in buf[a:b] without a line end (else no
+    line is too long); only then are the lines measured."""
+    half = MAX_LINE_BYTES // 2
+    return b - a > MAX_LINE_BYTES and any(
+        buf.find(b"\n", k, k + half) < 0 for k in range(a, b - half + 1, half)
+    )
+
+
+def _line_starts(body: bytes) -> np.ndarray:
+    ends = np.flatnonzero(np.frombuffer(body, np.uint8) == ord("\n"))
+    starts = np.r_[0, ends + 1]
+    return starts[starts < len(body)] if len(body) else starts[:0]

@@ -1,0 +1,296 @@
+"""NMEA 0183 logs of AIS receivers (`!AIVDM` / `!AIVDO` sentences), read as the frame a
+MarineCadastre CSV gives: `MMSI, BaseDateTime, LAT, LON, SOG, COG, Heading`.
+
+Sentences are parsed and decoded with pyais; messages of several sentences are reassembled. Only
+position reports become rows (types 1-3 class A, 18-19 class B, 27 long range). Each message needs
+a time, which receivers log in one of three ways:
+
+* an NMEA 4.0 tag block before the sentence, `\\c:1606780800,s:r1*hh\\!AIVDM,...` (seconds, or
+  milliseconds, since 1970; the tag block's own checksum is not checked, as pyais does not);
+* a timestamp column before the sentence, `2020-12-01T00:00:00Z,!AIVDM,...` or
+  `1606780800.25 !AIVDM,...` (ISO 8601, UTC when no zone is given, or seconds since 1970);
+* a Gatehouse `$PGHP,1,<year>,<month>,<day>,<h>,<m>,<s>,<ms>,...` sentence on the line before.
+
+The times are handed on as the text they were written in, for `convert.time_us` to parse like
+any CSV's. AIS's 'not available' values stay the values the cleaner rejects by name (LAT 91,
+LON 181, SOG 102.3, COG 360; type 27's SOG 63 and COG 511 become 102.3 and 360), and heading 511
+becomes a missing value. Every line that gives no row is counted under one reason: `not_ais`,
+`bad_checksum`, `truncated` (cut short, empty, or a multi-sentence message with parts missing),
+`not_position` or `no_time`; blank lines and `#` comments are not rows.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import pyarrow as pa
+from pyais.exceptions import AISBaseException, UnknownMessageException
+from pyais.messages import AISSentence, GatehouseSentence, NMEASentence, NMEASentenceFactory
+
+from aisdati.errors import UserError
+from aisdati.preprocess.clean import SENTINEL_COG, SENTINEL_SOG
+from aisdati.preprocess.inputs import (
+    AIS_SENTENCE,
+    SNIFF_BYTES,
+    Source,
+    describe_read_error,
+    looks_like_nmea,
+)
+from aisdati.preprocess.lineguard import shorten
+from aisdati.preprocess.streams import READ_ERRORS, ByteStream, CountingReader
+
+COLUMNS = {
+    "mmsi": "MMSI",
+    "time": "BaseDateTime",
+    "lat": "LAT",
+    "lon": "LON",
+    "sog": "SOG",
+    "cog": "COG",
+}
+"""Canonical column -> the frame's (MarineCadastre's) name."""
+FRAME_SCHEMA = pa.schema(
+    [
+        ("MMSI", pa.int64()),
+        ("BaseDateTime", pa.string()),
+        ("LAT", pa.float64()),
+        ("LON", pa.float64()),
+        ("SOG", pa.float64()),
+        ("COG", pa.float64()),
+        ("Heading", pa.int16()),
+    ]
+)
+POSITION_TYPES = frozenset({1, 2, 3, 18, 19, 27})
+REASONS = ("not_ais", "bad_checksum", "truncated", "not_position", "no_time")
+"""Why a line gives no row (`report.REASONS` describes them)."""
+HEADING_NOT_AVAILABLE = 511
+LONG_RANGE_SOG_NOT_AVAILABLE = 63
+LONG_RANGE_COG_NOT_AVAILABLE = 511
+BATCH_MESSAGES = 1 << 16
+"""Position reports per record batch."""
+MAX_LINE_BYTES = 4096
+"""An NMEA sentence has at most 82 characters, a tag block a few dozen: a longer line is none."""
+MAX_KEPT_TEXT = 1 << 26
+"""Characters of skipped lines kept for rejects.parquet; past this only their count is kept (a
+log without times would otherwise hold all its lines in memory)."""
+SENTENCE_START = re.compile(rb"[!$\\]")
+STAMP_SEPARATORS = b" \t,;[]"
+
+
+class SkippedLines:
+    """The lines that gave no row: their text by reason, within `MAX_KEPT_TEXT` characters."""
+
+    def __init__(self) -> None:
+        self.by_reason: dict[str, list[str | None]] = {reason: [] for reason in REASONS}
+        self._kept = 0
+
+    def add(self, reason: str, line: bytes) -> None:
+        text = None
+        if self._kept < MAX_KEPT_TEXT:
+            text = shorten(line.decode("ascii", errors="replace"))
+            self._kept += len(text)
+        self.by_reason[reason].append(text)
+
+
+@dataclass
+class Part:
+    """One sentence of a message, with the time its line gave (if any) and the line itself."""
+
+    sentence: AISSentence
+    time: str | None
+    line: bytes
+
+
+class NmeaDecoder:
+    """Lines in; position rows (taken as record batches of `FRAME_SCHEMA`) and skipped lines
+    (handed to `skip` with their reason) out."""
+
+    def __init__(self, skip: Callable[[str, bytes], None]) -> None:
+        self.skip = skip
+        self._rows: list[tuple] = []
+        self._gatehouse: str | None = None  # the time of the last $PGHP, for the next sentence
+        self._parts: dict[tuple, list[Part]] = {}  # unfinished messages by their stream
+
+    @property
+    def pending_rows(self) -> int:
+        return len(self._rows)
+
+    def feed(self, line: bytes) -> None:
+        """One line of the log (without its line end)."""
+        line = line.strip()
+        if not line or line.startswith(b"#"):
+            return
+        start = SENTENCE_START.search(line) if len(line) <= MAX_LINE_BYTES else None
+        if start is None:
+            self.skip("not_ais", line)
+            return
+        gatehouse = self._gatehouse
+        sentence = self._parse(line[start.start() :], line)
+        if isinstance(sentence, GatehouseSentence):
+            self._gatehouse = sentence.timestamp.isoformat()
+            return
+        self._gatehouse = None  # a $PGHP stamps the line after it only
+        if isinstance(sentence, AISSentence):
+            stamp = line[: start.start()].strip(STAMP_SEPARATORS).decode("ascii", "replace")
+            self._add_part(Part(sentence, _tag_time(sentence) or stamp or gatehouse, line))
+
+    def finish(self) -> None:
+        """The end of the log: messages still missing parts are truncated."""
+        for slot in list(self._parts):
+            self._give_up(slot)
+
+    def take(self) -> pa.RecordBatch:
+        """The rows decoded since the last call, as one record batch."""
+        columns = list(zip(*self._rows, strict=True)) if self._rows else [[]] * 7
+        self._rows = []
+        return pa.record_batch(
+            [pa.array(c, f.type) for c, f in zip(columns, FRAME_SCHEMA, strict=True)],
+            schema=FRAME_SCHEMA,
+        )
+
+    def _parse(self, raw: bytes, line: bytes) -> NMEASentence | None:
+        """The sentence of a line, or None (the line skipped under its reason)."""
+        try:
+            sentence = NMEASentenceFactory.produce(raw)
+        except UnknownMessageException:
+            self.skip("not_ais", line)
+            return None
+        except AISBaseException:
+            self.skip("truncated" if AIS_SENTENCE.search(line) else "not_ais", line)
+            return None
+        if not sentence.is_valid:  # pyais gives a missing `*hh` checksum as -1
+            self.skip("bad_checksum" if sentence.checksum >= 0 else "truncated", line)
+            return None
+        return sentence
+
+    def _add_part(self, part: Part) -> None:
+        """Decode a one-sentence message at once; collect the parts of a longer one, in order."""
+        sentence = part.sentence
+        if sentence.is_single:
+            self._decode(sentence, part.time, part.line)
+            return
+        slot = (sentence.seq_id, sentence.channel, sentence.talker_id, sentence.type)
+        slot += (sentence.frag_cnt,)
+        parts = self._parts.get(slot)
+        if sentence.frag_num == 1 or (parts and sentence.frag_num == len(parts) + 1):
+            if sentence.frag_num == 1 and parts:
+                self._give_up(slot)  # a new message began before the last one ended
+            self._parts.setdefault(slot, []).append(part)
+        else:  # a part without its beginning, or out of order
+            if parts:
+                self._give_up(slot)
+            self.skip("truncated", part.line)
+            return
+        if len(self._parts[slot]) == sentence.frag_cnt:
+            parts = self._parts.pop(slot)
+            message = AISSentence.assemble_from_iterable([p.sentence for p in parts])
+            time = next((p.time for p in parts if p.time), None)
+            self._decode(message, time, b"\n".join(p.line for p in parts))
+
+    def _give_up(self, slot: tuple) -> None:
+        self.skip("truncated", b"\n".join(p.line for p in self._parts.pop(slot)))
+
+    def _decode(self, message: AISSentence, time: str | None, text: bytes) -> None:
+        """One row from a whole message, or the reason it gives none."""
+        if not message.payload:
+            self.skip("truncated", text)
+            return
+        if message.ais_id not in POSITION_TYPES:
+            self.skip("not_position", text)
+            return
+        try:
+            report = message.decode()
+        except AISBaseException:
+            self.skip("truncated", text)
+            return
+        sog, cog = report.speed, report.course
+        if None in (report.mmsi, report.lat, report.lon, sog, cog):
+            self.skip("truncated", text)  # the payload ended before these fields
+            return
+        if not time:
+            self.skip("no_time", text)
+            return
+        if report.msg_type == 27:
+            sog = SENTINEL_SOG if sog == LONG_RANGE_SOG_NOT_AVAILABLE else sog
+            cog = SENTINEL_COG if cog == LONG_RANGE_COG_NOT_AVAILABLE else cog
+        heading = getattr(report, "heading", None)
+        heading = None if heading == HEADING_NOT_AVAILABLE else heading
+        self._rows.append((report.mmsi, time, report.lat, report.lon, sog, cog, heading))
+
+
+def _tag_time(sentence: AISSentence) -> str | None:
+    """The receiver time (`c:`) of the sentence's NMEA 4.0 tag block, if it has one."""
+    if sentence.tag_block is None:
+        return None
+    sentence.tag_block.init()
+    return sentence.tag_block.receiver_timestamp
+
+
+def read_lines(stream: ByteStream, chunk_bytes: int = 1 << 20) -> Iterator[bytes]:
+    """The lines of a byte stream, ended by LF, CRLF or CR. A line longer than `MAX_LINE_BYTES`
+    comes as its first `MAX_LINE_BYTES + 1` bytes (no sentence: it will be skipped), so memory
+    stays bounded whatever the file holds."""
+    carry, dropping = b"", False
+    while chunk := stream.read(chunk_bytes):
+        lines = (carry + chunk).replace(b"\r", b"\n").split(b"\n")
+        carry = lines.pop()
+        if dropping and lines:
+            lines.pop(0)  # the end of the over-long line, already given
+            dropping = False
+        yield from lines
+        if not dropping and len(carry) > MAX_LINE_BYTES:
+            yield carry[: MAX_LINE_BYTES + 1]
+            dropping = True
+        if dropping:
+            carry = b""
+    if carry and not dropping:
+        yield carry
+
+
+class NmeaReader:
+    """Streams one NMEA log as record batches of `FRAME_SCHEMA` (see the module docstring); the
+    `TableReader` of NMEA sources."""
+
+    def __init__(self, source: Source) -> None:
+        self.source = source
+        self.columns = dict(COLUMNS)
+        self.time_format: str | None = None
+        self._skipped = SkippedLines()
+        self._counter: CountingReader | None = None
+        try:
+            found = looks_like_nmea(source)
+        except READ_ERRORS as exc:
+            raise describe_read_error(source, exc) from None
+        if not found:
+            raise UserError(
+                f"{source.label}: no AIS sentence (!AIVDM or !AIVDO) in the first "
+                f"{SNIFF_BYTES >> 10} KiB: not an NMEA log"
+            )
+
+    @property
+    def total(self) -> int:
+        """Progress units of the whole source: bytes on disk."""
+        return self.source.size()
+
+    @property
+    def done(self) -> int:
+        return self._counter.bytes_read if self._counter else 0
+
+    @property
+    def skipped(self) -> dict[str, list[str | None]]:
+        return self._skipped.by_reason
+
+    def batches(self) -> Iterator[pa.RecordBatch]:
+        stream, self._counter = self.source.open()
+        decoder = NmeaDecoder(self._skipped.add)
+        try:
+            for line in read_lines(stream):
+                decoder.feed(line)
+                if decoder.pending_rows >= BATCH_MESSAGES:
+                    yield decoder.take()
+            decoder.finish()
+            if decoder.pending_rows:
+                yield decoder.take()
+        finally:
+            stream.close()

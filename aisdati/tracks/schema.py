@@ -1,0 +1,88 @@
+"""The data contracts of an ingest output (DESIGN.md), defined once: the columns and types of
+points.parquet, tracks.parquet, rejects.parquet and routes.parquet, the names of the track sets
+(clusters and routes), and the unit of the speeds they hold.
+
+`aisdati.preprocess` writes these files and `aisdati.tracks.store` (training, detection) and
+`aisdati.evaluation.dataset` (the evaluation's injected copy) read or write them, all through
+these names."""
+
+from __future__ import annotations
+
+import pyarrow as pa
+
+KNOT_MPS = 1852.0 / 3600.0
+"""One knot (the unit of AIS SOG, and of `sog` in points.parquet) in metres per second."""
+
+CLUSTERS = ("up", "down", "other")
+"""The paper's direction clusters (tracks.parquet's `cluster`)."""
+ROUTE_PREFIX = "route-"
+"""Route clusters are named route-1, route-2, ... by size (tracks.parquet's `route`)."""
+UNROUTED = "unrouted"
+"""The name of the tracks that fit no route (`route` is null)."""
+
+UTC_US = pa.timestamp("us", tz="UTC")
+POINTS_SCHEMA = pa.schema(
+    [
+        ("track_id", pa.int64()),
+        ("mmsi", pa.int64()),
+        ("time", UTC_US),
+        ("lon", pa.float64()),
+        ("lat", pa.float64()),
+        ("sog", pa.float32()),
+        ("cog", pa.float32()),
+    ]
+)
+TRACKS_SCHEMA = pa.schema(
+    [
+        ("track_id", pa.int64()),
+        ("mmsi", pa.int64()),
+        ("start", UTC_US),
+        ("end", UTC_US),
+        ("n_points", pa.int64()),
+        ("length_km", pa.float64()),
+        ("cluster", pa.string()),
+        ("lon0", pa.float64()),
+        ("lat0", pa.float64()),
+        ("route", pa.string()),
+        ("stage", pa.string()),
+        ("geometry", pa.binary()),
+    ]
+)
+TRACK_COLUMNS = ["track_id", "mmsi", "start", "end", "n_points", "length_km", "cluster", "route"]
+"""The columns of tracks.parquet that a track table holds (`aisdati.tracks.store`)."""
+REJECTS_SCHEMA = pa.schema(
+    [
+        ("source", pa.string()),
+        ("reason", pa.string()),
+        ("mmsi", pa.int64()),
+        ("time", UTC_US),
+        ("lon", pa.float64()),
+        ("lat", pa.float64()),
+        ("sog", pa.float64()),
+        ("cog", pa.float64()),
+        ("raw", pa.string()),
+    ]
+)
+ROUTES_SCHEMA = pa.schema(
+    [
+        ("route", pa.string()),
+        ("n_tracks", pa.int64()),
+        ("entry_lon", pa.float64()),
+        ("entry_lat", pa.float64()),
+        ("exit_lon", pa.float64()),
+        ("exit_lat", pa.float64()),
+        ("median_length_km", pa.float64()),
+        ("medoid_track_id", pa.int64()),
+        ("spread_km", pa.float64()),
+        ("geometry", pa.binary()),
+    ]
+)
+ROUTE_COLUMNS = ROUTES_SCHEMA.names[:-1]
+"""A route's facts: routes.parquet's columns but its medoid's geometry."""
+GEO_METADATA = {
+    "version": "1.1.0",
+    "primary_column": "geometry",
+    "columns": {"geometry": {"encoding": "WKB", "geometry_types": ["LineString"]}},
+}
+"""GeoParquet metadata of tracks.parquet and routes.parquet; no `crs` means OGC:CRS84 (WGS84
+lon/lat)."""

@@ -1,0 +1,80 @@
+"""Seeds are range-checked before any reading (issue 27, item 13): a negative or huge seed used
+to reach numpy or torch only after the whole ingest or scoring, as a ValueError traceback."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from aisdati.cli import app
+
+NY_HOUR = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+
+
+def run(*args):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def one_line_error(result, needle: str) -> None:
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    assert result.stderr.startswith("error:"), result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert re.search(needle, " ".join(result.stderr.split())), result.stderr
+
+
+@pytest.mark.parametrize("seed", [-1, 2**64])
+def test_ingest_refuses_a_route_seed_out_of_range_before_reading(tmp_path, seed):
+    out = tmp_path / "processed"
+    result = run("ingest", "--input", NY_HOUR, "--route-seed", seed, "--out", out)
+    one_line_error(result, rf"--route-seed must be an integer in \[0, 4294967295\], got {seed}$")
+    assert not out.exists()  # refused before any work
+
+
+@pytest.mark.parametrize("seed", [-1, 2**64])
+def test_detect_refuses_a_seed_out_of_range_before_reading(tmp_path, seed):
+    result = run("detect", "--data", tmp_path, "--seed", seed, "--out", tmp_path / "report")
+    one_line_error(result, rf"--seed must be an integer in \[0, 4294967295\], got {seed}$")
+    assert not (tmp_path / "report").exists()
+
+
+def _child(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+
+
+def test_a_ctrl_c_while_the_cli_imports_exits_130_without_a_traceback():
+    """Item 16: the console script (argv[0] 'aisdati') interrupted inside `import aisdati`
+    (where Gymnasium loads), deterministically: the signal is sent from within the import."""
+    code = (
+        "import os, signal, sys\n"
+        "sys.argv[0] = '/usr/local/bin/aisdati'\n"
+        "import aisdati\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "import time; time.sleep(30)\n"
+    )
+    done = _child(code)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr.strip() == "interrupted"
+
+
+def test_once_the_cli_has_loaded_ctrl_c_is_pythons_again():
+    """The guard ends when aisdati.cli has loaded (so click and each command's clean-up see the
+    KeyboardInterrupt), and a library user's import never installs it."""
+    code = (
+        "import signal, sys\n"
+        "sys.argv[0] = 'aisdati'\n"
+        "import aisdati.cli\n"
+        "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
+        "print('ok')\n"
+    )
+    assert _child(code).stdout.strip() == "ok"
+    library = _child(
+        "import signal, sys\nsys.argv[0] = 'analysis.py'\nimport aisdati\n"
+        "print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)"
+    )
+    assert library.stdout.strip() == "True"
