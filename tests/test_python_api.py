@@ -1,5 +1,5 @@
 """The Python API as a user writes it (the README's example, kept in step with
-/tmp/python_example.py): read ingest's tracks, fit `nearest` and a tiny DATI, score held-out
+the README): read ingest's tracks, fit `nearest` and a tiny DATI, score held-out
 tracks, flag them with a contamination threshold, save and load."""
 
 from __future__ import annotations
