@@ -1,5 +1,6 @@
-"""The Python API as a user writes it (the README's "From Python" example): read ingest's tracks, fit `nearest` and a tiny DATI, score held-out
-tracks, flag them with a contamination threshold, save and load."""
+"""The Python API as a user writes it (the README's "From Python" example): read ingest's
+tracks, fit `nearest` and a tiny DATI, score held-out tracks, flag them with a contamination
+threshold, save and load."""
 
 from __future__ import annotations
 
