@@ -313,10 +313,10 @@ def html_detection_map(
     path: Path,
     **optional: Any,
 ) -> None:
-    """Write the self-contained detection page to `path` (via a temporary file, so a reader
-    never sees half a page). `optional`: best_rollouts, stretches, medoids, title (see
-    `map_data`)."""
+    """Write the self-contained detection page to `path` (atomically, under outdir's one
+    temporary-name scheme, so a reader never sees half a page). `optional`: best_rollouts,
+    stretches, medoids, title (see `map_data`)."""
+    from aisdati.outdir import atomic_write_bytes
+
     page = render_page(map_data(tracks, rollouts, props, flagged, regions, **optional))
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(path)
+    atomic_write_bytes(path, page.encode("utf-8"))
