@@ -31,9 +31,15 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import config as numba_config
 from numba import njit, prange
 
 from aisdati.geo import EARTH_RADIUS_M, arc_m, unit_vectors
+
+# The parallel kernels run on numba's own thread pool ("workqueue"), not OpenMP: with the OpenMP
+# layer, one parallel kernel (validation's DTW after a DATI episode) left torch's next steps on
+# two spinning threads, 13-200x slower on 2 cores (the "25x slower from episode 2" of issue 26).
+numba_config.THREADING_LAYER = "workqueue"
 
 _EUCLIDEAN, _HAVERSINE = 0, 1
 _METRICS = {"euclidean": _EUCLIDEAN, "haversine": _HAVERSINE}
@@ -491,56 +497,64 @@ def _chord_m(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:
 
 
 @njit(cache=True)
-def _gc_cost_length(a, a_lo, n, b, b_lo, m, abandon):  # pragma: no cover - compiled
+def _gc_cost_length(a, a_lo, n, b, b_lo, m, tail, beat):  # pragma: no cover - compiled
     """Great-circle DTW cost and path length of a[a_lo:a_lo+n] against b[b_lo:b_lo+m] (unit
-    vectors), rolling rows; gives up (inf, 0) as soon as every cell of a row costs more than
-    `abandon` (the final cost can only be larger). Ties as `_best`."""
+    vectors), rolling rows. Gives up (inf, 0) once no cell of a row can lead to a mean of at
+    most `beat` (inf: never): a path whose last cell in row i is (i, j), of cost D and length l,
+    ends with cost >= D + tail[i] (`tail[i]` bounds rows i+1.. from below, each visited once)
+    and length <= l + (n-1-i) + (m-1-j). Ties as `_best`."""
     prev_d = np.full(m, np.inf)
     prev_l = np.zeros(m, dtype=np.int64)
     cur_d = np.empty(m)
     cur_l = np.empty(m, dtype=np.int64)
     for i in range(n):
-        row_min = np.inf
+        alive = False
         for j in range(m):
             d = _chord_m(a, a_lo + i, b, b_lo + j)
             if i == 0 and j == 0:
                 cur_d[0] = d
                 cur_l[0] = 1
-                row_min = d
-                continue
-            best = np.inf
-            move = 0
-            if j > 0:
-                best = prev_d[j - 1]
-            if prev_d[j] < best:
-                best = prev_d[j]
-                move = 1
-            if j > 0 and cur_d[j - 1] < best:
-                best = cur_d[j - 1]
-                move = 2
-            cur_d[j] = d + best
-            if move == 0:
-                cur_l[j] = prev_l[j - 1] + 1
-            elif move == 1:
-                cur_l[j] = prev_l[j] + 1
             else:
-                cur_l[j] = cur_l[j - 1] + 1
-            if cur_d[j] < row_min:
-                row_min = cur_d[j]
-        if row_min > abandon:
+                best = np.inf
+                move = 0
+                if j > 0:
+                    best = prev_d[j - 1]
+                if prev_d[j] < best:
+                    best = prev_d[j]
+                    move = 1
+                if j > 0 and cur_d[j - 1] < best:
+                    best = cur_d[j - 1]
+                    move = 2
+                cur_d[j] = d + best
+                if move == 0:
+                    cur_l[j] = prev_l[j - 1] + 1
+                elif move == 1:
+                    cur_l[j] = prev_l[j] + 1
+                else:
+                    cur_l[j] = cur_l[j - 1] + 1
+            longest = cur_l[j] + (n - 1 - i) + (m - 1 - j)
+            if (cur_d[j] + tail[i]) * (1.0 - _ROUNDING) <= beat * longest:
+                alive = True
+        if not alive:
             return np.inf, 0
         prev_d, cur_d = cur_d, prev_d
         prev_l, cur_l = cur_l, prev_l
     return prev_d[m - 1], prev_l[m - 1]
 
 
+_ROUNDING = 1e-9
+"""Relative margin by which a bound must beat the best distance before the search trusts it:
+far above the rounding of sums of a few thousand distances."""
+
+
 @njit(cache=True, parallel=True)
 def _pairs_mean(a, a_off, a_len, b, b_off, pair_a, pair_b):  # pragma: no cover - compiled
     out = np.empty(len(pair_a))
+    no_tail = np.zeros(a_len.max())
     for p in prange(len(pair_a)):
         ia, ib = pair_a[p], pair_b[p]
         cost, length = _gc_cost_length(
-            a, a_off[ia], a_len[p], b, b_off[ib], b_off[ib + 1] - b_off[ib], np.inf
+            a, a_off[ia], a_len[p], b, b_off[ib], b_off[ib + 1] - b_off[ib], no_tail, np.inf
         )
         out[p] = cost / length
     return out
@@ -575,55 +589,175 @@ def batch_mean_dtw_m(
     return _pairs_mean(rolls, a_off, lengths, b, b_off, pairs, owner)
 
 
+class _Swept:
+    """Series flattened as unit vectors for the nearest search, with what `_sweep_min` reads:
+    each series' axis of largest spread and its points' projections on it, sorted (`order`:
+    the points' indices in that order, within the series)."""
+
+    def __init__(self, series: list[np.ndarray], name: str) -> None:
+        self.x, self.off = _flatten(series, name)
+        count = len(self.off) - 1
+        self.axis = np.empty((count, 3))
+        self.proj = np.empty(len(self.x))
+        self.order = np.empty(len(self.x), dtype=np.int64)
+        for k in range(count):
+            a, b = self.off[k], self.off[k + 1]
+            pts = self.x[a:b]
+            self.axis[k] = np.linalg.eigh(np.cov(pts.T) if b - a > 1 else np.eye(3))[1][:, -1]
+            proj = pts @ self.axis[k]
+            self.order[a:b] = np.argsort(proj, kind="stable")
+            self.proj[a:b] = proj[self.order[a:b]]
+
+    def lengths(self) -> np.ndarray:
+        return np.diff(self.off)
+
+
+@njit(cache=True)
+def _sweep_min(a, a_lo, n, b, b_lo, m, proj, order, axis, cap_m, out):  # pragma: no cover
+    """out[i] = min(cap_m, great-circle distance of a[a_lo + i] to the nearest point of
+    b[b_lo:b_lo+m]), with the distance computed as `_chord_m` does. The chord between two
+    points is at least the difference of their projections on `axis`, so from where a_i's
+    projection falls among b's sorted ones only the points whose projection lies within the
+    nearest chord so far (or the cap) need a look. Where a_i's projection falls is walked to
+    from a_{i-1}'s: along a track it moves by a few places."""
+    cap = 2.0 * math.sin(min(cap_m / (2.0 * EARTH_RADIUS_M), math.pi / 2))
+    lo = 0
+    for i in range(n):
+        x0, x1, x2 = a[a_lo + i, 0], a[a_lo + i, 1], a[a_lo + i, 2]
+        p = x0 * axis[0] + x1 * axis[1] + x2 * axis[2]
+        while lo > 0 and proj[b_lo + lo - 1] >= p:
+            lo -= 1
+        while lo < m and proj[b_lo + lo] < p:
+            lo += 1
+        least = cap * cap
+        reach = cap + 1e-12
+        for step in (1, -1):
+            j = lo if step == 1 else lo - 1
+            while 0 <= j < m and abs(proj[b_lo + j] - p) <= reach:
+                t = b_lo + order[b_lo + j]
+                dx, dy, dz = x0 - b[t, 0], x1 - b[t, 1], x2 - b[t, 2]
+                sq = dx * dx + dy * dy + dz * dz
+                if sq < least:
+                    least = sq
+                    reach = math.sqrt(sq) + 1e-12
+                j += step
+        half = 0.5 * math.sqrt(least)
+        out[i] = cap_m if least >= cap * cap else 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
+
+
+@njit(cache=True)
+def _mean_bound(amin, bmin, beat):  # pragma: no cover - compiled
+    """A lower bound of the mean DTW of two series whose points lie amin / bmin (metres) from
+    the other series; inf where it exceeds `beat`. A warping path of length L (max(n, m) to
+    n + m - 1) enters each row once by a diagonal or vertical move (cost >= sum(amin)) and
+    L - n columns by horizontal moves (cost >= the L - n smallest bmin), and the same with rows
+    and columns swapped. The quick test first: sum(amin - beat) + sum(min(bmin - beat, 0)) > 0
+    means every L's bound exceeds beat, with no sorting."""
+    n, m = len(amin), len(bmin)
+    over = beat * (1.0 + _ROUNDING)
+    for x, y in ((amin, bmin), (bmin, amin)):
+        if np.sum(x - over) + np.sum(np.minimum(y - over, 0.0)) > 0:
+            return np.inf
+    sa, sb = np.sort(amin), np.sort(bmin)
+    big = max(n, m)
+    x = sa.sum() + sb[: big - n].sum()
+    y = sb.sum() + sa[: big - m].sum()
+    bound = max(x, y) / big
+    for length in range(big + 1, n + m):
+        x += sb[length - 1 - n]
+        y += sa[length - 1 - m]
+        bound = min(bound, max(x, y) / length)
+    return bound * (1.0 - _ROUNDING)
+
+
+@njit(cache=True)
+def _nearest_one(q, k, r, cand):  # pragma: no cover - compiled
+    """Query k's nearest candidate (`_Swept` tuples q and r: x, off, axis, proj, order): the
+    first candidate sets the best mean; every other one gets `_mean_bound` (the point minima
+    capped a little above the best, which keeps the sweeps short and the bound valid); they
+    are tried by increasing bound, each DTW abandoned once it cannot win, until a bound cannot
+    beat the best. Equal means go to the smaller reference index."""
+    qx, qoff, qaxis, qproj, qorder = q
+    rx, roff, raxis, rproj, rorder = r
+    lo, n = qoff[k], qoff[k + 1] - qoff[k]
+    amin = np.zeros(n)
+    tail = np.zeros(n)
+    arg = cand[0]
+    cost, length = _gc_cost_length(
+        qx, lo, n, rx, roff[arg], roff[arg + 1] - roff[arg], tail, np.inf
+    )
+    best = cost / length
+    cap = 2.0 * best + 1.0
+    bound = np.full(len(cand), np.inf)
+    for c in range(1, len(cand)):
+        j = cand[c]
+        b_lo, m = roff[j], roff[j + 1] - roff[j]
+        bmin = np.empty(m)
+        _sweep_min(qx, lo, n, rx, b_lo, m, rproj, rorder, raxis[j], cap, amin)
+        _sweep_min(rx, b_lo, m, qx, lo, n, qproj, qorder, qaxis[k], cap, bmin)
+        bound[c] = _mean_bound(amin, bmin, best)
+    for c in np.argsort(bound, kind="mergesort"):
+        j = cand[c]
+        if bound[c] > best:
+            break
+        if bound[c] == best and j > arg:
+            continue
+        b_lo, m = roff[j], roff[j + 1] - roff[j]
+        _sweep_min(qx, lo, n, rx, b_lo, m, rproj, rorder, raxis[j], cap, amin)
+        tail[n - 1] = 0.0
+        for i in range(n - 2, -1, -1):
+            tail[i] = tail[i + 1] + amin[i + 1]
+        cost, length = _gc_cost_length(qx, lo, n, rx, b_lo, m, tail, best)
+        if length > 0 and (cost / length < best or (cost / length == best and j < arg)):
+            best, arg = cost / length, j
+    return best, arg
+
+
 @njit(cache=True, parallel=True)
-def _nearest(q, q_off, r, r_off, cand, cand_off, lower):  # pragma: no cover - compiled
-    """For each query, the smallest mean DTW over its candidates (tried in the given order,
-    which should be by increasing `lower`), skipping those whose lower bound cannot win and
-    abandoning a DTW once its cost passes best * (n + m - 1) (the longest path)."""
-    nq = len(q_off) - 1
+def _nearest(q, r, cand, cand_off):  # pragma: no cover - compiled
+    """`_nearest_one` of every query with candidates, the queries shared among the cores."""
+    nq = len(cand_off) - 1
     best = np.full(nq, np.inf)
     arg = np.full(nq, -1, dtype=np.int64)
     for k in prange(nq):
-        n = q_off[k + 1] - q_off[k]
-        for c in range(cand_off[k], cand_off[k + 1]):
-            if lower[c] >= best[k]:
-                break
-            j = cand[c]
-            m = r_off[j + 1] - r_off[j]
-            cost, length = _gc_cost_length(q, q_off[k], n, r, r_off[j], m, best[k] * (n + m - 1))
-            if length > 0 and cost / length < best[k]:
-                best[k] = cost / length
-                arg[k] = j
+        if cand_off[k + 1] > cand_off[k]:
+            best[k], arg[k] = _nearest_one(q, k, r, cand[cand_off[k] : cand_off[k + 1]])
     return best, arg
+
+
+def _by_likeness(q: _Swept, k: int, r: _Swept, cand: np.ndarray) -> np.ndarray:
+    """Query k's candidates, those most like it first: by the summed distance between the
+    points at 0, 1/4, .. 4/4 of each series (only the first matters: it sets the best mean
+    that the bounds must beat, so a near one keeps every sweep short)."""
+    at = np.linspace(0.0, 1.0, 5)
+    mine = q.x[q.off[k] + np.rint(at * (q.off[k + 1] - q.off[k] - 1)).astype(np.int64)]
+    theirs = r.off[cand, None] + np.rint(at * (r.lengths()[cand, None] - 1)).astype(np.int64)
+    unlike = np.linalg.norm(r.x[theirs] - mine, axis=2).sum(axis=1)
+    return cand[np.argsort(unlike, kind="stable")]
 
 
 def nearest_mean_dtw_m(
     queries: list[np.ndarray], references: list[np.ndarray], candidates: list[np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exact nearest reference of each query in mean great-circle DTW (metres), searching only
-    `candidates[k]` (reference indices) for query k. Returns (distance, index); inf and -1 for
-    a query without candidates. Pruning is exact: the endpoints are always matched, so
-    (d(first, first) + d(last, last)) / (n + m - 1) bounds the mean from below; candidates are
-    tried from the smallest bound and the search stops when the bound cannot beat the best."""
-    q, q_off = _flatten(list(queries), "queries")
-    r, r_off = _flatten(list(references), "references")
+    `candidates[k]` (reference indices) for query k. Returns (distance, index), the smaller
+    index among equal distances; inf and -1 for a query without candidates. Pruning is exact
+    (`_nearest_one`): the candidate most like the query first (`_by_likeness`), then the others by a
+    lower bound from each point's distance to the other series (`_mean_bound`), found by a
+    sweep along each series' main axis (`_sweep_min`), with each DTW abandoned once it cannot
+    win (`_gc_cost_length`)."""
+    q, r = _Swept(list(queries), "queries"), _Swept(list(references), "references")
     if len(candidates) != len(queries):
         raise ValueError(f"{len(queries)} queries, {len(candidates)} candidate lists")
-    order, lower = [], []
-    for k, cand in enumerate(candidates):
-        cand = _as_indices(cand, f"candidates[{k}]", len(r_off) - 1)
-        a0, a1 = q[q_off[k]], q[q_off[k + 1] - 1]
-        b0, b1 = r[r_off[cand]], r[r_off[cand + 1] - 1]
-        ends = arc_m(np.linalg.norm(b0 - a0, axis=1)) + arc_m(np.linalg.norm(b1 - a1, axis=1))
-        lb = ends / (q_off[k + 1] - q_off[k] + np.diff(r_off)[cand] - 1)
-        by = np.argsort(lb, kind="stable")
-        order.append(cand[by])
-        lower.append(lb[by])
+    order = [
+        _by_likeness(q, k, r, np.unique(_as_indices(c, f"candidates[{k}]", len(r.off) - 1)))
+        for k, c in enumerate(candidates)
+    ]
     cand_off = np.zeros(len(candidates) + 1, dtype=np.int64)
     cand_off[1:] = np.cumsum([len(o) for o in order])
-    flat = np.concatenate(order) if order else np.empty(0, np.int64)
-    bounds = np.concatenate(lower) if lower else np.empty(0)
-    return _nearest(q, q_off, r, r_off, flat.astype(np.int64), cand_off, bounds)
+    flat = np.concatenate(order).astype(np.int64) if order else np.empty(0, np.int64)
+    swept = [(s.x, s.off, s.axis, s.proj, s.order) for s in (q, r)]
+    return _nearest(*swept, flat, cand_off)
 
 
 def matched_distances(track: np.ndarray, other: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ rule is eq. (5) of the paper: a flat-Earth step whose longitude is rescaled by c
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 
 import numpy as np
@@ -123,23 +124,148 @@ def lane_distances(
     polylines [n_i, 2] (several rollouts or training tracks) pooled into one cloud: how far the
     track is from anywhere that traffic goes, whatever the timing.
 
-    With `course_m` > 0 the distance also weighs the course: sqrt(d^2 + (course_m sin(dθ/2))^2)
-    for great-circle distance d and course difference dθ, so sailing against the traffic, or
-    across it, costs up to `course_m` (a loiter's circles do both where the lane's points are
-    near). A k-d tree on unit vectors (scaled to metres), joined by the course vectors scaled by
-    course_m / 2, finds the nearest point in that metric (chord for arc: equal to well under a
-    millimetre at lane scales); the distance is then recomputed exactly."""
-    from scipy.spatial import cKDTree
+    With `course_m` > 0 the distance also weighs the course: sqrt(d^2 + (course_m / 2 |c - c'|)^2)
+    for great-circle distance d and the points' course vectors c, c' (`_course_vectors`: that is
+    course_m sin(dθ/2) for course difference dθ, and course_m / 2 against a point that does not
+    move), so sailing against the traffic, or across it, costs up to `course_m` (a loiter's
+    circles do both where the lane's points are near).
 
+    The result is the brute-force minimum over every point of the lane (to well under a
+    micrometre): a k-d tree on unit vectors (scaled to metres) joined by the course vectors
+    scaled by course_m / 2 ranks the points by a chord metric that never exceeds the exact one,
+    so once the exact distance of the best of the k nearest is within the k-th one's, no point
+    further out can be nearer (`_nearest_exact`). The tree is kept for the next call
+    (`_LaneIndex`): scoring many tracks against the same training tracks builds it once."""
     track = np.asarray(track, np.float64)
-    cloud = np.concatenate([np.asarray(p, np.float64) for p in lane])
-    keys = [EARTH_RADIUS_M * unit_vectors(cloud)]
-    query = [EARTH_RADIUS_M * unit_vectors(track)]
-    if course_m > 0:
-        keys.append(course_m / 2 * np.concatenate([_course_vectors(p) for p in lane]))
-        query.append(course_m / 2 * _course_vectors(track))
-    _, idx = cKDTree(np.hstack(keys)).query(np.hstack(query))
-    d = haversine_m(track[:, 0], track[:, 1], cloud[idx, 0], cloud[idx, 1])
-    if course_m > 0:
-        d = np.hypot(d, np.linalg.norm(query[1] - keys[1][idx], axis=1))
+    query = _lane_keys([track], course_m)
+    index = _INDEX[0]
+    fresh, allowed = _split(index, lane, course_m)
+    if index is None or not index.worth_reusing(fresh, allowed):
+        index = _INDEX[0] = _LaneIndex(_unique(lane), course_m)
+        fresh, allowed = [], None
+    d = index.nearest(track, query, allowed)
+    if fresh:
+        d = np.minimum(d, _LaneIndex(fresh, course_m).nearest(track, query, None))
     return d
+
+
+def _lane_keys(polylines: Sequence[np.ndarray], course_m: float) -> np.ndarray:
+    """The k-d tree's coordinates of the polylines' points: unit vectors in metres, then (when
+    the course is weighed) the course vectors times course_m / 2."""
+    cloud = np.concatenate([np.asarray(p, np.float64) for p in polylines])
+    keys = EARTH_RADIUS_M * unit_vectors(cloud)
+    if course_m > 0:
+        course = np.concatenate([_course_vectors(p) for p in polylines])
+        keys = np.hstack([keys, course_m / 2 * course])
+    return keys
+
+
+def _unique(lane: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """The lane's polylines, each object once (a repeated one adds no nearer point)."""
+    return list({id(p): p for p in lane}.values())
+
+
+def _split(
+    index: _LaneIndex | None, lane: Sequence[np.ndarray], course_m: float
+) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """The lane's polylines that `index` does not hold, and a mask of those it does (None when
+    it holds none, or one of them has changed since)."""
+    if index is None or index.course_m != course_m:
+        return _unique(lane), None
+    held: dict[int, np.ndarray] = {}
+    fresh = []
+    for p in _unique(lane):
+        k = index.holds(p)
+        if k is None:
+            fresh.append(p)
+        else:
+            held[k] = p
+    if not held:
+        return fresh, None
+    allowed = np.zeros(len(index.refs), dtype=bool)
+    allowed[list(held)] = True
+    order = sorted(held)
+    now = np.concatenate([held[k] for k in order])
+    was = np.concatenate([index.lonlat[index.offsets[k] : index.offsets[k + 1]] for k in order])
+    return fresh, allowed if np.array_equal(now, was) else None
+
+
+class _LaneIndex:
+    """A k-d tree over some polylines' points (`_lane_keys`), and which polyline each point is
+    from, so that a later call with the same polylines, or most of them, queries it instead of
+    building another. It holds weak references to the polylines and a copy of their points: a
+    polyline is reused only while it is the same living object with the same points."""
+
+    def __init__(self, polylines: list[np.ndarray], course_m: float) -> None:
+        from scipy.spatial import cKDTree
+
+        self.course_m = course_m
+        self.refs = [weakref.ref(p) if isinstance(p, np.ndarray) else None for p in polylines]
+        self.ids = {id(p): k for k, p in enumerate(polylines)}
+        self.lonlat = np.concatenate([np.asarray(p, np.float64) for p in polylines])
+        sizes = [len(p) for p in polylines]
+        self.offsets = np.r_[0, np.cumsum(sizes)]
+        self.owner = np.repeat(np.arange(len(polylines)), sizes)
+        self.keys = _lane_keys(polylines, course_m)
+        self.tree = cKDTree(self.keys)
+
+    def holds(self, p: np.ndarray) -> int | None:
+        """The number of polyline `p` in this index, or None where it is not here (`_split`
+        then checks that the points held are still the polylines' points)."""
+        k = self.ids.get(id(p))
+        if k is None or self.refs[k] is None or self.refs[k]() is not p:
+            return None
+        return k if p.shape == (self.offsets[k + 1] - self.offsets[k], 2) else None
+
+    def worth_reusing(self, fresh: list[np.ndarray], allowed: np.ndarray | None) -> bool:
+        """Whether the lane's held polylines are at least half of this index and of the lane:
+        a lane that is mostly new, or a small part of the index, is cheaper as its own tree."""
+        if allowed is None:
+            return False
+        held = int(np.diff(self.offsets)[allowed].sum())
+        new = sum(len(p) for p in fresh)
+        return held >= new and 2 * held >= len(self.lonlat)
+
+    def nearest(
+        self, track: np.ndarray, query: np.ndarray, allowed: np.ndarray | None
+    ) -> np.ndarray:
+        """Each track point's exact distance to the nearest point of the allowed polylines: the
+        k nearest by the tree's metric, k growing (x4) for the points not yet settled. A point
+        is settled when the exact distance (haversine, as the brute force) of its best allowed
+        neighbour is within `_unseen_m` of the k-th neighbour, which bounds every point not yet
+        seen from below (less `_TREE_SLACK_M` for rounding)."""
+        size = len(self.lonlat)
+        out = np.full(len(track), np.inf)
+        todo = np.arange(len(track))
+        k = min(4, size)
+        while todo.size:
+            chord, idx = self.tree.query(query[todo], k)
+            chord, idx = chord.reshape(len(todo), k), idx.reshape(len(todo), k)
+            lon, lat = track[todo, 0, None], track[todo, 1, None]
+            d = haversine_m(lon, lat, self.lonlat[idx, 0], self.lonlat[idx, 1])
+            if self.course_m > 0:
+                turn = query[todo, None, 3:] - self.keys[idx, 3:]
+                d = np.hypot(d, np.linalg.norm(turn, axis=2))
+            if allowed is not None:
+                d[~allowed[self.owner[idx]]] = np.inf
+            best = d.min(axis=1)
+            done = (best <= _unseen_m(chord[:, -1], self.course_m) - _TREE_SLACK_M) | (k == size)
+            out[todo[done]] = best[done]
+            todo = todo[~done]
+            k = min(4 * k, size)
+        return out
+
+
+def _unseen_m(tree_m: np.ndarray, course_m: float) -> np.ndarray:
+    """The least exact distance of a point at `tree_m` by the tree's metric, sqrt(chord^2 +
+    penalty^2): the penalty is at most course_m, so the chord is at least
+    x = sqrt(tree_m^2 - course_m^2), and the arc of a chord x is 2R asin(x / 2R) >= x."""
+    x = np.sqrt(np.maximum(tree_m**2 - course_m**2, 0.0))
+    return np.sqrt(arc_m(x / EARTH_RADIUS_M) ** 2 + tree_m**2 - x**2)
+
+
+_TREE_SLACK_M = 1e-6
+"""Metres of rounding allowed in the tree's distances (keys of about 6.4e6 m, so about 1e-9 m)."""
+
+_INDEX: list[_LaneIndex | None] = [None]
+"""The last lane's index (`lane_distances`), replaced by the next lane that does not fit it."""

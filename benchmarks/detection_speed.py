@@ -9,8 +9,15 @@ The tracks are synthetic lanes (a few shared routes, each track jittered around 
 speed does not depend on where the ships are. Step scoring uses an untrained DATI actor (its cost
 does not depend on the weights), with the default lane model's number of members.
 
+The "Scoring at scale" table times the `nearest` detector's two searches against 1,000 training
+tracks, as `NearestDetector.search` and `lane_scores` run them: the exact DTW search and each
+report's course-weighed distance to the candidates' lane. "Before" is the brute force (every
+pair's full DTW; a fresh k-d tree of every candidate point per track, as `lane_distances` was),
+measured on the first `--before` test tracks and extrapolated linearly to all of them (both
+cost the same per test track).
+
 Run: python benchmarks/detection_speed.py [--tracks 1000] [--points 500] [--draws 10]
-(not part of the test suite; prints a markdown table).
+[--before 20] [--only-scale] (not part of the test suite; prints markdown tables).
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ import time
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 
 from aisdati.ais import DEFAULT_PRESET
 from aisdati.ais.policy import AISPolicy, dati_act
@@ -28,17 +36,19 @@ from aisdati.ais.source import build_source
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.scoring import ScoreSettings, tail_mean
-from aisdati.geo import lane_distances
+from aisdati.dtw import batch_mean_dtw_m
+from aisdati.geo import EARTH_RADIUS_M, courses_deg, lane_distances, unit_vectors
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
 from aisdati.tracks.store import Track
 
 
-def lanes(rng: np.random.Generator, n_tracks: int, points: int, routes: int = 5) -> list[Track]:
+def lanes(rng: np.random.Generator, n_tracks: int, points: int, heads: np.ndarray) -> list[Track]:
+    """Tracks along the routes that leave (-129, 53) on the courses `heads` (test and training
+    tracks share them, as a detector's test tracks share its training tracks' lanes)."""
     out = []
-    heads = rng.uniform(0, 360, routes)
     for i in range(n_tracks):
-        r = i % routes
+        r = i % len(heads)
         dt = np.full(points - 1, 0.05)
         cog = np.radians(heads[r] + 20 * np.sin(np.linspace(0, 3, points - 1)) + rng.normal(0, 2))
         step = 12 * dt / 60
@@ -90,16 +100,81 @@ def bench_nearest(train: list[Track], test: list[Track]) -> tuple[float, float]:
     return time.perf_counter() - t0, float(np.median(dist))
 
 
+def brute_nearest(train: list[Track], test: list[Track]) -> float:
+    """Every candidate's full DTW (the plain per-pair kernel, no bounds or abandoning)."""
+    det = NearestDetector()
+    det.tracks = [t.positions for t in train]
+    cands = det._candidates([t.positions for t in test], ScoreSettings().near_km, None)
+    batch_mean_dtw_m(test[0].positions[None], [2], det.tracks[:1], [0])  # compile
+    t0 = time.perf_counter()
+    for t, c in zip(test, cands, strict=True):
+        p = t.positions
+        batch_mean_dtw_m(np.repeat(p[None], len(c), 0), np.full(len(c), len(p)), det.tracks, c)
+    return time.perf_counter() - t0
+
+
+def brute_lane(train: list[Track], test: list[Track], course_m: float) -> float:
+    """A fresh k-d tree of every candidate point per test track, queried for the nearest."""
+    det = NearestDetector()
+    det.tracks = [t.positions for t in train]
+    cands = det._candidates([t.positions for t in test], ScoreSettings().near_km, None)
+    t0 = time.perf_counter()
+    for t, c in zip(test, cands, strict=True):
+        lane = [det.tracks[j] for j in c]
+        cKDTree(keys(lane, course_m)).query(keys([t.positions], course_m))
+    return time.perf_counter() - t0
+
+
+def keys(polylines: list[np.ndarray], course_m: float) -> np.ndarray:
+    """The k-d tree's coordinates: unit vectors in metres and course vectors x course_m / 2."""
+    theta = np.radians(np.concatenate([courses_deg(p) for p in polylines]))
+    course = course_m / 2 * np.column_stack([np.cos(theta), np.sin(theta)])
+    return np.hstack([EARTH_RADIUS_M * unit_vectors(np.concatenate(polylines)), course])
+
+
+def bench_scale(train: list[Track], test: list[Track], before: int) -> None:
+    """The "Scoring at scale" table: both searches of all test tracks, after and before."""
+    how = ScoreSettings(score="lane")
+    det = NearestDetector()
+    det.tracks, det.mmsi = [t.positions for t in train], np.array([t.mmsi for t in train])
+    positions = [t.positions for t in test]
+    det.search(positions[:2], how.near_km)  # compile
+    t0 = time.perf_counter()
+    det.search(positions, how.near_km)
+    near_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    det.lane_scores(positions, how)
+    lane_s = time.perf_counter() - t0
+    scale = len(test) / before
+    old_near = brute_nearest(train, test[:before]) * scale
+    old_lane = brute_lane(train, test[:before], how.lane_course_km * 1000.0) * scale
+    n, m, p = len(test), len(train), len(test[0].positions)
+    print(f"\nScoring at scale on {os.cpu_count()} CPU cores ({p} reports a track; before:")
+    print(f"measured on {before} test tracks and extrapolated to {n})\n")
+    print("| test x training tracks | nearest before | nearest after | lane before | lane after |")
+    print("|---|---|---|---|---|")
+    print(
+        f"| {n:,} x {m:,} | {old_near:,.0f} s (extrapolated) | {near_s:.1f} s | "
+        f"{old_lane:,.0f} s (extrapolated) | {lane_s:.1f} s |"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tracks", type=int, default=1000)
     ap.add_argument("--points", type=int, default=500)
     ap.add_argument("--draws", type=int, default=10)
+    ap.add_argument("--before", type=int, default=20, help="test tracks the brute force scores")
+    ap.add_argument("--only-scale", action="store_true", help="only the Scoring at scale table")
     args = ap.parse_args()
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
-    test = lanes(rng, args.tracks, args.points)
-    train = lanes(rng, args.tracks, args.points)
+    heads = rng.uniform(0, 360, 5)
+    test = lanes(rng, args.tracks, args.points, heads)
+    train = lanes(rng, args.tracks, args.points, heads)
+    bench_scale(train, test, min(args.before, args.tracks))
+    if args.only_scale:
+        return
     step_s = bench_step(test, args.draws)
     lane_s = bench_lane(test, args.draws)
     near_s, med = bench_nearest(train, test)

@@ -13,11 +13,14 @@ import pytest
 
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m
+from aisdati.preprocess import routes as routes_module
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.routes import (
     RouteSettings,
     ShapeDistance,
+    _hdbscan_knn,
     cluster_routes,
+    earth_xyz_km,
     lines_from_wkb,
     resample,
 )
@@ -247,3 +250,78 @@ def test_tracks_without_a_route_column_read_as_unrouted(kitimat, tmp_path):
 def test_routes_of_no_tracks_are_empty():
     routes = cluster_routes([], np.zeros(0, np.int64), np.zeros(0))
     assert len(routes.table) == 0 and len(routes.labels) == 0
+
+
+# ------------------------------------------------------------------ at the scale of a coast
+@pytest.fixture(scope="module")
+def ny_lines(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ny")
+    ingest([NY_WEEK], out, IngestSettings(min_points=10, clusters="direction"), None, "none")
+    tracks = pq.read_table(out / "tracks.parquet").to_pandas()
+    return tracks, lines_from_wkb(tracks["geometry"].tolist())
+
+
+def test_resampling_all_tracks_at_once_is_np_interp_track_by_track(kitimat_lines):
+    _, lines = kitimat_lines
+    lines = [*lines, np.array([[-74.0, 40.7], [-74.0, 40.7]])]  # a track that never moved
+    frac = np.linspace(0.0, 1.0, 32)
+    for xy, got in zip(lines, resample(lines, 32), strict=True):
+        along = np.r_[0.0, np.cumsum(haversine_m(xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1]))]
+        want = [np.interp(frac * along[-1], along, xy[:, c]) for c in (0, 1)]
+        if along[-1] == 0:
+            want = [np.full(32, xy[0, 0]), np.full(32, xy[0, 1])]
+        np.testing.assert_array_equal(got, np.stack(want, axis=1))
+
+
+def test_neighbour_graph_hdbscan_finds_the_groups_of_all_pairs_hdbscan(ny_lines):
+    from sklearn.cluster import HDBSCAN
+    from sklearn.metrics import adjusted_rand_score
+
+    _, lines = ny_lines
+    first = np.array([xy[0] for xy in lines])
+    last = np.array([xy[-1] for xy in lines])
+    x = np.hstack([earth_xyz_km(first[:, 0], first[:, 1]), earth_xyz_km(last[:, 0], last[:, 1])])
+    exact = HDBSCAN(min_cluster_size=5, copy=True).fit_predict(x)
+    knn, core = _hdbscan_knn(x, 5)
+    # HDBSCAN itself moves this much when only the order of its input changes (ARI 0.96 here)
+    assert adjusted_rand_score(exact, knn) > 0.95
+    assert abs(knn.max() - exact.max()) <= 3 and abs((knn < 0).sum() - (exact < 0).sum()) < 25
+    assert np.all(core > 0)
+
+
+def test_routes_of_the_large_scale_steps_keep_the_ferry_lanes(ny_lines, monkeypatch):
+    """NY Harbor's week through every step beyond EXACT_TRACKS: the k-nearest HDBSCAN on a
+    sample of a quarter of the tracks, the rest joining their nearest sampled track, the shape
+    split within a budget that shrinks the samples."""
+    tracks, lines = ny_lines
+    ids, km = tracks["track_id"].to_numpy(), tracks["length_km"].to_numpy()
+    exact = cluster_routes(lines, ids, km)
+    monkeypatch.setattr(routes_module, "EXACT_TRACKS", 100)
+    monkeypatch.setattr(routes_module, "DENSITY_SAMPLE", len(lines) // 4)
+    monkeypatch.setattr(routes_module, "SHAPE_PAIRS", 20_000)
+    assert routes_module._sample_size([len(lines) // 10] * 10, 128) < 128
+    large = cluster_routes(lines, ids, km)
+    for routes in (exact, large):
+        head = routes.table.head(2)
+        ends = {
+            (
+                _near(r.entry_lon, r.entry_lat, WHITEHALL, 1),
+                _near(r.exit_lon, r.exit_lat, WHITEHALL, 1),
+            )
+            for r in head.itertuples()
+        }
+        assert ends == {(True, False), (False, True)}  # the Staten Island Ferry, both ways
+        assert (head["n_tracks"] >= 80).all()
+    same = pd.Series(exact.labels) == pd.Series(large.labels)
+    ferry = pd.Series(exact.labels).isin(["route-1", "route-2"])
+    assert same[ferry].mean() > 0.9
+    assert len(large.table) >= 0.5 * len(exact.table)
+
+
+def test_shape_sample_shrinks_only_beyond_the_pair_budget():
+    from aisdati.preprocess.routes import SHAPE_PAIRS, _sample_size
+
+    assert _sample_size([40, 300, 7], 128) == 128
+    size = _sample_size([5000] * 500, 128)
+    assert 2 <= size < 128
+    assert 500 * size * (size - 1) // 2 <= SHAPE_PAIRS < 500 * (size + 1) * size // 2

@@ -30,7 +30,17 @@ that start in one place, end in another and follow one path between them:
 least `shape_min_km`: 5% of a 175 km passage is 8.8 km (the channels that split it are tens of
 km apart, a lane's own tracks a kilometre or two), and a harbour crossing of a few km gets the
 floor of 0.5 km, the paper's ε. Resampling to 32 points makes each comparison 32 x 32 cells
-whatever the report rate (10,000 tracks take seconds, `benchmarks/routes_speed.py`).
+whatever the report rate.
+
+At the scale of a coast and a year (`benchmarks/routes_speed.py`: time linear in the number of
+tracks) no step compares all pairs of tracks. Up to `EXACT_TRACKS` tracks the above is exact;
+beyond, HDBSCAN runs on each track's `NEIGHBOURS` nearest endpoints (a k-d tree), on a seeded
+sample of at most `DENSITY_SAMPLE` tracks that the others join. Everywhere, the shape split's
+samples shrink when all groups together would need more than `SHAPE_PAIRS` DTWs, a track is
+compared by DTW with only the `CANDIDATES` path medoids nearest in lock-step distance, the merge
+looks only at paths whose ends are near (a k-d tree), and a route's spread is the median over a
+sample of at most `max_sample` of its tracks. On the shipped samples (at most 2,144 tracks) all
+of these give the routes of the exact steps.
 
 Each route is described by its size, its entry and exit (the medians of its tracks' first and
 last points), its median length, its medoid track (the member with the smallest summed distance
@@ -54,6 +64,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import shapely
+from numba import njit
 
 from aisdati.dtw import pairs_mean_dtw_m, prepare_lonlat
 from aisdati.geo import EARTH_RADIUS_M, haversine_m, unit_vectors
@@ -101,19 +112,45 @@ def earth_xyz_km(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
 
 def resample(lines: list[np.ndarray], k: int) -> np.ndarray:
     """Each [n, 2] lon/lat line as k points equally spaced along its great-circle length
-    (linear in lon/lat between reports, which are close): [len(lines), k, 2]."""
+    (linear in lon/lat between reports, which are close): [len(lines), k, 2]. One compiled pass
+    over all reports, as `np.interp` track by track would be (a Python loop per track is
+    minutes at a million tracks)."""
     out = np.empty((len(lines), k, 2))
-    frac = np.linspace(0.0, 1.0, k)
-    for i, xy in enumerate(lines):
-        steps = haversine_m(xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1])
-        along = np.r_[0.0, np.cumsum(steps)]
-        if along[-1] <= 0:
-            out[i] = xy[0]
-            continue
-        target = frac * along[-1]
-        out[i, :, 0] = np.interp(target, along, xy[:, 0])
-        out[i, :, 1] = np.interp(target, along, xy[:, 1])
+    if not lines:
+        return out
+    xy = np.ascontiguousarray(np.concatenate(lines), dtype=np.float64)
+    ends = np.cumsum([len(line) for line in lines])
+    steps = haversine_m(xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1])
+    _resample_all(xy, ends, steps, np.linspace(0.0, 1.0, k), out)
     return out
+
+
+@njit(cache=True)
+def _resample_all(xy, ends, steps, frac, out):  # pragma: no cover - compiled
+    """`np.interp` of each track's lon and lat at `frac` of its length, bit for bit."""
+    start = 0
+    for t in range(len(ends)):
+        stop = ends[t]
+        n = stop - start
+        along = np.empty(n)
+        along[0] = 0.0
+        for p in range(1, n):
+            along[p] = along[p - 1] + steps[start + p - 1]
+        if along[-1] <= 0:
+            out[t, :, 0] = xy[start, 0]
+            out[t, :, 1] = xy[start, 1]
+        else:
+            for q in range(len(frac)):
+                x = frac[q] * along[-1]
+                j = np.searchsorted(along, x, side="right") - 1
+                for c in range(2):
+                    if j >= n - 1:
+                        out[t, q, c] = xy[stop - 1, c]
+                        continue
+                    y0, y1 = xy[start + j, c], xy[start + j + 1, c]
+                    slope = (y1 - y0) / (along[j + 1] - along[j])
+                    out[t, q, c] = slope * (x - along[j]) + y0
+        start = stop
 
 
 class ShapeDistance:
@@ -121,13 +158,18 @@ class ShapeDistance:
 
     def __init__(self, paths: np.ndarray) -> None:
         self.fwd = prepare_lonlat(paths)
-        self.rev = np.ascontiguousarray(self.fwd[:, ::-1])
 
     def pairs(self, i: np.ndarray, j: np.ndarray, reverse: bool = False) -> np.ndarray:
+        """Distances of tracks i[p] to tracks j[p] (reversed). Only the tracks named are handed
+        to the kernel, which checks every series it gets: the whole set each call would make
+        the per-group calls quadratic in the number of tracks."""
         if len(i) == 0:
             return np.zeros(0)
-        pairs = np.ascontiguousarray(np.stack([i, j], axis=1).astype(np.int64))
-        return pairs_mean_dtw_m(self.fwd, self.rev if reverse else self.fwd, pairs) / 1000.0
+        used, pairs = np.unique(np.concatenate([i, j]), return_inverse=True)
+        a = self.fwd[used]
+        b = np.ascontiguousarray(a[:, ::-1]) if reverse else a
+        pairs = np.ascontiguousarray(pairs.reshape(2, -1).T.astype(np.int64))
+        return pairs_mean_dtw_m(a, b, pairs) / 1000.0
 
     def matrix(self, idx: np.ndarray) -> np.ndarray:
         """Symmetric matrix of the distances among tracks `idx`."""
@@ -137,6 +179,28 @@ class ShapeDistance:
         d[iu, ju] = d[ju, iu] = self.pairs(idx[iu], idx[ju])
         return d
 
+    def nearest(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Position in `cols` of each row's nearest track (ties: the first). DTW only with
+        the `CANDIDATES` nearest in lock-step distance (the mean distance between the i-th
+        points, an upper bound of the mean DTW): all of them when there are no more, so a
+        group's tracks cost a few DTWs each however many paths it has."""
+        if len(cols) <= CANDIDATES:
+            return np.argmin(self.cross(rows, cols), axis=1)
+        out = np.empty(len(rows), dtype=np.int64)
+        b = self.fwd[cols]
+        for lo in range(0, len(rows), 1024):
+            a = self.fwd[rows[lo : lo + 1024], None]
+            h = (
+                np.sin((b[None, :, :, 1] - a[..., 1]) / 2) ** 2
+                + a[..., 2] * b[None, :, :, 2] * np.sin((b[None, :, :, 0] - a[..., 0]) / 2) ** 2
+            )
+            lockstep = np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0))).mean(axis=2)
+            pick = np.sort(np.argsort(lockstep, axis=1, kind="stable")[:, :CANDIDATES], axis=1)
+            rows_lo = np.repeat(rows[lo : lo + 1024], CANDIDATES)
+            d = self.pairs(rows_lo, cols[pick.ravel()]).reshape(pick.shape)
+            out[lo : lo + 1024] = pick[np.arange(len(pick)), np.argmin(d, axis=1)]
+        return out
+
     def cross(self, rows: np.ndarray, cols: np.ndarray, reverse: bool = False) -> np.ndarray:
         """[len(rows), len(cols)] distances of tracks `rows` to tracks `cols`."""
         ii, jj = np.meshgrid(rows, cols, indexing="ij")
@@ -144,21 +208,93 @@ class ShapeDistance:
 
 
 # ---------------------------------------------------------------------------- clustering
+EXACT_TRACKS = 20_000
+"""Up to this many tracks HDBSCAN compares the endpoints of all pairs (scikit-learn's, O(n²):
+3 s at 20,000); beyond, only each track's `NEIGHBOURS` nearest (`_hdbscan_knn`)."""
+NEIGHBOURS = 16
+"""Nearest neighbours of each track's endpoints that the large-scale HDBSCAN keeps."""
+DENSITY_SAMPLE = 200_000
+"""Tracks the large-scale HDBSCAN sees at most (`_sampled_hdbscan`)."""
+SHAPE_PAIRS = 500_000
+"""DTW pairs the shape split compares at most (about 15 s on 2 idle cores): when the groups'
+samples of `max_sample` would need more, every group's sample shrinks to the size that fits."""
+CANDIDATES = 3
+"""Path medoids a track is compared with by DTW: the nearest in lock-step distance."""
+
+
 def endpoint_groups(first: np.ndarray, last: np.ndarray, settings: RouteSettings) -> np.ndarray:
     """Candidate group of each track from its entry and exit (-1: noise)."""
     n = len(first)
     if n < max(settings.min_tracks, 2):
         return np.full(n, -1)
     x = np.hstack([earth_xyz_km(first[:, 0], first[:, 1]), earth_xyz_km(last[:, 0], last[:, 1])])
+    if settings.eps_km is None and n > EXACT_TRACKS:
+        return _sampled_hdbscan(x, max(settings.min_tracks, 2), settings.seed)
     if settings.eps_km is None:
         from sklearn.cluster import HDBSCAN
 
-        model = HDBSCAN(min_cluster_size=max(settings.min_tracks, 2), copy=True)
-    else:
-        from sklearn.cluster import DBSCAN
+        return HDBSCAN(min_cluster_size=max(settings.min_tracks, 2), copy=True).fit_predict(x)
+    from sklearn.cluster import DBSCAN
 
-        model = DBSCAN(eps=settings.eps_km, min_samples=settings.min_tracks)
-    return model.fit_predict(x)
+    return DBSCAN(eps=settings.eps_km, min_samples=settings.min_tracks).fit_predict(x)
+
+
+def _sampled_hdbscan(x: np.ndarray, min_cluster_size: int, seed: int) -> np.ndarray:
+    """`_hdbscan_knn` of at most `DENSITY_SAMPLE` points (a seeded sample); every other point
+    joins the group of its nearest sampled point when within that point's core distance (it
+    would be one of its neighbours), else is noise. So a lane needs about min_cluster_size x
+    n / DENSITY_SAMPLE tracks to be found beyond that many tracks."""
+    from scipy.spatial import cKDTree
+
+    n = len(x)
+    if n <= DENSITY_SAMPLE:
+        return _hdbscan_knn(x, min_cluster_size)[0]
+    sample = np.sort(np.random.default_rng(seed).choice(n, DENSITY_SAMPLE, replace=False))
+    sub, core = _hdbscan_knn(x[sample], min_cluster_size)
+    dist, near = cKDTree(x[sample]).query(x, 1, workers=-1)
+    labels = np.where(dist <= core[near], sub[near], -1)
+    labels[sample] = sub
+    return labels
+
+
+def _hdbscan_knn(x: np.ndarray, min_cluster_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """HDBSCAN labels of points `x` from their `NEIGHBOURS` nearest neighbours (a k-d tree)
+    instead of all pairs, which scikit-learn's own HDBSCAN takes: O(n²), hours at a million.
+
+    The core distances are exact (the neighbours include the (min_cluster_size - 1)-th, the
+    same core as scikit-learn's dense HDBSCAN at its default min_samples). The minimum spanning
+    tree of the mutual reachability is exact within each connected part of the neighbour graph
+    (its edges are short, so they are among the neighbours); the parts, every one of more than
+    `NEIGHBOURS` points, are joined at a distance beyond any other, so each one is split (or
+    kept) by its own hierarchy. Returns the labels and the core distances."""
+    from scipy.sparse import coo_matrix, csgraph
+    from scipy.spatial import cKDTree
+    from sklearn.cluster import HDBSCAN
+
+    n = len(x)
+    k = min(n - 1, max(NEIGHBOURS, min_cluster_size))
+    dist, nbr = cKDTree(x).query(x, k + 1, workers=-1)
+    rows = np.repeat(np.arange(n), k + 1)
+    keep = nbr.ravel() != rows
+    # identical endpoints (distance 0) would read as no edge in a sparse matrix
+    data = np.maximum(dist.ravel()[keep], 1e-9)
+    graph = coo_matrix((data, (rows[keep], nbr.ravel()[keep])), shape=(n, n)).tocsr()
+    graph = graph.maximum(graph.T).tocsr()
+    parts, part = csgraph.connected_components(graph, directed=False)
+    if parts > 1:
+        heads = np.unique(part, return_index=True)[1]
+        far = 2.0 * float(graph.data.max()) + 1.0
+        bridge = coo_matrix(
+            (np.full(parts - 1, far), (heads[:-1], heads[1:])), shape=(n, n)
+        ).tocsr()
+        graph = (graph + bridge + bridge.T).tocsr()
+    model = HDBSCAN(
+        min_cluster_size=min_cluster_size,
+        min_samples=min_cluster_size - 1,
+        metric="precomputed",
+        copy=False,
+    )
+    return model.fit_predict(graph), dist[:, min_cluster_size - 1]
 
 
 def _medoid(dist: np.ndarray) -> int:
@@ -176,12 +312,13 @@ def split_by_shape(
     idx: np.ndarray,
     shapes: ShapeDistance,
     tau: float,
-    settings: RouteSettings,
+    size: int,
     rng: np.random.Generator,
 ) -> list[tuple[np.ndarray, int]]:
-    """The paths within one candidate group: (member track indices, medoid track index) each,
-    every member assigned to its nearest path medoid."""
-    sample = _sample(idx, settings.max_sample, rng)
+    """The paths within one candidate group (compared on a sample of `size` of its tracks):
+    (member track indices, medoid track index) each, every member assigned to its nearest path
+    medoid."""
+    sample = _sample(idx, size, rng)
     if len(sample) == 1:
         return [(idx, int(sample[0]))]
     dist = shapes.matrix(sample)
@@ -197,8 +334,31 @@ def split_by_shape(
     medoids_arr = np.array(medoids)
     if len(medoids) == 1:
         return [(idx, medoids[0])]
-    nearest = np.argmin(shapes.cross(idx, medoids_arr), axis=1)
+    nearest = shapes.nearest(idx, medoids_arr)
     return [(idx[nearest == c], medoids[c]) for c in range(len(medoids)) if (nearest == c).any()]
+
+
+def _members(groups: np.ndarray) -> list[np.ndarray]:
+    """The ascending track indices of each group, groups in ascending order (-1 left out): one
+    sort, where a scan of all tracks per group is quadratic."""
+    order = np.flatnonzero(groups >= 0)
+    order = order[np.argsort(groups[order], kind="stable")]
+    return np.split(order, np.flatnonzero(np.diff(groups[order])) + 1) if len(order) else []
+
+
+def _sample_size(sizes: list[int], cap: int) -> int:
+    """The largest sample of each group, at most `cap`, whose shape split compares at most
+    `SHAPE_PAIRS` pairs in all groups together (at least 2)."""
+
+    def pairs(s: int) -> int:
+        m = np.minimum(np.asarray(sizes, dtype=np.int64), s)
+        return int((m * (m - 1) // 2).sum())
+
+    lo, hi = 2, max(cap, 2)
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if pairs(mid) <= SHAPE_PAIRS else (lo, mid - 1)
+    return lo
 
 
 def _find(parent: list[int], i: int) -> int:
@@ -222,7 +382,7 @@ def merge_paths(
     if n > 1:
         med = np.array([m for _, m, _ in paths])
         tau = np.array([t for _, _, t in paths])
-        iu, ju = np.triu_indices(n, 1)
+        iu, ju = _near_pairs(first[med], last[med], tau)
         limit = np.minimum(tau[iu], tau[ju])
         a, b = med[iu], med[ju]
         near = (
@@ -240,6 +400,23 @@ def merge_paths(
     for i in range(n):
         groups.setdefault(_find(parent, i), []).append(i)
     return list(groups.values())
+
+
+def _near_pairs(
+    first: np.ndarray, last: np.ndarray, tau: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs i < j (ascending) of paths whose medoids may start and end within tau[i] of each
+    other, from a k-d tree instead of all pairs. Both great-circle distances within tau puts
+    the (entry, exit) chords within sqrt(2) tau, so none is missed; the caller checks them."""
+    from scipy.spatial import cKDTree
+
+    x = np.hstack([earth_xyz_km(first[:, 0], first[:, 1]), earth_xyz_km(last[:, 0], last[:, 1])])
+    balls = cKDTree(x).query_ball_point(x, np.sqrt(2.0) * tau * (1 + 1e-9) + 1e-9)
+    iu = np.repeat(np.arange(len(x)), [len(b) for b in balls])
+    ju = np.fromiter((j for b in balls for j in b), np.int64, len(iu))
+    keep = iu < ju
+    order = np.lexsort((ju[keep], iu[keep]))
+    return iu[keep][order], ju[keep][order]
 
 
 def cluster_routes(
@@ -285,10 +462,11 @@ def cluster_routes(
     rng = np.random.default_rng(settings.seed)
 
     paths: list[tuple[np.ndarray, int, float]] = []
-    for g in np.unique(groups[groups >= 0]):
-        idx = np.flatnonzero(groups == g)
+    members_of = _members(groups)
+    size = _sample_size([len(idx) for idx in members_of], settings.max_sample)
+    for idx in members_of:
         tau = _tolerance(length_km[idx], settings)
-        for members, medoid in split_by_shape(idx, shapes, tau, settings, rng):
+        for members, medoid in split_by_shape(idx, shapes, tau, size, rng):
             paths.append((members, medoid, tau))
     lap("split")
 
@@ -301,7 +479,8 @@ def cluster_routes(
     for number, (members, medoid) in enumerate(routes, start=1):
         name = f"{ROUTE_PREFIX}{number}"
         labels[members] = name
-        spread = shapes.pairs(members, np.full(len(members), medoid))
+        some = _sample(members, settings.max_sample, rng)
+        spread = shapes.pairs(some, np.full(len(some), medoid))
         rows.append(
             {
                 "route": name,
