@@ -5,6 +5,7 @@ stays fast; every user mistake surfaces as a `UserError` and is shown as one red
 from __future__ import annotations
 
 import os
+from datetime import datetime
 from pathlib import Path
 
 # Before torch loads: DATI's networks are small and batched, so OpenMP/MKL worker threads only
@@ -14,7 +15,7 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import typer
 
-from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
 from aisdati.commands import run_command
 from aisdati.commands.common import user_errors
 from aisdati.startup import end_startup_guard
@@ -29,10 +30,12 @@ app = typer.Typer(
 
 
 PRESET_OPTION = typer.Option(
-    DEFAULT_PRESET,
+    None,
     "--preset",
-    help="DATI's AIS set-up: lanes (the default, what measured best) or paper (the "
-    "paper's own configuration).",
+    help=f"DATI's AIS set-up: {DEFAULT_PRESET} (the default for a cluster or route), "
+    f"{AREA_PRESET} (the default for --cluster all: {DEFAULT_PRESET} bound for each track's "
+    "destination, calibrated by cross-fitting) or paper (the paper's own configuration).",
+    show_default=False,
 )
 SELFTEST_PRESET_OPTION = typer.Option(
     "paper",
@@ -251,6 +254,24 @@ def evaluate(
     train_fraction: float = typer.Option(
         0.6, "--train-fraction", help="Share of the tracks (by vessel) to train on."
     ),
+    split: str = typer.Option(
+        "vessel",
+        "--split",
+        help="vessel: train on a seeded share of the vessels, judge the others; time: train "
+        "on the tracks that start before --before, judge every later one (forward in time).",
+    ),
+    before: datetime | None = typer.Option(
+        None,
+        "--before",
+        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S"],
+        help="--split time: the first day (UTC) of the judged period, e.g. 2018-08-01.",
+    ),
+    altered: float = typer.Option(
+        0.5, "--altered", help="Share of the judged tracks that take an anomaly."
+    ),
+    strength: float = typer.Option(
+        1.0, "--strength", help="Anomaly distances x this (0.3: the subtle tier)."
+    ),
     models: Path | None = typer.Option(
         None,
         "--models",
@@ -300,7 +321,9 @@ def detect(
         "--score",
         help="How a policy judges a track: lane (distance to where its K free rollouts go; "
         "for nearest: to where the training tracks go), step (teacher-forced one-step "
-        "errors), rollout (the best free rollout's DTW, the paper's) or both (rollout + step).",
+        "errors), rollout (the best free rollout's DTW, the paper's), both (rollout + step) "
+        "or area (lane + how much rarer the track's start-end pair is than the training "
+        "tracks'; models trained since 0.2.0).",
     ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from aisdati.detection.labels import evaluate_labels, match_labels, read_labels
+from aisdati.detection.run import NOT_JUDGED_FAR, NOT_JUDGED_TRAINING
 from aisdati.errors import UserError
 from aisdati.tracks.store import load_tracks, read_track_table
 
@@ -185,4 +186,8 @@ def test_report_counts_the_tracks_no_model_judged(kitimat, cli, tmp_path):
     assert cov["candidates"] == len(read_track_table(kitimat))
     assert cov["judged"] == report["test_tracks"] == cov["judged_by"]["route-1-nearest"]
     assert cov["judged"] + sum(cov["not_judged"].values()) == cov["candidates"]
-    assert cov["not_judged"]["a training track of the model in reach"] == 25
+    assert cov["not_judged"][NOT_JUDGED_TRAINING] == 25
+    assert sorted(cov["not_judged_tracks"][NOT_JUDGED_FAR]) == sorted(
+        set(read_track_table(kitimat)["track_id"]) - set(pd.read_parquet(out / "scores.parquet")
+        ["track_id"]) - set(cov["not_judged_tracks"][NOT_JUDGED_TRAINING])
+    )  # fmt: skip

@@ -6,3 +6,6 @@ lane preset without loading numpy."""
 
 DEFAULT_PRESET = "lanes"
 """The lane preset used when none is given (`aisdati.ais.space.PRESETS`)."""
+AREA_PRESET = "area"
+"""The lane preset of a model of a whole area (`--cluster all`) when none is given: calibrated
+by cross-fitting."""

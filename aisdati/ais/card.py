@@ -134,6 +134,9 @@ class DataCard:
     """All their reports; the traffic rollouts of a lane run their mean length."""
     start_points: list[list[float]]
     """[lon, lat] of each track's first report."""
+    end_points: list[list[float]] | None = None
+    """[lon, lat] of each track's last report (where it was bound: goal-conditioned models and
+    the origin-destination score read them); None in cards before 0.2.0."""
     track_keys: list[list[Any]] | None = None
     """[mmsi, "start", "end"] per track (ISO 8601, UTC; `track_keys`); None in cards before
     0.1.0, which `training_mask` matches by id."""
@@ -163,12 +166,13 @@ class DataCard:
             points=int(sum(len(t.positions) for t in tracks)),
             time_span=[str(spans["start"].min()), str(spans["end"].max())],
             start_points=[[float(t.positions[0, 0]), float(t.positions[0, 1])] for t in tracks],
+            end_points=[[float(t.positions[-1, 0]), float(t.positions[-1, 1])] for t in tracks],
             **source,
         )
 
     def to_dict(self) -> dict[str, Any]:
         order = ("dir", "files", "cluster", "tracks_in_cluster", "tracks_used", "track_ids",
-                 "track_keys", "points", "time_span", "start_points")  # fmt: skip
+                 "track_keys", "points", "time_span", "start_points", "end_points")  # fmt: skip
         return _present({k: getattr(self, k) for k in order})
 
 
@@ -356,7 +360,7 @@ def _read_networks(f: CardFields, method: str, lane: LaneConfig) -> NetworkCard 
                 f.number(f"config.{key}", value=value)
         _read_sizes(f, "config", ("state_features", "time_embedding_dim", "hidden_units"))
         return NetworkCard(seeds=seeds, config=config)
-    state_dim = f.choice("state_dim", (state_width(lane.state, lane.fourier),))
+    state_dim = f.choice("state_dim", (state_width(lane.state, lane.fourier, lane.goal),))
     decision_dim = f.integer("decision_dim", 3, 3)
     f.choice("config.noise", ("gaussian", "ou"))
     f.number("config.noise_sigma", 0.0, 100.0)
@@ -389,13 +393,8 @@ def _read_data(f: CardFields) -> DataCard:
     for key, most in (("tracks_in_cluster", MAX_COUNT), ("tracks_used", MAX_TRACKS)):
         if f.get(f"data.{key}", None) is not None:
             f.integer(f"data.{key}", 0, most)
-    starts = f.array("data.start_points", length=len(ids))
-    for i, point in enumerate(starts):
-        name = f"data.start_points[{i}]"
-        if not isinstance(point, list) or len(point) != 2:
-            raise f.fail(name, "a [lon, lat] pair", point)
-        f.number(f"{name}[0]", -180.0, 180.0, value=point[0])
-        f.number(f"{name}[1]", -90.0, 90.0, value=point[1])
+    starts = _read_points(f, "data.start_points", len(ids))
+    ends = _read_points(f, "data.end_points", len(ids)) if f.get("data.end_points", None) else None
     keys = f.get("data.track_keys", None)
     if keys is not None:
         f.array("data.track_keys", length=len(ids))
@@ -403,7 +402,22 @@ def _read_data(f: CardFields) -> DataCard:
     data = f.get("data")
     source = {k: data.get(k) for k in ("dir", "files", "cluster", "tracks_in_cluster",
                                        "tracks_used", "time_span")}  # fmt: skip
-    return DataCard(track_ids=ids, points=points, start_points=starts, track_keys=keys, **source)
+    return DataCard(
+        track_ids=ids, points=points, start_points=starts, end_points=ends, track_keys=keys,
+        **source,
+    )  # fmt: skip
+
+
+def _read_points(f: CardFields, key: str, n: int) -> list[list[float]]:
+    """n [lon, lat] pairs in degrees."""
+    points = f.array(key, length=n)
+    for i, point in enumerate(points):
+        name = f"{key}[{i}]"
+        if not isinstance(point, list) or len(point) != 2:
+            raise f.fail(name, "a [lon, lat] pair", point)
+        f.number(f"{name}[0]", -180.0, 180.0, value=point[0])
+        f.number(f"{name}[1]", -90.0, 90.0, value=point[1])
+    return points
 
 
 def _read_calibration(f: CardFields) -> dict[str, list[float]]:

@@ -1,7 +1,8 @@
 """A learnt AIS policy (DATI's forward actor, or BC) and the two ways it judges a track.
 
 Both read the same observation as in training, (position scaled by the model's box, step index
-t), and decide (SOG, COG, dt) scaled into [-1, 1], which the spherical rule turns into a move.
+t; with `goal=true`, the judged track's own last report as the goal), and decide (SOG, COG, dt)
+scaled into [-1, 1], which the spherical rule turns into a move.
 
 - **rollout** (the paper's score, section 6.2): K free rollouts from the track's first point,
   for as many steps as the track has; the score is the best rollout's mean great-circle distance
@@ -68,8 +69,9 @@ class AISPolicy:
         dts: np.ndarray,
         t: np.ndarray,
         horizon: np.ndarray,
+        goals: np.ndarray | None = None,
     ) -> np.ndarray:
-        state = self.space.features(positions, previous, dts)
+        state = self.space.features(positions, previous, dts, goals)
         time = self.space.time_input(t, horizon)
         return np.concatenate([state, np.asarray(time)[:, None]], axis=1).astype(np.float32)
 
@@ -81,15 +83,18 @@ class AISPolicy:
         rollouts: int,
         seed: int = 0,
         reach: float = 1.0,
+        goals: np.ndarray | None = None,
     ) -> np.ndarray:
         """K rollouts from each start in one batch: positions [N * K, max steps + 1, 2],
         rollout k of start i at row i * K + k; rows past their last step hold their last
         position. Each runs `reach` x its horizon steps (rounded up); the time input still
         counts towards the horizon, so the first `horizon` steps are the same whatever the
-        reach. A step that would leave the region sticks or slides (`AISSpace.resolve`)."""
+        reach. A step that would leave the region sticks or slides (`AISSpace.resolve`).
+        `goals` [N, 2]: where each start's track is bound (goal-conditioned models)."""
         with one_thread():
             n = len(starts) * rollouts
             pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
+            bound = None if goals is None else np.repeat(np.asarray(goals), rollouts, axis=0)
             prev, last_dt = pos.copy(), np.zeros(n)
             limit = np.repeat(np.asarray(horizons), rollouts)
             runs = np.ceil(limit * reach).astype(int)
@@ -98,7 +103,7 @@ class AISPolicy:
             out[:, 0] = pos
             act = self.make_act(n, seed, True)
             for t in range(steps):
-                action = act(self.observe(pos, prev, last_dt, np.full(n, t), limit))
+                action = act(self.observe(pos, prev, last_dt, np.full(n, t), limit, bound))
                 decision = self.rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
                 moved = self.space.resolve(pos, self.rule.step(pos, decision))
                 live = t < runs
@@ -123,8 +128,9 @@ class AISPolicy:
         the rollout score does not depend on L; the other L - K come from a stream of their
         own."""
         starts = np.array([t[0] for t in tracks])
+        goals = np.array([t[-1] for t in tracks])
         horizons = np.array([len(t) - 1 for t in tracks])
-        paths = self.generate(starts, horizons, rollouts, seed, reach)
+        paths = self.generate(starts, horizons, rollouts, seed, reach, goals)
         dists = batch_mean_dtw_m(
             paths,
             np.repeat(horizons + 1, rollouts),
@@ -137,7 +143,7 @@ class AISPolicy:
         more = (lane_rollouts or rollouts) - rollouts
         if more > 0:
             stream = int(np.random.SeedSequence([seed, 1]).generate_state(1)[0])
-            extra = self.generate(starts, horizons, more, stream, reach)
+            extra = self.generate(starts, horizons, more, stream, reach, goals)
             every = [
                 np.concatenate([e, extra[i * more : (i + 1) * more, : r + 1]])
                 for i, (e, r) in enumerate(zip(every, runs, strict=True))
@@ -165,6 +171,7 @@ class AISPolicy:
                     np.r_[0.0, d[:-1]],
                     np.arange(len(p) - 1),
                     np.full(len(p) - 1, len(p) - 1),
+                    np.broadcast_to(p[-1], (len(p) - 1, 2)),
                 )
                 for p, d in zip(tracks, dts, strict=True)
             ]

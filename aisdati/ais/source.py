@@ -54,8 +54,14 @@ class AISTrackSource(ReferenceSource):
     def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         return self.space.resolve(position, proposed)
 
-    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
-        return self.space.features(positions, previous, dts)
+    def features(
+        self,
+        positions: np.ndarray,
+        previous: np.ndarray,
+        dts: np.ndarray,
+        goals: np.ndarray | None = None,
+    ) -> np.ndarray:
+        return self.space.features(positions, previous, dts, goals)
 
     def time_input(self, t: np.ndarray, horizon: int) -> np.ndarray:
         return self.space.time_input(t, horizon)

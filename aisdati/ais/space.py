@@ -40,6 +40,16 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
   near its reference, so the pull pairs the reference's decisions with states near the
   reference's own. The paper starts from random actors. With validation the pretrained actor is
   a candidate for the kept one (episode 0), which an episode's actor must beat.
+- `goal=true`: the state adds where the track is bound, its last report (scaled like the
+  position, with the same Fourier octaves, and the scaled offset from the agent to it), so one
+  model of a whole area's multimodal traffic generates, from a track's start, tracks that go
+  where that track goes ("the state space of DATI may easily be enlarged to include more
+  information such as destination", section 7). In training the goal is the reference's end;
+  in scoring, the judged track's own end (`aisdati.ais.policy`). How unusual the (start, end)
+  pair itself is, the goal cannot say: `aisdati.detectors.od` scores that.
+- `crossfit=true`: member m of an M-member lane trains on every fold of the training tracks but
+  fold m (folds by vessel), validates on fold m, and calibrates the threshold on it, so the
+  threshold comes from tracks the member did not fit (`aisdati.detectors.dati`).
 - `average=B`: validate and keep an exponential moving average (decay B per training batch) of
   the forward actor instead of the live one (`DATIConfig.actor_average`): the validation DTW of
   the live actor jumps by km from one episode to the next, so the kept one was the best of noise.
@@ -53,7 +63,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
 from aisdati.ais.corridor import Corridor
 from aisdati.errors import UserError
 from aisdati.geo import spherical_decision
@@ -91,6 +101,8 @@ class LaneConfig:
     pretrain: int = 0
     fourier: int = 0
     average: float = 0.0
+    goal: bool = False
+    crossfit: bool = False
 
     def __post_init__(self) -> None:
         choices = {
@@ -114,6 +126,8 @@ class LaneConfig:
             raise UserError(f"average must be in [0, 1), got {self.average}")
         if not 1 <= self.members <= MAX_MEMBERS:
             raise UserError(f"members must be in [1, {MAX_MEMBERS}], got {self.members}")
+        if self.crossfit and self.members < 2:
+            raise UserError("crossfit needs at least 2 members (one fold held out by each)")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -134,10 +148,23 @@ PRESETS: dict[str, LaneConfig] = {
         pretrain=50,
         members=3,
     ),
+    AREA_PRESET: LaneConfig(
+        validation=True,
+        region="corridor",
+        ranges="quantile",
+        noise="ou",
+        fourier=6,
+        pretrain=50,
+        members=3,
+        crossfit=True,
+    ),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
-combination that measured best with `aisdati evaluate` (docs/results). The default's name is
-`aisdati.ais.DEFAULT_PRESET`."""
+combination that measured best with `aisdati evaluate` on one route (docs/results); `area` is
+`lanes` with cross-fitted calibration, the model of a whole area (`--cluster all`, which trains
+it unless told otherwise). The goal lever (`goal=true`) measured worse than without on Kitimat,
+forward in time, so the area preset leaves it off (docs/results/forward.md). Their names are
+`aisdati.ais.DEFAULT_PRESET` and `AREA_PRESET`."""
 
 
 def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:
@@ -165,10 +192,11 @@ def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:
     return LaneConfig(**values)
 
 
-def state_width(state: str, fourier: int) -> int:
+def state_width(state: str, fourier: int, goal: bool = False) -> int:
     """Width of the agent's state: the position (2) or position and motion (5), plus sin and
-    cos of both coordinates at each Fourier octave (the layout of `AISSpace.features`)."""
-    return (5 if state == "motion" else 2) + 4 * fourier
+    cos of both coordinates at each Fourier octave; with a goal, its position, octaves and
+    offset (the layout of `AISSpace.features`)."""
+    return (5 if state == "motion" else 2) + 4 * fourier + (4 + 4 * fourier if goal else 0)
 
 
 def region_box(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -215,7 +243,7 @@ class AISSpace:
 
     @property
     def state_dim(self) -> int:
-        return state_width(self.config.state, self.config.fourier)
+        return state_width(self.config.state, self.config.fourier, self.config.goal)
 
     @property
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -224,7 +252,11 @@ class AISSpace:
         else:
             lo, hi = np.zeros(2), np.ones(2)
         waves = 4 * self.config.fourier
-        return np.r_[lo, -np.ones(waves)], np.r_[hi, np.ones(waves)]
+        lo, hi = np.r_[lo, -np.ones(waves)], np.r_[hi, np.ones(waves)]
+        if self.config.goal:  # the goal's position and octaves, then the offset to it
+            lo = np.r_[lo, np.zeros(2), -np.ones(waves), -np.ones(2)]
+            hi = np.r_[hi, np.ones(2), np.ones(waves), np.ones(2)]
+        return lo, hi
 
     def time_high(self, max_steps: int) -> float:
         return PROGRESS_SCALE if self.config.time == "progress" else float(max_steps)
@@ -255,18 +287,37 @@ class AISSpace:
         out = np.where(self.in_box(prop)[:, None], prop, pos)
         return out[0] if single else out
 
-    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
-        lo, hi = self.bounds
+    def features(
+        self,
+        positions: np.ndarray,
+        previous: np.ndarray,
+        dts: np.ndarray,
+        goals: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The state of agents at `positions` (previously at `previous`, `dts` hours before),
+        bound for `goals` (needed with `goal=true`, ignored without)."""
         positions = np.asarray(positions, np.float64)
-        scaled = np.clip((positions - lo) / (hi - lo), 0.0, 1.0)
+        scaled = self._scaled(positions)
         parts = [scaled]
         if self.config.state == "motion":
             parts.append(self._motion(positions, previous, dts))
-        if self.config.fourier:
-            angles = scaled[..., None] * (np.pi * 2.0 ** np.arange(self.config.fourier))
-            waves = np.concatenate([np.sin(angles), np.cos(angles)], axis=-1)
-            parts.append(waves.reshape((*scaled.shape[:-1], -1)))
-        return np.concatenate(parts, axis=-1) if len(parts) > 1 else scaled
+        parts.append(self._waves(scaled))
+        if self.config.goal:
+            if goals is None:
+                raise ValueError("a goal-conditioned model needs each agent's goal")
+            target = self._scaled(np.broadcast_to(np.asarray(goals, np.float64), positions.shape))
+            parts += [target, self._waves(target), np.clip(target - scaled, -1.0, 1.0)]
+        return np.concatenate(parts, axis=-1)
+
+    def _scaled(self, positions: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds
+        return np.clip((positions - lo) / (hi - lo), 0.0, 1.0)
+
+    def _waves(self, scaled: np.ndarray) -> np.ndarray:
+        """sin and cos of the scaled coordinates at each Fourier octave ([..., 0] without)."""
+        angles = scaled[..., None] * (np.pi * 2.0 ** np.arange(self.config.fourier))
+        waves = np.concatenate([np.sin(angles), np.cos(angles)], axis=-1)
+        return waves.reshape((*scaled.shape[:-1], -1))
 
     def _motion(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
         """The agent's current course (sin, cos) and speed (scaled by the SOG range), from its

@@ -264,10 +264,32 @@ def demonstrations(envs: Sequence[TrajectoryImitationEnv]) -> list[tuple[np.ndar
     return out
 
 
+def crossfit_folds(tracks: Sequence[Track], folds: int, seed: int) -> np.ndarray:
+    """Fold (0 .. folds - 1) of each track for cross-fitting (`LaneConfig.crossfit`): vessels
+    in seeded order, each to the fold with the fewest tracks so far, so that no vessel's other
+    tracks teach the member that is calibrated on it; with fewer vessels than folds, tracks in
+    seeded order, dealt round."""
+    rng = np.random.default_rng([seed, 11])
+    mmsi = np.array([t.mmsi for t in tracks])
+    out = np.empty(len(tracks), dtype=np.int64)
+    vessels = np.unique(mmsi)
+    if len(vessels) < folds:
+        out[rng.permutation(len(tracks))] = np.arange(len(tracks)) % folds
+        return out
+    sizes = np.zeros(folds, dtype=np.int64)
+    for v in rng.permutation(vessels):
+        mine = mmsi == v
+        fold = int(np.argmin(sizes))
+        out[mine] = fold
+        sizes[fold] += int(mine.sum())
+    return out
+
+
 class Validator:
     """Scores a live DATI actor by its rollouts (best of R, from each validation track's first
-    point) against `validation_tracks` of the training tracks: the median mean great-circle DTW
-    in metres. Lower is better; the trainer keeps the best actor and stops on it."""
+    point) against `validation_tracks` of the given tracks (the training tracks, or with
+    cross-fitting the member's held-out fold): the median mean great-circle DTW in metres.
+    Lower is better; the trainer keeps the best actor and stops on it."""
 
     def __init__(
         self,
@@ -291,7 +313,7 @@ class Validator:
 
 class MemberValidators:
     """One `Validator` per ensemble member (each route validates on its own tracks; the seeds
-    of one lane share theirs)."""
+    of one lane share theirs, or with cross-fitting each validates on its held-out fold)."""
 
     def __init__(self, validators: Sequence[Validator]):
         self.validators = list(validators)
@@ -364,22 +386,49 @@ class EnsembleRun:
         self.routes = list(routes)
         first = self.routes[0].settings
         self.members = first.lane.members
+        short = [r.settings.cluster for r in self.routes if len(r.tracks) < 2 * self.members]
+        if first.lane.crossfit and short:
+            raise UserError(
+                f"cross-fitting {self.members} members needs at least {2 * self.members} tracks "
+                f"per model ({', '.join(short)} has fewer): pass --lane crossfit=false"
+            )
         self.sources = [build_source(r.tracks, r.settings.lane) for r in self.routes]
-        envs = [  # each member draws its own episode order from its route's tracks
-            make_env(AISTrackSource(src.references, src.space), r.settings.epsilon_m)
-            for r, src in zip(self.routes, self.sources, strict=True)
-            for _ in range(self.members)
+        self.seeds = member_seeds(first.seed, self.members * len(self.routes))
+        # each member's tracks: its route's, or with cross-fitting all but its own fold
+        self.folds = [
+            crossfit_folds(r.tracks, self.members, self.seeds[k * self.members])
+            if first.lane.crossfit
+            else np.full(len(r.tracks), -1)
+            for k, r in enumerate(self.routes)
+        ]
+        envs = [  # each member draws its own episode order from its tracks
+            make_env(
+                AISTrackSource(
+                    [ref for ref, f in zip(src.references, folds, strict=True) if f != m],
+                    src.space,
+                ),
+                r.settings.epsilon_m,
+            )
+            for r, src, folds in zip(self.routes, self.sources, self.folds, strict=True)
+            for m in range(self.members)
         ]
         # one configuration for all members (OU noise at the median dt of all routes' tracks)
         self.config = dati_config(first, [t for r in self.routes for t in r.tracks])
         validate = None
         if first.lane.validation:
-            validators = [
-                Validator(src.space, self.config, r.tracks, r.settings.lane, r.settings.seed)
-                for r, src in zip(self.routes, self.sources, strict=True)
-            ]
-            validate = MemberValidators([v for v in validators for _ in range(self.members)])
-        self.seeds = member_seeds(first.seed, self.members * len(self.routes))
+            validate = MemberValidators(
+                [
+                    Validator(
+                        src.space,
+                        self.config,
+                        [t for t, f in zip(r.tracks, folds, strict=True) if f in (-1, m)],
+                        r.settings.lane,
+                        r.settings.seed,
+                    )
+                    for r, src, folds in zip(self.routes, self.sources, self.folds, strict=True)
+                    for m in range(self.members)
+                ]
+            )
         self.envs = envs
         self.trainer = DATITrainer(envs, self.seeds, self.config, validate)
         self.log_lines: list[list[str]] = [[] for _ in self.routes]

@@ -71,10 +71,15 @@ def spinner(where: Console, text: str, show: bool = True) -> contextlib.Abstract
     return where.status(text, spinner="dots") if show else contextlib.nullcontext()
 
 
-def lane_settings(preset: str, lane: list[str] | None) -> dict[str, Any]:
+def lane_settings(preset: str | None, lane: list[str] | None, cluster: str) -> dict[str, Any]:
     """The `preset` (its name and overrides, for the model card) and `lane` (the resolved
-    LaneConfig) of the train and evaluate settings, from --preset and --lane."""
+    LaneConfig) of the train and evaluate settings, from --preset and --lane; without
+    --preset, the area preset for a whole area (`--cluster all`), else the default."""
+    from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
     from aisdati.ais.space import lane_config  # here: cli.py imports this module for --help
+    from aisdati.tracks.schema import AREA
 
+    if preset is None:
+        preset = AREA_PRESET if cluster.strip().lower() == AREA else DEFAULT_PRESET
     name = preset if not lane else f"{preset} + {', '.join(lane)}"
     return {"preset": name, "lane": lane_config(preset, lane or ())}

@@ -13,7 +13,7 @@ from aisdati.ais.card import unfinished_models
 from aisdati.commands.common import console, err_console, spinner, warn
 from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
-from aisdati.detection.run import Detection, DetectSettings, check_settings, detect
+from aisdati.detection.run import Coverage, Detection, DetectSettings, check_settings, detect
 from aisdati.detectors import parse_detectors
 from aisdati.options import check_options
 from aisdati.outdir import staged_outputs
@@ -88,9 +88,28 @@ def run(
         print_detection(result, files, settings.out_dir)
 
 
+SHOWN_IDS = 8
+"""Ids of tracks not judged named on the terminal (all are in report.json)."""
+
+
+def coverage_line(coverage: Coverage) -> str:
+    """`judged 221 of 225 tracks (all: 200, route-1: 21); not judged: 4, no model covers its
+    start and end (...): 17, 19, ...`: what judged each track, or why none did."""
+    by = ", ".join(f"{escape(k)}: {v}" for k, v in coverage.judged_by.items())
+    text = f"judged {coverage.judged} of {coverage.candidates} tracks ({by})"
+    for reason, ids in coverage.not_judged.items():
+        shown = ", ".join(str(i) for i in ids[:SHOWN_IDS]) + (
+            ", ..." if len(ids) > SHOWN_IDS else ""
+        )
+        text += f"; [yellow]not judged: {len(ids)}, {escape(reason)}[/]: tracks {shown}"
+    return text
+
+
 def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     """The flagged tracks, the scores against hand labels if given, and what was written."""
     console.print(detection_table(result.scores))
+    if result.coverage is not None:
+        console.print(coverage_line(result.coverage), highlight=False)
     if result.metrics is not None:
         m = result.metrics
         auc = "n/a (one class only)" if m["roc_auc"] is None else f"{m['roc_auc']:.3f}"

@@ -9,6 +9,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 from rich.markup import escape
 
 from aisdati.ais.training import TrainSettings
@@ -46,8 +47,12 @@ def run(
     kinds: str,
     param: list[str] | None,
     train_fraction: float,
+    split: str,
+    before: datetime | None,
+    altered: float,
+    strength: float,
     models: Path | None,
-    preset: str,
+    preset: str | None,
     lane: list[str] | None,
     episodes: int,
     patience: int,
@@ -89,7 +94,11 @@ def run(
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
-        **lane_settings(preset, lane),
+        split=split.strip().lower(),
+        before=None if before is None else pd.Timestamp(before, tz="UTC"),
+        altered=altered,
+        strength=strength,
+        **lane_settings(preset, lane, cluster),
     )
     check(settings)
     every_route = settings.cluster == ALL_ROUTES

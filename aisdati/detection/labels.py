@@ -222,7 +222,8 @@ def match_labels(scores: pd.DataFrame, tracks: Sequence[Track], labels: Labels) 
 
 def label_metrics(y: np.ndarray, flagged: np.ndarray, score: np.ndarray) -> dict[str, Any]:
     """Precision and recall of the anomaly class, weighted F1 (the paper's metric: per-class F1
-    weighted by class support) and ROC AUC of the normalised score."""
+    weighted by class support), the share of normal tracks flagged (the false-alarm rate a
+    calibrated threshold promises) and ROC AUC of the normalised score."""
     y, p = np.asarray(y, int), np.asarray(flagged, int)
     anomaly = flagging(y, p)
     return {
@@ -232,6 +233,7 @@ def label_metrics(y: np.ndarray, flagged: np.ndarray, score: np.ndarray) -> dict
         "precision": anomaly["precision"],
         "recall": anomaly["recall"],
         "f1_weighted": weighted_f1(y, p),
+        "false_alarm_rate": anomaly["false_alarm_rate"],
         "roc_auc": ranking(y, score)["roc_auc"],
     }
 

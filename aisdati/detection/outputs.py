@@ -58,6 +58,9 @@ SCORE_DEFINITIONS = {
     "near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
     "distance d and course difference dcourse (m)",
     "both": "rollout / median training rollout score + step / median training step score",
+    "area": "lane + the track's origin-destination distance to the nearest training track "
+    "(the larger of the starts' and the ends' distances) beyond the 95th percentile of the "
+    "training tracks' own (m)",
     "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
     "track starting within near_km",
 }
@@ -168,6 +171,22 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
     return {"type": "FeatureCollection", "features": features}
 
 
+def thresholds(result: Detection) -> dict[str, Any] | None:
+    """With `--contamination`, each judging model's calibrated threshold and its bootstrap
+    spread (`Detector.threshold_spread`), in the score's unit."""
+    s = result.settings
+    if s is None or s.contamination is None:
+        return None
+    used = set(result.scores["model"])
+    out = {}
+    for m in result.models:
+        if m.name in used:
+            lo, hi = m.threshold_spread(s.how, s.contamination)
+            out[m.name] = {"threshold": round(m.threshold(s.how, s.contamination), 3),
+                           "spread_5_95": [round(lo, 3), round(hi, 3)]}  # fmt: skip
+    return out
+
+
 def report_dict(result: Detection) -> dict[str, Any]:
     """report.json: the settings, models, warnings, counts, timings, metrics and what the
     score measures."""
@@ -181,6 +200,7 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "warnings": [w for m in result.models for w in card_warnings(m.card, m.name)],
         "test_tracks": len(sc),
         "coverage": result.coverage.as_dict() if result.coverage else None,
+        "thresholds": thresholds(result),
         "flagged": int(sc["flagged"].sum()),
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},

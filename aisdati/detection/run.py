@@ -1,18 +1,22 @@
 """Detection of abnormal tracks (section 6.2 of the paper): scores -> flags.
 
-Each test track goes to the model whose training tracks start nearest to where it starts, and is
-scored by that model's detector (`aisdati.detectors`): by default DATI, judged by the lane its K
-free rollouts from the track's first point cover (`--score lane`, the default), by its best
-rollout (`--score rollout`, the paper's), by its teacher-forced one-step predictions along the
-track (`--score step`) or by rollout and step together (`--score both`). Every score is in
-metres and higher means more abnormal. Flags: scores divided by their maximum over the test
-set above `threshold` (the paper's Λ = 0.75), or the `top_percent` highest, or scores above the
-model's calibrated threshold (`contamination`: the share of its own training tracks it would
-flag), which does not depend on the test set. For every track the point of largest local deviation
-(the peak of its deviation profile) tells where it strays most.
+Each test track goes to a model (`route_test_tracks`): the route or cluster model whose
+training tracks are bound as it is (start and end within `near_km`; the paper's rule, by start
+alone, for cards that do not record where their tracks end), else an area model (`--cluster
+all`), which judges any track; a track no model covers is listed with the reason, never dropped
+unsaid. The model's detector (`aisdati.detectors`) scores it: by default DATI, judged by the
+lane its K free rollouts from the track's first point cover (`--score lane`, the default), with
+the origin-destination term added (`--score area`), by its best rollout
+(`--score rollout`, the paper's), by its teacher-forced one-step predictions along the track
+(`--score step`) or by rollout and step together (`--score both`). Higher means more abnormal.
+Flags: scores divided by their maximum over the test set above `threshold` (the paper's
+Λ = 0.75), or the `top_percent` highest, or scores above the model's calibrated threshold
+(`contamination`: the share of its own training tracks it would flag; cross-fitted for an area
+model), which does not depend on the test set. For every track the point of largest local
+deviation (the peak of its deviation profile) tells where it strays most.
 
-Default test set (section 6.2): tracks of the `other` cluster, not used in training, whose first
-point lies within `near_km` (default 10 km) of some training track's first point.
+Default test set (section 6.2): tracks of the `other` cluster, not used in training; `--cluster
+all`: every track of the ingest.
 
 What is written is `aisdati.detection.outputs`'s; hand labels are `aisdati.detection.labels`'s.
 """
@@ -32,8 +36,9 @@ import pandas as pd
 from aisdati.ais.card import training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
+from aisdati.detectors.od import od_distances
 from aisdati.errors import UserError
-from aisdati.geo import haversine_m
+from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
 
@@ -79,32 +84,37 @@ EVIDENCE = {
     "rollout": "best rollout",
     "both": "best rollout",
     "lane": "best rollout",
+    "area": "best rollout",
     "step": "one-step predictions",
     "nearest": "nearest training track",
 }
 """What a track was compared with, by score (by method for `nearest`)."""
 
 
-NOT_JUDGED_TRAINING = "a training track of the model in reach"
-NOT_JUDGED_FAR = "no model's training tracks start within --near-km"
+NOT_JUDGED_TRAINING = "a training track of every model in reach"
+NOT_JUDGED_FAR = "no model covers its start and end (none within --near-km, no area model)"
 
 
 @dataclass(frozen=True)
 class Coverage:
     """What became of every track of the chosen test set: judged (by which model) or not, and
-    why, so that no track leaves it uncounted. A model never judges its own training tracks,
-    and judges only tracks that start within `near_km` of one of its training tracks' starts."""
+    why (with the ids), so that no track leaves it uncounted."""
 
     candidates: int
     judged_by: dict[str, int]
-    not_judged: dict[str, int]
+    not_judged: dict[str, list[int]]
+
+    @property
+    def judged(self) -> int:
+        return sum(self.judged_by.values())
 
     def as_dict(self) -> dict[str, Any]:
         return {
             "candidates": self.candidates,
-            "judged": sum(self.judged_by.values()),
+            "judged": self.judged,
             "judged_by": self.judged_by,
-            "not_judged": self.not_judged,
+            "not_judged": {k: len(v) for k, v in self.not_judged.items()},
+            "not_judged_tracks": self.not_judged,
         }
 
 
@@ -144,37 +154,82 @@ def load_models(settings: DetectSettings) -> list[Detector]:
 
 
 # --------------------------------------------------------------------------------- test set
-def select_test_tracks(
-    settings: DetectSettings, models: Sequence[Detector]
-) -> tuple[list[int], list[int], Coverage]:
-    """Test track ids, for each the index of the model that judges it, and the `Coverage` of
-    the chosen set."""
+def is_area_model(model: Detector) -> bool:
+    """A model of a whole area (`--cluster all`): it judges any track of its region."""
+    return model.card.cluster == AREA
+
+
+def reach_km(model: Detector, tracks: Sequence[Track]) -> np.ndarray:
+    """How far (km) each track is from being bound the way the model's training tracks are: the
+    origin-destination distance (`aisdati.detectors.od`) where the card records where its
+    tracks end, else (older cards) the distance between starts, the paper's rule."""
+    starts = np.array([t.positions[0] for t in tracks])
+    if model.end_points is None:
+        return od_distances(starts, starts, model.start_points, model.start_points) / 1000.0
+    ends = np.array([t.positions[-1] for t in tracks])
+    return od_distances(starts, ends, model.start_points, model.end_points) / 1000.0
+
+
+def route_test_tracks(
+    settings: DetectSettings, models: Sequence[Detector], table: pd.DataFrame, tracks: list[Track]
+) -> tuple[np.ndarray, Coverage]:
+    """For each track (rows of `table`, loaded as `tracks`), the index of the model that judges
+    it (-1: none) and the `Coverage`. A model never judges its own training tracks. A route or
+    cluster model judges the tracks bound as its own are (`reach_km` within `near_km`), the
+    nearest in reach; a track no such model reaches goes to an area model; with none, it is
+    listed as not judged, with the reason. `track_ids` given: the nearest model judges."""
+    n = len(tracks)
+    reach = np.stack([reach_km(m, tracks) for m in models], axis=1)
+    trained_any = np.zeros(n, dtype=bool)
+    if not settings.track_ids:
+        for m, model in enumerate(models):
+            trained = training_mask(model.card, table)  # by vessel and time where it can
+            reach[trained, m] = np.inf
+            trained_any |= trained
+    area = np.array([is_area_model(m) for m in models])
+    local = np.where(area[None, :] | (reach > settings.near_km), np.inf, reach)
+    if settings.track_ids:
+        local = reach
+    owner = np.where(np.isfinite(local).any(axis=1), local.argmin(axis=1), -1)
+    if area.any():
+        spare = np.where(area[None, :], reach, np.inf)
+        fallback = np.where(np.isfinite(spare).any(axis=1), spare.argmin(axis=1), -1)
+        owner = np.where(owner < 0, fallback, owner)
+    ids = table["track_id"].to_numpy()
+    names = [m.name for m in models]
+    judged = pd.Series([names[o] for o in owner if o >= 0], dtype=object).value_counts()
+    left = owner < 0
+    not_judged = {
+        reason: [int(i) for i in ids[mask]]
+        for reason, mask in ((NOT_JUDGED_TRAINING, left & trained_any),
+                             (NOT_JUDGED_FAR, left & ~trained_any))
+        if mask.any()
+    }  # fmt: skip
+    coverage = Coverage(
+        candidates=n,
+        judged_by={str(k): int(v) for k, v in judged.sort_index().items()},
+        not_judged=not_judged,
+    )
+    return owner, coverage
+
+
+def candidate_table(settings: DetectSettings) -> pd.DataFrame:
+    """The chosen test set's rows of tracks.parquet (`track_ids`, a cluster, or all)."""
     table = read_track_table(settings.data_dir)
     if settings.track_ids:
         missing = set(settings.track_ids) - set(table["track_id"])
         if missing:
             raise UserError(f"tracks not in {settings.data_dir}: {sorted(missing)[:5]}")
-        table = table[table["track_id"].isin(settings.track_ids)]
-    elif settings.cluster != "all":
-        table = select_cluster(table, settings.cluster, settings.data_dir, needed=1)
-    ids = table["track_id"].to_numpy()
-    starts = table[["lon0", "lat0"]].to_numpy(np.float64) if "lon0" in table else None
-    if starts is None:
-        starts = np.array([t.positions[0] for t in load_tracks(settings.data_dir, ids)])
-    # distance from each start to each model's nearest training start (km)
-    near = np.full((len(ids), len(models)), np.inf)
-    trained_any = np.zeros(len(ids), dtype=bool)
-    for m, model in enumerate(models):
-        sp = model.start_points
-        for lo in range(0, len(sp), 256):
-            chunk = sp[lo : lo + 256]
-            d = haversine_m(starts[:, None, 0], starts[:, None, 1], chunk[:, 0], chunk[:, 1])
-            near[:, m] = np.minimum(near[:, m], d.min(axis=1) / 1000.0)
-        if not settings.track_ids:
-            trained = training_mask(model.card, table)  # by vessel and time where it can
-            near[trained, m] = np.inf  # a model does not judge its own training tracks
-            trained_any |= trained
-    inside = np.zeros(len(ids), dtype=bool)
+        return table[table["track_id"].isin(settings.track_ids)]
+    if settings.cluster != AREA:
+        return select_cluster(table, settings.cluster, settings.data_dir, needed=1)
+    return table
+
+
+def check_region(models: Sequence[Detector], tracks: Sequence[Track]) -> None:
+    """Refuse models of another region, in one line."""
+    starts = np.array([t.positions[0] for t in tracks])
+    inside = np.zeros(len(tracks), dtype=bool)
     for model in models:
         inside |= model.contains(starts)
     if not inside.any():
@@ -183,30 +238,6 @@ def select_test_tracks(
             f"no test track starts inside the model's region (lon {lo[0]:.2f}..{hi[0]:.2f}, "
             f"lat {lo[1]:.2f}..{hi[1]:.2f}): is the model from another region?"
         )
-    best = near.argmin(axis=1)
-    dist = near[np.arange(len(ids)), best]
-    keep = np.ones(len(ids), dtype=bool) if settings.track_ids else dist <= settings.near_km
-    if not keep.any():
-        raise UserError(
-            f"no test tracks start within {settings.near_km:g} km of the training tracks' starts "
-            "(training tracks are never test tracks); raise --near-km or pass --cluster all"
-        )
-    names = [m.name for m in models]
-    judged = pd.Series([names[b] for b in best[keep]], dtype=object).value_counts()
-    skipped = ~keep
-    coverage = Coverage(
-        candidates=len(ids),
-        judged_by={str(k): int(v) for k, v in judged.sort_index().items()},
-        not_judged={
-            k: int(v)
-            for k, v in (
-                (NOT_JUDGED_TRAINING, (skipped & trained_any).sum()),
-                (NOT_JUDGED_FAR, (skipped & ~trained_any).sum()),
-            )
-            if v
-        },
-    )
-    return [int(i) for i in ids[keep]], [int(b) for b in best[keep]], coverage
 
 
 def flag(scores: np.ndarray, threshold: float, top_percent: float | None) -> np.ndarray:
@@ -247,8 +278,17 @@ def detect(settings: DetectSettings) -> Detection:
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     models = load_models(settings)
-    ids, owner, coverage = select_test_tracks(settings, models)
-    tracks = load_tracks(settings.data_dir, ids)
+    table = candidate_table(settings)
+    candidates = load_tracks(settings.data_dir, [int(i) for i in table["track_id"]])
+    check_region(models, candidates)
+    owners, coverage = route_test_tracks(settings, models, table, candidates)
+    if coverage.judged == 0:
+        raise UserError(
+            f"no test track is judged by any model ({', '.join(coverage.not_judged)}): train an "
+            "area model (`aisdati train --cluster all`), raise --near-km, or pass --cluster all"
+        )
+    tracks = [t for t, o in zip(candidates, owners, strict=True) if o >= 0]
+    owner = [int(o) for o in owners if o >= 0]
     timings["load_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner)

@@ -35,6 +35,8 @@ from aisdati.tracks.store import Track
 
 DEFAULT_CONTAMINATION = 0.05
 """The share of normal traffic a threshold flags unless told otherwise (`aisdati evaluate`'s)."""
+SPREAD_DRAWS = 200
+SPREAD_SEED = 0
 D = TypeVar("D", bound="Detector")
 
 
@@ -170,6 +172,20 @@ class Detector(ABC):
                 )
         return float(np.quantile(np.asarray(cal, np.float64), 1.0 - contamination))
 
+    def threshold_spread(
+        self, how: ScoreSettings | None = None, contamination: float = DEFAULT_CONTAMINATION
+    ) -> tuple[float, float]:
+        """The 5th and 95th percentiles of `threshold` over `SPREAD_DRAWS` seeded bootstrap
+        resamples of the calibration scores: how much the threshold rests on which training
+        tracks happened to calibrate it (a few hundred scores put a 0.95 quantile on a handful
+        of tracks)."""
+        self.threshold(how, contamination)  # the same checks, the same one-line refusals
+        cal = np.asarray(self.card.calibration[self.calibration_key(how or self.how)], np.float64)
+        rng = np.random.default_rng(SPREAD_SEED)
+        draws = rng.choice(cal, size=(SPREAD_DRAWS, len(cal)), replace=True)
+        cuts = np.quantile(draws, 1.0 - contamination, axis=1)
+        return float(np.quantile(cuts, 0.05)), float(np.quantile(cuts, 0.95))
+
     def predict(
         self, tracks: Sequence[Track], contamination: float = DEFAULT_CONTAMINATION
     ) -> np.ndarray:
@@ -181,6 +197,12 @@ class Detector(ABC):
     @property
     def start_points(self) -> np.ndarray:
         return np.asarray(self.card.data.start_points, np.float64).reshape(-1, 2)
+
+    @property
+    def end_points(self) -> np.ndarray | None:
+        """Where each training track ends; None in cards from before they were recorded."""
+        ends = self.card.data.end_points
+        return None if ends is None else np.asarray(ends, np.float64).reshape(-1, 2)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

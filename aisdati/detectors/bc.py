@@ -51,7 +51,7 @@ class BCDetector(PolicyDetector):
         t0 = time.perf_counter()
         torch.set_num_threads(1)
         # a card's seeds number its members: the baseline is one model
-        source = build_source(tracks, replace(self.settings.lane, members=1))
+        source = build_source(tracks, replace(self.settings.lane, members=1, crossfit=False))
         self.card = base_card("bc", self.settings, source.space, self.describe(tracks, data))
         trainer = BCTrainer(
             [make_env(source)], [self.settings.seed], BCConfig(episodes=self.settings.episodes)
@@ -68,7 +68,8 @@ class BCDetector(PolicyDetector):
         self.card.training.wall_seconds = time.perf_counter() - t0
         return self
 
-    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
+    def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
+        """BC is one model: `member` (an ensemble's) does not apply and is ignored."""
         policy = self.trained()
         gen = torch.Generator().manual_seed(int(seed))
 

@@ -9,7 +9,13 @@ from pathlib import Path
 
 from aisdati.ais.card import DataCard, ModelCard
 from aisdati.ais.policy import Act, dati_act
-from aisdati.ais.training import LaneRoute, TrainResult, TrainSettings, train_lanes
+from aisdati.ais.training import (
+    LaneRoute,
+    TrainResult,
+    TrainSettings,
+    crossfit_folds,
+    train_lanes,
+)
 from aisdati.detectors.base import Detector
 from aisdati.detectors.policy import PolicyDetector, saved_corridor
 from aisdati.detectors.scoring import ScoreSettings
@@ -79,10 +85,12 @@ class DATIDetector(PolicyDetector):
         self.nets, self.config, self.corridor = result.networks, result.config, result.corridor
         self.card, self.resumed_from = result.card, result.resumed_from
         self.card.training.finished = True
-        self.calibrate(tracks)
+        lane = self.card.lane_config
+        folds = crossfit_folds(tracks, lane.members, self.card.seed) if lane.crossfit else None
+        self.calibrate(tracks, folds=folds)
 
-    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        return dati_act(self.trained(), self.config, None)(n, seed, temporal)
+    def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
+        return dati_act(self.trained(), self.config, member)(n, seed, temporal)
 
     def trained(self) -> DATINetworks:
         if self.nets is None:

@@ -2,7 +2,9 @@
 
 A track's score (`--score` anything but lane) is its mean great-circle DTW (metres along the
 warping path, the same unit as DATI's scores) to the nearest training track that starts within
-`near_km` of its start (all training tracks when none does). With `--score lane` it is, as for
+`near_km` of its start (all training tracks when none does; a model of a whole area, `--cluster
+all`, compares with every training track: the baseline an analyst tries first). With `--score
+lane` it is, as for
 the policies, the mean of the largest 10 % of each report's distance to the nearest point of
 those training tracks: the lane that remembered traffic covers. It is the bar every learnt
 detector has to clear: if imitating the traffic does not beat remembering it, the imitation adds
@@ -34,6 +36,7 @@ from aisdati.geo import haversine_m, lane_distances
 from aisdati.model.readers import ArraySpec, read_npz
 from aisdati.model.trainer import Callback
 from aisdati.outdir import atomic_write_bytes
+from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track
 
 
@@ -60,7 +63,7 @@ class NearestDetector(Detector):
     ) -> NearestDetector:
         """Remember the tracks; calibrate on each one against the other vessels' tracks."""
         t0 = time.perf_counter()
-        space = fit_space(tracks, replace(self.settings.lane, members=1))
+        space = fit_space(tracks, replace(self.settings.lane, members=1, crossfit=False))
         self.card = base_card("nearest", self.settings, space, self.describe(tracks, data))
         self.corridor = space.corridor
         self.tracks = [t.positions for t in tracks]
@@ -88,6 +91,8 @@ class NearestDetector(Detector):
         starts = np.array([q[0] for q in queries])
         own = np.array([t[0] for t in self.tracks])
         d = haversine_m(starts[:, None, 0], starts[:, None, 1], own[None, :, 0], own[None, :, 1])
+        if self.card.cluster == AREA:
+            d = np.zeros_like(d)  # every training track is a candidate
         out = []
         for k in range(len(starts)):
             ok = np.ones(len(self.tracks), dtype=bool)

@@ -4,7 +4,13 @@ Both score the same ways (`aisdati.ais.policy`): free rollouts (`rollout`, the p
 teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
 `both`: the rollout and step scores, each divided by the median of the training tracks' own
 scores of that kind, summed, so neither dominates by its unit of scale (a track as typical as
-the median training track scores 2). The step profile stands for `both` on maps.
+the median training track scores 2). The step profile stands for `both` on maps. Models whose
+cards record where their training tracks end also score `od` and `area` (`aisdati.detectors.od`):
+the lane score plus how much rarer the track's (start, end) pair is than the training tracks'.
+
+A goal-conditioned model's lane traffic (`ScoreSettings.lane_traffic`) is that of the training
+tracks bound the same way: starting and ending within `near_km` of the track's own start and end.
+All of an area's traffic would make every lane of the area count as the track's lane.
 """
 
 from __future__ import annotations
@@ -21,10 +27,11 @@ from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
+from aisdati.detectors.od import od_distances, od_excess
 from aisdati.detectors.scoring import Scores, ScoreSettings, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
-from aisdati.geo import lane_distances
+from aisdati.geo import haversine_m, lane_distances
 from aisdati.tracks.store import Track
 
 
@@ -33,21 +40,33 @@ class PolicyDetector(Detector):
 
     lane_settings = ("lane_course_km", "lane_traffic")
 
-    def policy(self) -> AISPolicy:
-        return AISPolicy(AISSpace.from_card(self.card, self.corridor), self.make_act)
+    def policy(self, member: int | None = None) -> AISPolicy:
+        """The learnt policy (with `member`, that member of an ensemble alone)."""
+
+        def make(n: int, seed: int, temporal: bool) -> Act:
+            return self.make_act(n, seed, temporal, member)
+
+        return AISPolicy(AISSpace.from_card(self.card, self.corridor), make)
 
     @abstractmethod
-    def make_act(self, n: int, seed: int, temporal: bool) -> Act:
-        """The policy for a batch of n rows (`aisdati.ais.policy.MakeAct`)."""
+    def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
+        """The policy for a batch of n rows (`aisdati.ais.policy.MakeAct`), of one member."""
 
     def score_tracks(
         self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
     ) -> Scores:
-        policy = self.policy()
+        return self.score_with(self.policy(), tracks, how, also)
+
+    def score_with(
+        self, policy: AISPolicy, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
+    ) -> Scores:
+        """`score_tracks` with a given policy (one member of the ensemble, for calibration)."""
         positions = [t.positions for t in tracks]
         wanted = {how.score, *also}
         if "both" in wanted:
             wanted |= {"rollout", "step"}
+        if wanted & {"area", "od"}:
+            wanted |= {"lane", "od"}
         parts: dict[str, np.ndarray] = {}
         profiles: dict[str, list[np.ndarray]] = {}
         evidence: dict[str, list[np.ndarray]] = {}
@@ -64,9 +83,10 @@ class PolicyDetector(Detector):
                 ]
         if "lane" in wanted:
             traffic = self.traffic(policy, how) if how.lane_traffic else []
+            bound = self.traffic_of(positions, len(traffic), how)
             profiles["lane"] = [
-                lane_distances(p, [*e, *traffic], how.lane_course_km * 1000.0)
-                for p, e in zip(positions, every, strict=True)
+                lane_distances(p, [*e, *(traffic[j] for j in b)], how.lane_course_km * 1000.0)
+                for p, e, b in zip(positions, every, bound, strict=True)
             ]
             parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
         if "step" in wanted:
@@ -78,6 +98,12 @@ class PolicyDetector(Detector):
             evidence["step"] = [
                 np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
             ]
+        if "od" in wanted:
+            parts["od"] = self.od_scores(positions)
+            profiles["od"], evidence["od"] = profiles["lane"], evidence["lane"]
+        if "area" in wanted:
+            parts["area"] = parts["lane"] + od_excess(parts["od"], self.calibration_of("od"))
+            profiles["area"], evidence["area"] = profiles["lane"], evidence["lane"]
         if "both" in wanted:
             cal = self.card.calibration
             if not cal.get("rollout") or not cal.get("step"):
@@ -96,19 +122,77 @@ class PolicyDetector(Detector):
         of steps times the lane's reach: where the model's traffic goes, shared by every
         track's lane, so a track that starts off the lane and joins it is judged against the
         lane it joins, not only against where the policy goes from its odd start."""
-        starts = self.start_points
+        starts, goals = self.start_points, self.end_points
         steps = max(1, round(self.card.data.points / len(starts)) - 1)
         stream = int(np.random.SeedSequence([how.seed, 2]).generate_state(1)[0])
-        paths = policy.generate(starts, np.full(len(starts), steps), 1, stream, how.lane_reach)
+        horizons = np.full(len(starts), steps)
+        paths = policy.generate(starts, horizons, 1, stream, how.lane_reach, goals)
         return list(paths)
 
-    def calibrate(self, tracks: Sequence[Track], how: ScoreSettings | None = None) -> None:
-        """Score the training tracks every way; `threshold` and `both` read these."""
-        how = how or self.how
-        parts = self.score(tracks, replace(how, score="rollout"), also=("step", "lane")).parts
-        cal = {k: [round(float(v), 2) for v in parts[k]] for k in ("rollout", "step", "lane")}
+    def traffic_of(
+        self, positions: Sequence[np.ndarray], count: int, how: ScoreSettings
+    ) -> list[np.ndarray]:
+        """Per track, which of the `count` traffic rollouts join its lane: all of them, or for a
+        goal-conditioned model those of training tracks bound the same way (module docstring)."""
+        if not count or not self.card.lane_config.goal or self.end_points is None:
+            return [np.arange(count)] * len(positions)
+        starts, ends = self.start_points, self.end_points
+        reach = how.near_km * 1000.0
+        out = []
+        for p in positions:
+            d0 = haversine_m(p[0, 0], p[0, 1], starts[:, 0], starts[:, 1])
+            d1 = haversine_m(p[-1, 0], p[-1, 1], ends[:, 0], ends[:, 1])
+            out.append(np.nonzero(np.maximum(d0, d1) <= reach)[0])
+        return out
+
+    def od_scores(self, positions: Sequence[np.ndarray]) -> np.ndarray:
+        """Each track's origin-destination distance to the training tracks (`od_distances`)."""
+        ends = self.end_points
+        if ends is None:
+            raise UserError(
+                f"model {self.name} does not record where its training tracks end (a card from "
+                "before 0.2.0): retrain it for --score area"
+            )
+        starts = np.array([p[0] for p in positions])
+        return od_distances(starts, np.array([p[-1] for p in positions]), self.start_points, ends)
+
+    def calibration_of(self, key: str) -> np.ndarray:
+        values = self.card.calibration.get(key)
+        if not values:
+            raise UserError(f"model {self.name} has no {key} calibration scores: retrain it")
+        return np.asarray(values, np.float64)
+
+    def calibrate(
+        self,
+        tracks: Sequence[Track],
+        how: ScoreSettings | None = None,
+        folds: np.ndarray | None = None,
+    ) -> None:
+        """Score the training tracks every way; `threshold`, `both` and `area` read these.
+        With `folds` (cross-fitting), the tracks of fold m are scored by member m alone, which
+        did not train on them; without, by the whole model that did."""
+        how = replace(how or self.how, score="rollout")
+        kinds = ("rollout", "step", "lane")
+        if folds is None:
+            parts = self.score_with(self.policy(), tracks, how, kinds[1:]).parts
+        else:
+            parts = {k: np.empty(len(tracks)) for k in kinds}
+            for m in np.unique(folds):
+                rows = np.nonzero(folds == m)[0]
+                got = self.score_with(self.policy(int(m)), [tracks[i] for i in rows], how, kinds)
+                for k in kinds:
+                    parts[k][rows] = got.parts[k]
+        cal = {k: [round(float(v), 2) for v in parts[k]] for k in kinds}
         both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
-        self.card.calibration = {**cal, "both": [round(float(v), 4) for v in both]}
+        cal["both"] = [round(float(v), 4) for v in both]
+        if self.end_points is not None:
+            ends = np.array([t.positions[-1] for t in tracks])
+            starts = np.array([t.positions[0] for t in tracks])
+            od = od_distances(starts, ends, starts, ends, leave_one_out=True)
+            area = np.asarray(cal["lane"]) + od_excess(od, od)
+            cal["od"] = [round(float(v), 2) for v in od]
+            cal["area"] = [round(float(v), 2) for v in area]
+        self.card.calibration = cal
         self.card.calibrated_with = how.calibrated_with()
 
 

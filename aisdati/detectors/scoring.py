@@ -11,7 +11,7 @@ import numpy as np
 
 from aisdati.ais.card import CalibratedWith
 
-SCORES = ("rollout", "step", "lane", "both")
+SCORES = ("rollout", "step", "lane", "both", "area")
 
 
 def tail_mean(values: np.ndarray, fraction: float) -> float:
@@ -24,8 +24,8 @@ def tail_mean(values: np.ndarray, fraction: float) -> float:
 @dataclass(frozen=True, kw_only=True)
 class ScoreSettings:
     score: str = "lane"
-    """lane, rollout (the paper's), step (teacher-forced) or both; see
-    `aisdati.ais.policy`."""
+    """lane, rollout (the paper's), step (teacher-forced), both, or area (lane plus the
+    origin-destination term, `aisdati.detectors.od`); see `aisdati.ais.policy`."""
     rollouts: int = 10
     """K: free rollouts per track (the rollout score is the best of K), and one-step draws
     per report."""

@@ -1,5 +1,7 @@
-"""The evaluation's data set: a seeded split of one group's tracks by vessel, anomalies written
-into half of the held-out tracks, all saved in ingest's own schema (points.parquet,
+"""The evaluation's data set: a seeded split of one group's tracks by vessel (or by time: the
+tracks that start before a date train, the later ones are judged, as an analyst uses a model
+month after month), anomalies written into a share of the held-out tracks (half by default), all
+saved in ingest's own schema (points.parquet,
 tracks.parquet) with `labels.csv` beside them, so `aisdati train` and `aisdati detect` read it
 like any ingest output."""
 
@@ -71,6 +73,16 @@ def _sog_cog(pos: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return sog.astype(np.float32), (cog % 360.0).astype(np.float32)
 
 
+def split_by_time(table: pd.DataFrame, before: pd.Timestamp) -> tuple[list[int], list[int]]:
+    """Tracks that start before `before` train, the others are judged (the same vessels may
+    sail on both sides, as they do month after month)."""
+    early = pd.to_datetime(table["start"], utc=True) < before
+    return (
+        sorted(int(i) for i in table.loc[early, "track_id"]),
+        sorted(int(i) for i in table.loc[~early, "track_id"]),
+    )
+
+
 def build(
     data_dir: Path,
     cluster: str,
@@ -80,25 +92,35 @@ def build(
     train_fraction: float = 0.6,
     seed: int = 0,
     train_ids: list[int] | None = None,
+    before: pd.Timestamp | None = None,
+    altered: float = 0.5,
 ) -> Split:
-    """Split, inject and write the evaluation data set to `out`; see the module docstring."""
+    """Split, inject and write the evaluation data set to `out`; see the module docstring.
+    `before`: split by time instead of by vessel; `altered`: the share of the held-out tracks
+    that take an anomaly."""
     table = select_cluster(read_track_table(data_dir), cluster, data_dir)
     table = table[table["n_points"] >= MIN_POINTS]
-    if train_ids is None:
+    if before is not None:
+        train, held = split_by_time(table, before)
+        if train_ids is not None:  # the models' own training tracks, whatever their dates
+            train = sorted(set(train_ids) & set(table["track_id"]))
+            held = sorted(set(held) - set(train))
+    elif train_ids is None:
         train, held = split_by_vessel(table, train_fraction, seed)
     else:
         train = sorted(set(train_ids) & set(table["track_id"]))
         vessels = set(table.loc[table["track_id"].isin(train), "mmsi"])
         held = sorted(int(i) for i in table.loc[~table["mmsi"].isin(vessels), "track_id"])
     if len(train) < MIN_SPLIT or len(held) < 2 * MIN_SPLIT:
+        sides = "before and from the date" if before is not None else "from different vessels"
         raise UserError(
             f"cluster {cluster!r} has {len(table)} tracks of at least {MIN_POINTS} reports "
             f"({len(train)} for training, {len(held)} held out); evaluate needs at least "
-            f"{MIN_SPLIT} for training and {2 * MIN_SPLIT} held out (from different vessels)"
+            f"{MIN_SPLIT} for training and {2 * MIN_SPLIT} held out ({sides})"
         )
     rng = np.random.default_rng([seed, 1])
     order = [held[i] for i in rng.permutation(len(held))]
-    altered = order[: len(held) // 2]
+    altered = order[: max(1, round(len(held) * altered))]
     assign = {tid: kinds[k % len(kinds)] for k, tid in enumerate(altered)}
     points = pq.read_table(
         data_dir / "points.parquet", filters=[("track_id", "in", train + held)]

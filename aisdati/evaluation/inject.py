@@ -53,6 +53,8 @@ LIMITS: dict[str, Range] = {
     "fraction": (0.0, 1.0),
 }
 """The allowed interval of each parameter."""
+SCALED = ("km", "radius_km")
+"""The parameters an anomaly's strength multiplies (`with_strength`): how far it strays."""
 MIN_POINTS = 10
 """A track needs this many reports to take an anomaly."""
 
@@ -63,6 +65,21 @@ class Injected:
     times_s: np.ndarray
     stretch: tuple[int, int]
     """[start, end) indices of the altered reports in the new track."""
+
+
+def with_strength(params: dict, strength: float) -> dict:
+    """`params` (KIND -> NAME -> range overrides) with every distance range (`SCALED`) of every
+    kind multiplied by `strength`: 0.3 writes anomalies at 0.3x their usual size (the subtle
+    tier)."""
+    if not 0.0 < strength <= 10.0:
+        raise UserError(f"--strength must be in (0, 10], got {strength:g}")
+    out = {kind: dict(values) for kind, values in params.items()}
+    for kind, defaults in DEFAULTS.items():
+        for name in SCALED:
+            if name in defaults:
+                lo, hi = out.get(kind, {}).get(name, defaults[name])
+                out.setdefault(kind, {})[name] = (lo * strength, hi * strength)
+    return out
 
 
 def _draw(rng: np.random.Generator, r: Range) -> float:

@@ -29,13 +29,21 @@ def ranking(y: np.ndarray, score: np.ndarray) -> dict[str, float | None]:
 
 
 def flagging(y: np.ndarray, flagged: np.ndarray) -> dict[str, Any]:
-    """Precision, recall and F1 of the anomaly class for a set of flags."""
+    """Precision, recall and F1 of the anomaly class for a set of flags, and the false-alarm
+    rate: the share of the normal tracks flagged (what a calibrated threshold promises)."""
     y, p = np.asarray(y, bool), np.asarray(flagged, bool)
     tp = int((y & p).sum())
     precision = tp / max(int(p.sum()), 1)
     recall = tp / max(int(y.sum()), 1)
     f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
-    return {"flagged": int(p.sum()), "precision": precision, "recall": recall, "f1": f1}
+    false_alarms = int((~y & p).sum()) / max(int((~y).sum()), 1)
+    return {
+        "flagged": int(p.sum()),
+        "precision": precision,
+        "recall": recall,
+        "f1": f1,
+        "false_alarm_rate": false_alarms,
+    }
 
 
 def weighted_f1(y: np.ndarray, flagged: np.ndarray) -> float:

@@ -1,8 +1,11 @@
 """`aisdati evaluate`: a detection benchmark on the user's own ingested data.
 
-1. Split one cluster's (or route's) tracks by vessel into training and held-out sets (seeded),
-   or take the training set from existing model cards (`models_dir`).
-2. Write anomalies of the chosen kinds into a seeded half of the held-out tracks
+1. Split one cluster's (or route's, or the whole area's: `all`) tracks by vessel into training
+   and held-out sets (seeded), or by time (`split="time"`: the tracks that start before
+   `before` train, every later one is judged: the forward protocol), or take the training set
+   from existing model cards (`models_dir`).
+2. Write anomalies of the chosen kinds (at `strength` x their usual distances) into a seeded
+   share (`altered`, half by default) of the held-out tracks
    (`aisdati.evaluation.inject`); save everything in ingest's schema under `<out>/data`.
 3. Train every detector asked for on the training tracks (`<out>/models`), or load it.
 4. Score the held-out tracks and report, per detector, score and anomaly kind: ROC AUC, average
@@ -32,9 +35,11 @@ from aisdati.detection.run import score_settings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
+from aisdati.evaluation.inject import parse_params, with_strength
 from aisdati.evaluation.metrics import flagging, ranking
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
+SPLITS = ("vessel", "time")
 POSITION_KINDS = ("detour", "jump", "loiter")
 """The summary row the README's targets use: anomalies a position-only score can see."""
 
@@ -60,6 +65,17 @@ class EvaluateSettings:
     models_dir: Path | None = None
     preset: str = DEFAULT_PRESET
     lane: LaneConfig = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
+    split: str = "vessel"
+    """vessel (held-out vessels, seeded) or time (tracks from `before` on are judged)."""
+    before: pd.Timestamp | None = None
+    altered: float = 0.5
+    """Share of the held-out tracks that take an anomaly."""
+    strength: float = 1.0
+    """Anomaly distances x this (`aisdati.evaluation.inject.with_strength`; 0.3: subtle)."""
+
+    @property
+    def anomaly_params(self) -> dict[str, Any]:
+        return with_strength(self.params or parse_params(None), self.strength)
 
 
 @dataclass
@@ -85,6 +101,13 @@ def check(settings: EvaluateSettings) -> None:
         raise UserError("--rollouts, --lane-rollouts and --episodes must be at least 1")
     if not np.isfinite(settings.near_km) or settings.near_km <= 0:
         raise UserError(f"--near-km must be a positive number, got {settings.near_km:g}")
+    if settings.split not in SPLITS:
+        raise UserError(f"--split must be one of {', '.join(SPLITS)}, got {settings.split!r}")
+    if (settings.split == "time") != (settings.before is not None):
+        raise UserError("--split time needs --before DATE (and --before needs --split time)")
+    if not 0.05 <= settings.altered <= 0.95:
+        raise UserError(f"--altered must be in [0.05, 0.95], got {settings.altered:g}")
+    with_strength({}, settings.strength)  # a --strength out of range fails here
 
 
 def _existing(settings: EvaluateSettings) -> dict[str, Detector]:
@@ -165,10 +188,12 @@ def _prepare(settings: EvaluateSettings) -> _Prepared:
         settings.cluster,
         settings.out_dir / "data",
         settings.kinds,
-        settings.params,
+        settings.anomaly_params,
         settings.train_fraction,
         settings.seed,
         train_ids,
+        settings.before,
+        settings.altered,
     )
     return _Prepared(settings, split, existing)
 
@@ -219,7 +244,7 @@ def _score(
         det = detectors[method]
         t1 = time.perf_counter()
         say(f"scoring {settings.cluster} with {method}")
-        kinds = ["nearest", "lane"] if method == "nearest" else ["rollout", "step", "lane", "both"]
+        kinds = scored_kinds(det)
         scored = det.score(heldout, how, also=kinds)
         timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
         for kind in kinds:
@@ -237,6 +262,15 @@ def _score(
     scores = pd.DataFrame(score_rows, columns=columns)
     result.scores = scores.merge(split.labels, on="track_id", how="left")
     return result
+
+
+def scored_kinds(det: Detector) -> list[str]:
+    """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
+    four, and `od` and `area` where its card records where its training tracks end."""
+    if det.method == "nearest":
+        return ["nearest", "lane"]
+    od = ["od", "area"] if det.end_points is not None else []
+    return ["rollout", "step", "lane", "both", *od]
 
 
 ALL_ROUTES = "routes"

@@ -19,6 +19,8 @@ ROUTE_PREFIX = "route-"
 """Route clusters are named route-1, route-2, ... by size (tracks.parquet's `route`)."""
 UNROUTED = "unrouted"
 """The name of the tracks that fit no route (`route` is null)."""
+AREA = "all"
+"""Every track of the ingest: the tracks an area model learns and judges."""
 
 UTC_US = pa.timestamp("us", tz="UTC")
 POINTS_SCHEMA = pa.schema(

@@ -20,7 +20,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from aisdati.errors import UserError
-from aisdati.tracks.schema import CLUSTERS, ROUTE_PREFIX, TRACK_COLUMNS, UNROUTED
+from aisdati.tracks.schema import AREA, CLUSTERS, ROUTE_PREFIX, TRACK_COLUMNS, UNROUTED
 
 MIN_ROUTE_TRACKS = 5
 """Fewest tracks a route needs to be trained on (ingest's default --route-min-tracks, so every
@@ -95,7 +95,7 @@ def cluster_counts(table: pd.DataFrame) -> str:
 
 def is_track_set(name: str) -> bool:
     """Whether `name` has the form of a cluster, route or `unrouted` (not whether it exists)."""
-    if name in CLUSTERS or name == UNROUTED:
+    if name in CLUSTERS or name in (UNROUTED, AREA):
         return True
     rest = name[len(ROUTE_PREFIX) :]
     return name.startswith(ROUTE_PREFIX) and rest.isdigit() and not rest.startswith("0")
@@ -104,7 +104,8 @@ def is_track_set(name: str) -> bool:
 def select_cluster(
     table: pd.DataFrame, cluster: str, data_dir: Path, needed: int | None = None
 ) -> pd.DataFrame:
-    """The tracks of a cluster (`up`, `down`, `other`), a route (`route-<n>`) or `unrouted`.
+    """The tracks of a cluster (`up`, `down`, `other`), a route (`route-<n>`), `unrouted`, or
+    every track of the area (`all`).
     Unknown names, empty selections and routes with fewer than `needed` tracks (default:
     `MIN_ROUTE_TRACKS` for a route, 1 otherwise) raise a one-line `UserError` that lists what
     the table holds."""
@@ -112,10 +113,12 @@ def select_cluster(
         table = table.assign(route=None)
     if not is_track_set(cluster):
         raise UserError(
-            f"unknown cluster {cluster!r}; choose from {', '.join(CLUSTERS)}, route-<n> or "
-            f"{UNROUTED} ({data_dir} has {cluster_counts(table)})"
+            f"unknown cluster {cluster!r}; choose from {', '.join(CLUSTERS)}, route-<n>, "
+            f"{UNROUTED} or {AREA} ({data_dir} has {cluster_counts(table)})"
         )
-    if cluster in CLUSTERS:
+    if cluster == AREA:
+        chosen = table
+    elif cluster in CLUSTERS:
         chosen = table[table["cluster"] == cluster]
     elif cluster == UNROUTED:
         chosen = table[table["route"].isna()]

@@ -1,0 +1,55 @@
+"""How unusual a track's (origin, destination) pair is among the training tracks.
+
+A goal-conditioned model (`LaneConfig.goal`) generates, from a track's start, tracks bound for
+that track's own end: it judges *how* a track sails to where it goes, not *whether* anybody goes
+there. A track that starts and ends where no training track does must still stand out, so the
+`area` score adds the origin-destination (OD) distance: for each track, over the training tracks,
+the smallest of max(distance between the starts, distance between the ends), in metres. The
+training tracks' own OD distances (each against the others) calibrate it; a track's OD counts
+only beyond `OD_QUANTILE` of them (`od_excess`), so the OD spread of ordinary traffic adds
+nothing to the lane score and a pair rarer than almost all the training tracks' adds its excess
+in metres (`area = lane + od_excess`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aisdati.geo import haversine_m
+
+OD_QUANTILE = 0.95
+"""A track's OD distance adds to its score beyond this quantile of the training tracks' own: a
+pair as usual as 95 % of the training tracks' costs nothing. Fixed, not tuned: it states
+"rarer than nearly all of what was seen" without reference to any data set."""
+CHUNK = 512
+
+
+def od_distances(
+    starts: np.ndarray,
+    ends: np.ndarray,
+    train_starts: np.ndarray,
+    train_ends: np.ndarray,
+    leave_one_out: bool = False,
+) -> np.ndarray:
+    """[N] metres: each (start, end) pair's distance to the nearest training pair, a pair's
+    distance being the larger of its starts' and its ends' great-circle distances.
+    `leave_one_out`: the queries are the training tracks themselves, each compared with the
+    others (calibration)."""
+    starts, ends = np.asarray(starts, np.float64), np.asarray(ends, np.float64)
+    out = np.empty(len(starts))
+    for lo in range(0, len(starts), CHUNK):
+        s, e = starts[lo : lo + CHUNK], ends[lo : lo + CHUNK]
+        d_start = haversine_m(s[:, None, 0], s[:, None, 1], train_starts[:, 0], train_starts[:, 1])
+        d_end = haversine_m(e[:, None, 0], e[:, None, 1], train_ends[:, 0], train_ends[:, 1])
+        pair = np.maximum(d_start, d_end)
+        if leave_one_out:
+            rows = np.arange(len(s))
+            pair[rows, lo + rows] = np.inf
+        out[lo : lo + CHUNK] = pair.min(axis=1) if pair.shape[1] else np.inf
+    return out
+
+
+def od_excess(od_m: np.ndarray, calibration_od_m: np.ndarray) -> np.ndarray:
+    """The part of each OD distance beyond `OD_QUANTILE` of the training tracks' own."""
+    free = float(np.quantile(np.asarray(calibration_od_m, np.float64), OD_QUANTILE))
+    return np.maximum(np.asarray(od_m, np.float64) - free, 0.0)

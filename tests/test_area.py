@@ -1,0 +1,210 @@
+"""A model of a whole area, judged forward in time (issue 26), on the real Kitimat tracks: July
+trains, August is judged. Every track is judged or listed with its reason; the area DATI model
+is bound for each track's own destination; the origin-destination term sees a track that starts
+and ends where no training track does; the threshold is calibrated on tracks the member that
+scores them did not fit."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from aisdati.ais.card import DataCard
+from aisdati.ais.space import PRESETS, AISSpace
+from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, crossfit_folds
+from aisdati.detection.outputs import report_dict
+from aisdati.detection.run import NOT_JUDGED_FAR, DetectSettings, detect
+from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors.dati import DATIDetector
+from aisdati.detectors.nearest import NearestDetector
+from aisdati.detectors.od import OD_QUANTILE, od_distances, od_excess
+from aisdati.tracks.store import Track, load_tracks, read_track_table
+
+AUGUST = pd.Timestamp("2018-08-01", tz="UTC")
+HOW = ScoreSettings(rollouts=2, lane_rollouts=4)
+"""Few rollouts: the tests check what judges a track and how, not how well."""
+
+
+@pytest.fixture(scope="module")
+def months(kitimat) -> tuple[list[Track], list[Track], pd.DataFrame]:
+    """July's tracks (training), August's (judged) and the track table."""
+    table = read_track_table(kitimat)
+    july = table["start"] < AUGUST
+    ids = lambda mask: [int(i) for i in table.loc[mask, "track_id"]]  # noqa: E731
+    return load_tracks(kitimat, ids(july)), load_tracks(kitimat, ids(~july)), table
+
+
+def area_lane():
+    """The area preset, small enough for a test."""
+    return replace(PRESETS["area"], members=2, pretrain=3, validation_tracks=2, goal=True,
+                   validation_rollouts=1)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def lane_tracks(months) -> list[Track]:
+    """16 July tracks of the busiest lane, 8 each way (route-1 and route-2)."""
+    return [t for r in ("route-1", "route-2") for t in months[0] if t.route == r][::3][:16]
+
+
+@pytest.fixture(scope="module")
+def area_dati(lane_tracks) -> DATIDetector:
+    """An area DATI model of both directions of the busiest lane, one episode: enough to check
+    the mechanism, not the quality (benchmarks measure that)."""
+    july = lane_tracks
+    settings = TrainSettings(cluster="all", episodes=1, lane=area_lane(), preset="area")
+    return DATIDetector(settings, HOW).fit(july)
+
+
+def save_nearest(tracks: list[Track], cluster: str, models) -> None:
+    det = NearestDetector(TrainSettings(cluster=cluster), HOW).fit(tracks)
+    det.save(models / det.name)
+
+
+def test_every_track_is_judged_by_the_area_model_or_listed_with_its_reason(
+    months, kitimat, tmp_path
+):
+    july, august, table = months
+    route1 = set(table.loc[table["route"] == "route-1", "track_id"])
+    models = tmp_path / "models"
+    models.mkdir()
+    save_nearest([t for t in july if t.track_id in route1], "route-1", models)
+    settings = DetectSettings(data_dir=kitimat, models_dir=models, out_dir=tmp_path / "out",
+                              method="nearest", cluster="all", contamination=0.05)  # fmt: skip
+    alone = detect(settings)
+    cov = alone.coverage
+    assert cov.candidates == len(table)
+    not_judged = sum(len(v) for v in cov.not_judged.values())
+    assert cov.judged + not_judged == cov.candidates  # no track unaccounted for
+    assert cov.judged_by == {"route-1-nearest": cov.judged} and len(alone.scores) == cov.judged
+    far = cov.not_judged[NOT_JUDGED_FAR]
+    assert {t.track_id for t in august} & set(far)  # August tracks bound elsewhere are listed
+    # with an area model beside it, every later track the route model does not reach is
+    # judged by the area model (July's are its training tracks: counted, with that reason)
+    save_nearest(july, "all", models)
+    both = detect(settings)
+    assert NOT_JUDGED_FAR not in both.coverage.not_judged
+    later = {t.track_id for t in august}
+    by = both.scores.set_index("track_id")["model"]
+    assert later <= set(by.index)  # every later track has a score
+    assert set(by[sorted(later & set(far))]) == {"all-nearest"}
+    report = report_dict(alone)
+    assert str(far[0]) in json.dumps(report["coverage"])  # report.json names them
+    cut = report["thresholds"]["route-1-nearest"]
+    lo, hi = cut["spread_5_95"]
+    assert lo <= cut["threshold"] <= hi and lo < hi  # the calibration's bootstrap spread
+
+
+def test_a_route_model_judges_only_tracks_bound_as_its_own(months, kitimat, tmp_path):
+    """A track that starts at a route's entry but ends elsewhere goes to the area model."""
+    july, august, table = months
+    route1 = set(table.loc[table["route"] == "route-1", "track_id"])
+    mine = [t for t in july if t.track_id in route1]
+    models = tmp_path / "models"
+    models.mkdir()
+    save_nearest(mine, "route-1", models)
+    save_nearest(july, "all", models)
+    settings = DetectSettings(data_dir=kitimat, models_dir=models, out_dir=tmp_path / "out",
+                              method="nearest", cluster="all")  # fmt: skip
+    by = detect(settings).scores.set_index("track_id")["model"]
+    starts = np.array([t.positions[0] for t in mine])
+    ends = np.array([t.positions[-1] for t in mine])
+    elsewhere = 0
+    for t in august:
+        start_km = od_distances(t.positions[:1], t.positions[:1], starts, starts)[0] / 1000
+        od_km = od_distances(t.positions[:1], t.positions[-1:], starts, ends)[0] / 1000
+        if start_km < settings.near_km < od_km:  # the route's entry, another destination
+            elsewhere += 1
+            assert by[t.track_id] == "all-nearest"
+        elif od_km <= settings.near_km:
+            assert by[t.track_id] == "route-1-nearest"
+    assert elsewhere  # August holds such tracks
+
+
+def test_the_od_term_flags_a_real_track_moved_to_start_and_end_where_no_one_does(
+    area_dati, lane_tracks
+):
+    track = lane_tracks[0]
+    n = len(track.positions)
+    middle = replace(track, positions=track.positions[n // 3 : 2 * n // 3],
+                     dts=track.dts[n // 3 : 2 * n // 3 - 1])  # fmt: skip
+    how = replace(HOW, score="area")
+    got = area_dati.score([track, middle], how, also=("lane", "od"))
+    cal_od = np.asarray(area_dati.card.calibration["od"])
+    assert got.parts["od"][0] == 0.0  # a training track's own pair
+    assert got.parts["od"][1] > np.quantile(cal_od, OD_QUANTILE) + 5000  # mid-channel ends
+    excess = od_excess(got.parts["od"], cal_od)
+    assert np.allclose(got.parts["area"], got.parts["lane"] + excess)
+    # the slice lies on its own track's lane: the OD term is what ranks it above that track
+    assert got.parts["area"][1] - got.parts["lane"][1] > 5000
+    assert got.parts["area"][1] > got.parts["area"][0]
+
+
+def test_the_area_model_is_bound_for_each_tracks_destination(area_dati, lane_tracks):
+    """Same start, two goals: the rollouts go different ways; the state holds the goal."""
+    space = AISSpace.from_card(area_dati.card, area_dati.corridor)
+    assert area_dati.card.lane_config.goal and space.state_dim == area_dati.nets.state_dim
+    up, down = lane_tracks[0], lane_tracks[-1]
+    policy = area_dati.policy()
+    start = np.array([up.positions[0], up.positions[0]])
+    goals = np.array([up.positions[-1], down.positions[-1]])
+    paths = policy.generate(start, np.array([50, 50]), 1, 0, 1.0, goals)
+    assert not np.allclose(paths[0], paths[1])
+    with pytest.raises(ValueError, match="goal"):
+        space.features(start, start, np.zeros(2))
+
+
+def test_cross_fitting_calibrates_each_track_with_a_member_that_did_not_train_on_it(
+    area_dati, lane_tracks
+):
+    july = lane_tracks
+    folds = crossfit_folds(july, 2, area_dati.card.seed)
+    mmsi = np.array([t.mmsi for t in july])
+    for v in np.unique(mmsi):  # a vessel's tracks are in one fold
+        assert len(set(folds[mmsi == v])) == 1
+    settings = TrainSettings(cluster="all", episodes=1, lane=area_lane())
+    run = EnsembleRun([LaneRoute(settings, list(july), DataCard.of_tracks(july))])
+    for m, env in enumerate(run.envs):
+        seen = {r.label["track_id"] for r in env.source.references}
+        held = {t.track_id for t, f in zip(july, folds, strict=True) if f == m}
+        assert held and not seen & held and seen | held == {t.track_id for t in july}
+    cal = area_dati.card.calibration
+    assert len(cal["area"]) == len(cal["lane"]) == len(july)
+    # a model trained before end points were recorded still loads, without the OD term
+    assert area_dati.end_points is not None
+
+
+def test_old_cards_without_end_points_still_load_and_refuse_the_area_score(
+    area_dati, tmp_path
+):
+    area_dati.save(tmp_path / "all")
+    card = json.loads((tmp_path / "all.json").read_text())
+    card["data"].pop("end_points")
+    card["lane_config"].pop("goal")  # a card from before the goal: the position-only state
+    card["lane_config"].pop("crossfit")
+    (tmp_path / "old.json").write_text(json.dumps(card))
+    for suffix in (".pt", ".corridor.npz"):
+        (tmp_path / f"old{suffix}").write_bytes((tmp_path / f"all{suffix}").read_bytes())
+    with pytest.raises(Exception, match="state_dim"):  # weights of a goal model, old card
+        load_detector(tmp_path / "old")
+
+
+def test_evaluate_splits_by_time_and_judges_every_later_track(cli, kitimat, tmp_path):
+    out = tmp_path / "ev"
+    r = cli("evaluate", "--data", kitimat, "--cluster", "all", "--split", "time", "--before",
+            "2018-08-01", "--detectors", "nearest", "--kinds", "detour,jump,loiter",
+            "--altered", "0.3", "--strength", "0.3", "--out", out, "-q")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    doc = json.loads((out / "evaluation.json").read_text())
+    table = read_track_table(kitimat)
+    later = int((table["start"] >= AUGUST).sum())
+    assert doc["split"]["heldout_tracks"] == later
+    assert doc["split"]["injected"] == round(later * 0.3)
+    assert doc["split"]["training_tracks"] == len(table) - later
+    row = next(x for x in doc["results"] if x["kind"] == "all" and x["score"] == "lane")
+    assert 0.0 <= row["false_alarm_rate"] <= 1.0 and row["roc_auc"] is not None
+    bad = cli("evaluate", "--data", kitimat, "--cluster", "all", "--split", "time", "-q")
+    assert bad.exit_code == 2 and "--before" in bad.output
