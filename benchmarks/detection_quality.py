@@ -126,7 +126,7 @@ def forward(args: argparse.Namespace) -> None:
           "--contamination 0.05 (mean ± sd over seeds)")  # fmt: skip
     print("| area | detector | score | ROC AUC | avg precision | normal flagged | anomalies "
           "flagged | " + " | ".join(f"AUC {k}" for k in kinds) + " | training s |")  # fmt: skip
-    print("|---" * (9 + len(kinds)) + "|")
+    print("|---" * (8 + len(kinds)) + "|")
     for area in areas:
         docs = [run_forward(area, seed, args) for seed in seeds]
         keys = [(r["detector"], r["score"]) for r in docs[0]["results"] if r["kind"] == "all"]

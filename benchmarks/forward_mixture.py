@@ -12,6 +12,7 @@ of normal tracks and of anomalies flagged, AUC per kind, and the routes' trainin
 
 Run: python benchmarks/forward_mixture.py RUN --before DATE [--episodes 30] [--score lane]
      [--method nearest]   # the same mixture of nearest-track models (the baseline)
+     [--area-models DIR]  # a run made with `evaluate --models DIR` (e.g. --strength 0.3)
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=30)
     ap.add_argument("--score", default="lane")
     ap.add_argument("--method", default="dati", choices=("dati", "nearest"))
+    ap.add_argument("--area-models", type=Path, help="where the area model is (default RUN/models)")
     args = ap.parse_args()
     before = pd.Timestamp(args.before, tz="UTC")
     past = args.run / "mixture" / "past"
@@ -64,7 +66,7 @@ def main() -> None:
                "--method", args.method, "-q"]  # fmt: skip
         subprocess.run(cmd, check=True)
     train_s = time.perf_counter() - t0
-    for f in (args.run / "models").glob(f"{area}.*"):
+    for f in (args.area_models or args.run / "models").glob(f"{area}.*"):
         shutil.copy2(f, models / f.name)
     settings = DetectSettings(
         data_dir=args.run / "data", models_dir=models, out_dir=args.run / "mixture" / "report",
