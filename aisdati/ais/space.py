@@ -58,7 +58,7 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -137,27 +137,19 @@ class LaneConfig:
         return cls(**(data or {}))
 
 
+LANES = LaneConfig(
+    validation=True,
+    region="corridor",
+    ranges="quantile",
+    noise="ou",
+    fourier=6,
+    pretrain=50,
+    members=3,
+)
 PRESETS: dict[str, LaneConfig] = {
     "paper": LaneConfig(),
-    DEFAULT_PRESET: LaneConfig(
-        validation=True,
-        region="corridor",
-        ranges="quantile",
-        noise="ou",
-        fourier=6,
-        pretrain=50,
-        members=3,
-    ),
-    AREA_PRESET: LaneConfig(
-        validation=True,
-        region="corridor",
-        ranges="quantile",
-        noise="ou",
-        fourier=6,
-        pretrain=50,
-        members=3,
-        crossfit=True,
-    ),
+    DEFAULT_PRESET: LANES,
+    AREA_PRESET: replace(LANES, crossfit=True),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
 combination that measured best with `aisdati evaluate` on one route (docs/results); `area` is
