@@ -13,23 +13,9 @@ from pathlib import Path
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from typer.testing import CliRunner
-
-from aisdati.cli import app
+from cli_checks import one_line_error, run
 
 NY_HOUR = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
-
-
-def run(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def one_line_error(result, needle: str) -> None:
-    assert result.exit_code == 2, result.output
-    assert "Traceback" not in result.output
-    assert result.stderr.startswith("error:"), result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert re.search(needle, " ".join(result.stderr.split())), result.stderr
 
 
 @pytest.fixture(scope="module")

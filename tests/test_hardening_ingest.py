@@ -13,6 +13,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from cli_checks import one_line_error
 
 NY_HOUR = "NYHarbor_2020_06_30_first_hour.csv"
 NY_ROWS = 8689
@@ -23,15 +24,6 @@ def ingest(cli, out: Path, *inputs, extra=SETTINGS):
     args = ["ingest", *[a for i in inputs for a in ("--input", i)], "--out", out, *extra]
     result = cli(*args, "--json")
     return result, (json.loads(result.stdout) if result.exit_code == 0 else None)
-
-
-def one_line_error(result, needle: str) -> None:
-    """Exit 2, one red line naming the problem, no traceback."""
-    assert result.exit_code == 2, result.output
-    assert "Traceback" not in result.output
-    assert result.stderr.startswith("error:"), result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert re.search(needle, " ".join(result.stderr.split())), result.stderr
 
 
 def leftovers(folder: Path) -> list[str]:

@@ -16,27 +16,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from typer.testing import CliRunner
+from cli_checks import one_line_error, run
 
 from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings, train_ais
-from aisdati.cli import app
 
 NY_HOUR = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 RESUME_LANE = ("fourier=0", "pretrain=0", "members=1")
 """The checkpoint's lane settings (small and fast); a run without them has the preset's."""
-
-
-def run(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def one_line_error(result, needle: str) -> None:
-    assert result.exit_code == 2, result.output
-    assert "Traceback" not in result.output
-    assert result.stderr.startswith("error:"), result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert re.search(needle, " ".join(result.stderr.split())), result.stderr
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,6 @@ from __future__ import annotations
 import errno
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -19,9 +18,8 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from typer.testing import CliRunner
+from cli_checks import one_line_error, run
 
-from aisdati.cli import app
 from aisdati.outdir import hold_lock
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -75,10 +73,6 @@ app()
 """
 
 
-def run(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
 def hooked(mode: str, name: str, action: str, *args) -> subprocess.Popen:
     """The real command line in its own process, which does `action` (a signal's name, or
     pause) right after `mode` happens to `name` (see HOOK)."""
@@ -105,14 +99,6 @@ def snapshot(folder: Path) -> dict[str, bytes]:
     if not folder.exists():
         return {}
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
-
-
-def one_line_error(result, needle: str, code: int = 2) -> None:
-    assert result.exit_code == code, result.output
-    assert "Traceback" not in result.output
-    assert result.stderr.startswith("error:"), result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert re.search(needle, " ".join(result.stderr.split())), result.stderr
 
 
 def printed(result, text: str) -> bool:
