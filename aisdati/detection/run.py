@@ -36,7 +36,6 @@ import pandas as pd
 from aisdati.ais.card import training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
-from aisdati.detectors.od import od_distances
 from aisdati.errors import UserError
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
@@ -160,14 +159,9 @@ def is_area_model(model: Detector) -> bool:
 
 
 def reach_km(model: Detector, tracks: Sequence[Track]) -> np.ndarray:
-    """How far (km) each track is from being bound the way the model's training tracks are: the
-    origin-destination distance (`aisdati.detectors.od`) where the card records where its
-    tracks end, else (older cards) the distance between starts, the paper's rule."""
-    starts = np.array([t.positions[0] for t in tracks])
-    if model.end_points is None:
-        return od_distances(starts, starts, model.start_points, model.start_points) / 1000.0
-    ends = np.array([t.positions[-1] for t in tracks])
-    return od_distances(starts, ends, model.start_points, model.end_points) / 1000.0
+    """How far (km) each track is from being bound the way the model's training tracks are
+    (`Detector.od_m`: start and end, or start alone for older cards, the paper's rule)."""
+    return model.od_m([t.positions for t in tracks]) / 1000.0
 
 
 def route_test_tracks(
@@ -187,9 +181,11 @@ def route_test_tracks(
             reach[trained, m] = np.inf
             trained_any |= trained
     area = np.array([is_area_model(m) for m in models])
-    local = np.where(area[None, :] | (reach > settings.near_km), np.inf, reach)
-    if settings.track_ids:
-        local = reach
+    local = (
+        reach
+        if settings.track_ids
+        else np.where(area[None, :] | (reach > settings.near_km), np.inf, reach)
+    )
     owner = np.where(np.isfinite(local).any(axis=1), local.argmin(axis=1), -1)
     if area.any():
         spare = np.where(area[None, :], reach, np.inf)

@@ -25,6 +25,7 @@ import numpy as np
 from aisdati.ais.card import CalibratedWith, DataCard, ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.training import TrainSettings, check_settings
+from aisdati.detectors.od import od_distances
 from aisdati.detectors.registry import load_detector, register
 from aisdati.detectors.scoring import Scores, ScoreSettings
 from aisdati.errors import UserError
@@ -203,6 +204,16 @@ class Detector(ABC):
         """Where each training track ends; None in cards from before they were recorded."""
         ends = self.card.data.end_points
         return None if ends is None else np.asarray(ends, np.float64).reshape(-1, 2)
+
+    def od_m(self, positions: Sequence[np.ndarray]) -> np.ndarray:
+        """Each track's origin-destination distance (m) to the training tracks
+        (`aisdati.detectors.od`); for a card from before end points were recorded, the
+        distance between starts (the paper's rule for which model judges a track)."""
+        starts = np.array([p[0] for p in positions])
+        if self.end_points is None:
+            return od_distances(starts, starts, self.start_points, self.start_points)
+        ends = np.array([p[-1] for p in positions])
+        return od_distances(starts, ends, self.start_points, self.end_points)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -24,6 +24,19 @@ pair as usual as 95 % of the training tracks' costs nothing. Fixed, not tuned: i
 CHUNK = 512
 
 
+def od_pairs_m(
+    starts: np.ndarray, ends: np.ndarray, train_starts: np.ndarray, train_ends: np.ndarray
+) -> np.ndarray:
+    """[N, M] metres: the distance of each (start, end) pair to each training pair, the larger
+    of the two starts' and the two ends' great-circle distances."""
+    starts, ends = np.asarray(starts, np.float64), np.asarray(ends, np.float64)
+    d_start = haversine_m(
+        starts[:, None, 0], starts[:, None, 1], train_starts[:, 0], train_starts[:, 1]
+    )
+    d_end = haversine_m(ends[:, None, 0], ends[:, None, 1], train_ends[:, 0], train_ends[:, 1])
+    return np.maximum(d_start, d_end)
+
+
 def od_distances(
     starts: np.ndarray,
     ends: np.ndarray,
@@ -31,19 +44,14 @@ def od_distances(
     train_ends: np.ndarray,
     leave_one_out: bool = False,
 ) -> np.ndarray:
-    """[N] metres: each (start, end) pair's distance to the nearest training pair, a pair's
-    distance being the larger of its starts' and its ends' great-circle distances.
-    `leave_one_out`: the queries are the training tracks themselves, each compared with the
-    others (calibration)."""
-    starts, ends = np.asarray(starts, np.float64), np.asarray(ends, np.float64)
+    """[N] metres: each (start, end) pair's distance to the nearest training pair
+    (`od_pairs_m`), in chunks of `CHUNK` queries. `leave_one_out`: the queries are the training
+    tracks themselves, each compared with the others (calibration)."""
     out = np.empty(len(starts))
     for lo in range(0, len(starts), CHUNK):
-        s, e = starts[lo : lo + CHUNK], ends[lo : lo + CHUNK]
-        d_start = haversine_m(s[:, None, 0], s[:, None, 1], train_starts[:, 0], train_starts[:, 1])
-        d_end = haversine_m(e[:, None, 0], e[:, None, 1], train_ends[:, 0], train_ends[:, 1])
-        pair = np.maximum(d_start, d_end)
+        pair = od_pairs_m(starts[lo : lo + CHUNK], ends[lo : lo + CHUNK], train_starts, train_ends)
         if leave_one_out:
-            rows = np.arange(len(s))
+            rows = np.arange(len(pair))
             pair[rows, lo + rows] = np.inf
         out[lo : lo + CHUNK] = pair.min(axis=1) if pair.shape[1] else np.inf
     return out
@@ -53,3 +61,8 @@ def od_excess(od_m: np.ndarray, calibration_od_m: np.ndarray) -> np.ndarray:
     """The part of each OD distance beyond `OD_QUANTILE` of the training tracks' own."""
     free = float(np.quantile(np.asarray(calibration_od_m, np.float64), OD_QUANTILE))
     return np.maximum(np.asarray(od_m, np.float64) - free, 0.0)
+
+
+def area_scores(lane_m: np.ndarray, od_m: np.ndarray, calibration_od_m: np.ndarray) -> np.ndarray:
+    """The `area` score: the lane score plus the OD excess (module docstring)."""
+    return np.asarray(lane_m, np.float64) + od_excess(od_m, calibration_od_m)

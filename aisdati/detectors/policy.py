@@ -27,11 +27,11 @@ from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
-from aisdati.detectors.od import od_distances, od_excess
+from aisdati.detectors.od import area_scores, od_distances, od_pairs_m
 from aisdati.detectors.scoring import Scores, ScoreSettings, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
-from aisdati.geo import haversine_m, lane_distances
+from aisdati.geo import lane_distances
 from aisdati.tracks.store import Track
 
 
@@ -102,7 +102,7 @@ class PolicyDetector(Detector):
             parts["od"] = self.od_scores(positions)
             profiles["od"], evidence["od"] = profiles["lane"], evidence["lane"]
         if "area" in wanted:
-            parts["area"] = parts["lane"] + od_excess(parts["od"], self.calibration_of("od"))
+            parts["area"] = area_scores(parts["lane"], parts["od"], self.calibration_of("od"))
             profiles["area"], evidence["area"] = profiles["lane"], evidence["lane"]
         if "both" in wanted:
             cal = self.card.calibration
@@ -136,25 +136,20 @@ class PolicyDetector(Detector):
         goal-conditioned model those of training tracks bound the same way (module docstring)."""
         if not count or not self.card.lane_config.goal or self.end_points is None:
             return [np.arange(count)] * len(positions)
-        starts, ends = self.start_points, self.end_points
-        reach = how.near_km * 1000.0
-        out = []
-        for p in positions:
-            d0 = haversine_m(p[0, 0], p[0, 1], starts[:, 0], starts[:, 1])
-            d1 = haversine_m(p[-1, 0], p[-1, 1], ends[:, 0], ends[:, 1])
-            out.append(np.nonzero(np.maximum(d0, d1) <= reach)[0])
-        return out
+        starts = np.array([p[0] for p in positions])
+        ends = np.array([p[-1] for p in positions])
+        bound = od_pairs_m(starts, ends, self.start_points, self.end_points)
+        return [np.nonzero(row <= how.near_km * 1000.0)[0] for row in bound]
 
     def od_scores(self, positions: Sequence[np.ndarray]) -> np.ndarray:
-        """Each track's origin-destination distance to the training tracks (`od_distances`)."""
-        ends = self.end_points
-        if ends is None:
+        """Each track's origin-destination distance to the training tracks (`Detector.od_m`);
+        refused for a card that does not record where its tracks end."""
+        if self.end_points is None:
             raise UserError(
                 f"model {self.name} does not record where its training tracks end (a card from "
                 "before 0.2.0): retrain it for --score area"
             )
-        starts = np.array([p[0] for p in positions])
-        return od_distances(starts, np.array([p[-1] for p in positions]), self.start_points, ends)
+        return self.od_m(positions)
 
     def calibration_of(self, key: str) -> np.ndarray:
         values = self.card.calibration.get(key)
@@ -189,7 +184,7 @@ class PolicyDetector(Detector):
             ends = np.array([t.positions[-1] for t in tracks])
             starts = np.array([t.positions[0] for t in tracks])
             od = od_distances(starts, ends, starts, ends, leave_one_out=True)
-            area = np.asarray(cal["lane"]) + od_excess(od, od)
+            area = area_scores(cal["lane"], od, od)
             cal["od"] = [round(float(v), 2) for v in od]
             cal["area"] = [round(float(v), 2) for v in area]
         self.card.calibration = cal
