@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from cli_checks import one_line_error, run
+from hardening import card_edit, one_line_error, run
 
 NY_HOUR = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 
@@ -70,16 +70,6 @@ def test_the_card_stores_stable_track_keys(trained):
 
 
 # ---------------------------------------------------------------------------------- item 1
-def _set(path: str, value):
-    def edit(card):
-        node = card
-        *parents, last = path.split(".")
-        for p in parents:
-            node = node[p]
-        node[last] = value
-
-    return edit
-
 
 CARD_DAMAGE = [
     ("rule.max_sog_kn", -3, "rule.max_sog_kn must be a finite number in \\(0, 1000\\], got -3"),
@@ -108,7 +98,7 @@ CARD_DAMAGE = [
 
 @pytest.mark.parametrize("field, value, needle", CARD_DAMAGE, ids=[c[0] for c in CARD_DAMAGE])
 def test_a_damaged_card_is_refused_naming_the_field(trained, tmp_path, field, value, needle):
-    models = edited_models(trained, tmp_path, _set(field, value))
+    models = edited_models(trained, tmp_path, card_edit(field, value))
     result = detect(trained, models, tmp_path / "report")
     one_line_error(result, "model card .*down.json: " + needle)
     assert not (tmp_path / "report" / "scores.parquet").exists()
@@ -143,7 +133,7 @@ def test_a_card_without_track_keys_falls_back_to_track_ids(trained, tmp_path):
 
 # ---------------------------------------------------------------------------------- item 7
 def test_an_unfinished_model_is_used_with_a_warning(trained, tmp_path):
-    models = edited_models(trained, tmp_path, _set("training.finished", False))
+    models = edited_models(trained, tmp_path, card_edit("training.finished", False))
     result = detect(trained, models, tmp_path / "r")
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]

@@ -13,7 +13,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from cli_checks import one_line_error
+from hardening import one_line_error
 
 NY_HOUR = "NYHarbor_2020_06_30_first_hour.csv"
 NY_ROWS = 8689

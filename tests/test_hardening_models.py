@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cli_checks import one_line_error, run
+from hardening import card_edit, one_line_error, run
 
 from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings, train_ais
@@ -274,17 +274,6 @@ def test_a_huge_card_is_refused_before_it_is_read(trained, tmp_path):
     one_line_error(result, r"model card .*down\.json is 68,157,440 bytes, more than any holds")
 
 
-def _edit(path: str, value):
-    def edit(card):
-        node = card
-        *parents, last = path.split(".")
-        for p in parents:
-            node = node[p]
-        node[last] = value
-
-    return edit
-
-
 COUNTS = [
     ("dati", "data.points", 10**12, r"data\.points must be an integer in \[3, 300000\]"),
     ("bc", "data.points", 10**12, r"data\.points must be an integer in \[3, 300000\]"),
@@ -312,7 +301,7 @@ def test_counts_in_a_card_have_upper_bounds(trained, tmp_path, method, field, va
     card = json.loads(card_text(models, stem))
     if field == "seeds":
         value = value[: len(card["seeds"])]
-    _edit(field, value)(card)
+    card_edit(field, value)(card)
     (models / f"{stem}.json").write_text(json.dumps(card))
     result = detect(trained, models, tmp_path / "r", method)
     one_line_error(result, rf"model card .*{stem}\.json: " + needle)

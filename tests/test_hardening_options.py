@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from cli_checks import one_line_error, run
+from hardening import one_line_error, run
 
 NY_HOUR = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from cli_checks import one_line_error, run
+from hardening import one_line_error, run
 
 from aisdati.outdir import hold_lock
 
