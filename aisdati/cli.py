@@ -58,6 +58,19 @@ LANE_TRAFFIC_OPTION = typer.Option(
     help="Lane score of dati and bc: the lane also holds one rollout from every training "
     "track's start (where the model's traffic goes). As the models were calibrated.",
 )
+WORKERS_OPTION = typer.Option(
+    1,
+    "--workers",
+    help="Run the command's tasks on a local Dask cluster of this many processes (1: in this "
+    "process). Results do not depend on it.",
+)
+SCHEDULER_OPTION = typer.Option(
+    None,
+    "--scheduler",
+    envvar="AISDATI_SCHEDULER",
+    help="Run the command's tasks on the existing Dask cluster at this address "
+    "(tcp://HOST:PORT) instead; every worker must see the input and output folders.",
+)
 LANE_OPTION = typer.Option(
     None,
     "--lane",
@@ -122,6 +135,8 @@ def ingest(
     keep_rejects: bool = typer.Option(
         False, "--keep-rejects", help="Write every rejected row with its reason to rejects.parquet."
     ),
+    workers: int = WORKERS_OPTION,
+    scheduler: str | None = SCHEDULER_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
@@ -159,7 +174,13 @@ def selftest(
         None, help="Steps per episode τ (default: the family's, 200)."
     ),
     references: int = typer.Option(10, help="Unseen test references per family (paper: 10)."),
-    workers: int = typer.Option(2, help="Processes to share the members out over (one per core)."),
+    workers: int = typer.Option(
+        2,
+        "--workers",
+        help="Train the members on a local Dask cluster of this many processes (one per core); "
+        "1: in this process.",
+    ),
+    scheduler: str | None = SCHEDULER_OPTION,
     preset: str = SELFTEST_PRESET_OPTION,
     repeats: int = typer.Option(
         1, help="Run the whole protocol this many times on further seed blocks (its spread)."
@@ -211,6 +232,14 @@ def train(
     resume: bool = typer.Option(
         False, "--resume", help="Continue exactly from <out>/<cluster>.ckpt if it exists."
     ),
+    routes_per_task: int = typer.Option(
+        1,
+        "--routes-per-task",
+        help="--cluster routes: routes one task trains together as one batched ensemble (0: "
+        "all in one). The models depend on it, never on --workers.",
+    ),
+    workers: int = WORKERS_OPTION,
+    scheduler: str | None = SCHEDULER_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the model card as JSON on stdout."),
 ) -> None:
@@ -293,6 +322,8 @@ def evaluate(
         0.05, help="Calibrated flagging: share of training tracks a detector would flag."
     ),
     seed: int = typer.Option(0, help="Seed of the split, the injections and the training."),
+    workers: int = WORKERS_OPTION,
+    scheduler: str | None = SCHEDULER_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress or table."),
     as_json: bool = typer.Option(False, "--json", help="Print evaluation.json on stdout."),
 ) -> None:
@@ -354,6 +385,8 @@ def detect(
         10.0, "--near-km", help="Test tracks start within this distance of a training start."
     ),
     seed: int = typer.Option(0, help="Seed of the rollouts' latent noise."),
+    workers: int = WORKERS_OPTION,
+    scheduler: str | None = SCHEDULER_OPTION,
     labels: Path | None = typer.Option(
         None,
         "--labels",

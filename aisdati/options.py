@@ -93,6 +93,8 @@ OPTION_RANGES: dict[str, Range] = {
     # integers that reach a random generator (numpy refuses negative seeds, torch huge ones)
     "--seed": Range(low=0, high=SEED_MAX),
     "--route-seed": Range(low=0, high=SEED_MAX),
+    "--routes-per-task": Range(low=0),
+    "--workers": Range(low=1, high=1024),
 }
 """Every numeric option that needs more than its type, with its allowed range. Floats are always
 checked for finiteness, ranged or not."""

@@ -98,6 +98,11 @@ class EpisodeProgress(_Bars):
         for log in logs:
             self.update(log.member, log.episode, log.stopped)
 
+    def members_done(self, members: range) -> None:
+        """A task trained elsewhere (a Dask worker) has ended: its members are done."""
+        for member in members:
+            self.update(member, self.episodes, True)
+
 
 class TrainingProgress(_Bars):
     """Two bars for one training run: episodes, and the steps of the current episode with its

@@ -369,7 +369,7 @@ def test_train_every_route_as_one_ensemble(cli, kitimat, tmp_path):
     data, models = kitimat, tmp_path / "models"
     r = cli("train", "--cluster", "routes", "--data", data, "--out", models, "--episodes", "1",
             "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
-            "validation_rollouts=1", "-q")
+            "validation_rollouts=1", "--routes-per-task", "0", "-q")
     assert r.exit_code == 0, r.output
     routes = read_track_table(data)["route"].dropna().value_counts()
     trained = sorted(p.stem for p in models.glob("route-*.pt"))

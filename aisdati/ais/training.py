@@ -374,7 +374,7 @@ class EnsembleRun:
     so an interrupted run leaves usable models. A one-route run also keeps a checkpoint
     (<stem>.ckpt) that `--resume` continues from exactly: it holds the whole trainer."""
 
-    def __init__(self, routes: Sequence[LaneRoute]):
+    def __init__(self, routes: Sequence[LaneRoute], first_member: int = 0):
         if not routes:
             raise UserError("no route to train")
         if len({r.settings.lane for r in routes}) > 1:
@@ -393,7 +393,10 @@ class EnsembleRun:
                 f"per model ({', '.join(short)} has fewer): pass --lane crossfit=false"
             )
         self.sources = [build_source(r.tracks, r.settings.lane) for r in self.routes]
-        self.seeds = member_seeds(first.seed, self.members * len(self.routes))
+        # the members' seeds count from `first_member`: a route's seeds are the same whether it
+        # trains alone or beside others (`aisdati.detectors.train.route_tasks`)
+        self.seeds = member_seeds(first.seed, first_member + self.members * len(self.routes))
+        self.seeds = self.seeds[first_member:]
         # each member's tracks: its route's, or with cross-fitting all but its own fold
         self.folds = [
             crossfit_folds(r.tracks, self.members, self.seeds[k * self.members])
@@ -634,11 +637,14 @@ def lane_options(lane: dict[str, Any], keys: Sequence[str]) -> str:
     return " ".join(f"{k}={shown(lane.get(k))}" for k in keys)
 
 
-def train_lanes(routes: Sequence[LaneRoute], on_step: Callback | None = None) -> list[TrainResult]:
-    """Train one DATI model per route as one batched ensemble (see `EnsembleRun`); the models'
-    cards are not calibrated yet (`aisdati.detectors.dati`)."""
+def train_lanes(
+    routes: Sequence[LaneRoute], on_step: Callback | None = None, first_member: int = 0
+) -> list[TrainResult]:
+    """Train one DATI model per route as one batched ensemble (see `EnsembleRun`; seeds from
+    member `first_member` on); the models' cards are not calibrated yet
+    (`aisdati.detectors.dati`)."""
     torch.set_num_threads(1)  # small batched networks: one thread is fastest (3x on 2 cores)
-    run = EnsembleRun(routes)
+    run = EnsembleRun(routes, first_member)
     run.resume()
     return run.run(on_step)
 

@@ -15,6 +15,7 @@ from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
 from aisdati.detection.run import Coverage, Detection, DetectSettings, check_settings, detect
 from aisdati.detectors import parse_detectors
+from aisdati.execution import Execution, open_runner
 from aisdati.options import check_options
 from aisdati.outdir import staged_outputs
 
@@ -38,6 +39,8 @@ def run(
     near_km: float,
     seed: int,
     labels: Path | None,
+    workers: int,
+    scheduler: str | None,
     quiet: bool,
     as_json: bool,
 ) -> None:
@@ -73,11 +76,16 @@ def run(
         labels=labels,
     )
     check_settings(settings)
-    with staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs:
+    execution = Execution(workers=workers, scheduler=scheduler)
+    with (
+        staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
+        open_runner(execution) as runner,
+    ):
         for message in unfinished_models(models_dir, settings.models, settings.method):
             warn(message)
-        with spinner(err_console if as_json else console, "scoring", show=not quiet):
-            result = detect(settings)
+        where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"
+        with spinner(err_console if as_json else console, where, show=not quiet):
+            result = detect(settings, runner)
             files = [outputs.final(f) for f in write_outputs(result, outputs.folder)]
         outputs.commit()
     if as_json:

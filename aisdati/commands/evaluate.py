@@ -33,6 +33,7 @@ from aisdati.evaluation.run import (
     evaluate,
     evaluate_routes,
 )
+from aisdati.execution import Execution, Runner, open_runner
 from aisdati.options import check_options
 from aisdati.outdir import OutputSet, staged_outputs
 from aisdati.progress import EpisodeProgress, TrainingProgress
@@ -63,6 +64,8 @@ def run(
     near_km: float,
     contamination: float,
     seed: int,
+    workers: int,
+    scheduler: str | None,
     quiet: bool,
     as_json: bool,
 ) -> None:
@@ -102,27 +105,36 @@ def run(
     )
     check(settings)
     every_route = settings.cluster == ALL_ROUTES
-    owned = RESULTS
-    if every_route:  # each route's results too (fail before any work when there is no route)
-        routes = [glob.escape(r) for r in routes_with(data, "evaluate")]
-        owned += tuple(f"{route}/{name}" for route in routes for name in RESULTS)
-    else:
-        select_cluster(read_track_table(data), settings.cluster, data)  # fail before any work
-    with staged_outputs(settings.out_dir, owned, REPORT) as outputs:
+    with (
+        staged_outputs(settings.out_dir, owned_outputs(settings), REPORT) as outputs,
+        open_runner(Execution(workers=workers, scheduler=scheduler)) as runner,
+    ):
         outputs.retire_earlier()  # the data and models it describes are about to change
-        shown = Display(settings, show=not (quiet or as_json))
+        shown = Display(settings, runner, show=not (quiet or as_json))
         if every_route:
             evaluate_every_route(settings, shown, outputs, quiet, as_json)
         else:
             evaluate_one(settings, shown, outputs, quiet, as_json)
 
 
+def owned_outputs(settings: EvaluateSettings) -> tuple[str, ...]:
+    """The names the evaluation writes in its folder, with every route's under `--cluster
+    routes`; a cluster or route that is not there fails here, before any work."""
+    if settings.cluster != ALL_ROUTES:
+        select_cluster(read_track_table(settings.data_dir), settings.cluster, settings.data_dir)
+        return RESULTS
+    routes = [glob.escape(r) for r in routes_with(settings.data_dir, "evaluate")]
+    return RESULTS + tuple(f"{route}/{name}" for route in routes for name in RESULTS)
+
+
 class Display:
     """What the operator sees while the evaluation runs (nothing when not `show`): a dim line
-    per stage, bars while DATI trains, a spinner while the other detectors train."""
+    per stage, bars while DATI trains, a spinner while the other detectors train; and where
+    the tasks run (`runner`)."""
 
-    def __init__(self, settings: EvaluateSettings, show: bool):
+    def __init__(self, settings: EvaluateSettings, runner: Runner, show: bool):
         self.settings = settings
+        self.runner = runner
         self.show = show
 
     def stage(self, text: str) -> None:
@@ -150,14 +162,17 @@ class Display:
         members = len(group) * self.settings.lane.members
         label = f"training {method} on {len(group)} routes"
         with EpisodeProgress(members, self.settings.episodes, label, disable=not self.show) as bars:
-            return train_routes(method, group, how, on_step=bars.on_step)
+            return train_routes(
+                method, group, how, on_step=bars.on_step, runner=self.runner,
+                on_task=bars.members_done,
+            )  # fmt: skip
 
 
 def evaluate_one(
     settings: EvaluateSettings, shown: Display, outputs: OutputSet, quiet: bool, as_json: bool
 ) -> None:
     """One cluster or route: evaluate, write, print the table and the timings."""
-    result = evaluate(settings, shown.stage, shown.train)
+    result = evaluate(settings, shown.stage, shown.train, shown.runner)
     files = write(result, outputs.folder)
     outputs.commit()
     if as_json:
@@ -180,7 +195,7 @@ def evaluate_every_route(
     settings: EvaluateSettings, shown: Display, outputs: OutputSet, quiet: bool, as_json: bool
 ) -> None:
     """`--cluster routes`: each route judged by its own model, pooled into one table."""
-    routes = evaluate_routes(settings, shown.stage, shown.train, shown.train_routes)
+    routes = evaluate_routes(settings, shown.stage, shown.train, shown.train_routes, shown.runner)
     files = write_routes(routes, outputs.folder)
     outputs.commit()
     if as_json:

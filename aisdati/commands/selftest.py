@@ -30,6 +30,7 @@ def run(
     steps: int | None,
     references: int,
     workers: int,
+    scheduler: str | None,
     preset: str,
     repeats: int,
     noise: str | None,
@@ -62,6 +63,7 @@ def run(
         references=references,
         steps=steps,
         workers=workers,
+        scheduler=scheduler,
         methods=tuple(method_names),
         repeats=repeats,
     )

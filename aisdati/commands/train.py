@@ -18,10 +18,13 @@ from aisdati.commands.common import (
     console,
     err_console,
     lane_settings,
+    warn,
 )
 from aisdati.commands.tables import dati_model_table, route_models_table
 from aisdati.detectors import model_name, parse_detectors
+from aisdati.detectors.registry import detector_class
 from aisdati.detectors.train import Trained, train_detector, train_routes
+from aisdati.execution import Execution, open_runner
 from aisdati.interrupts import Terminated
 from aisdati.options import check_options
 from aisdati.outdir import prepare_output_dir
@@ -44,16 +47,21 @@ def run(
     max_tracks: int,
     patience: int,
     resume: bool,
+    routes_per_task: int,
+    workers: int,
+    scheduler: str | None,
     quiet: bool,
     as_json: bool,
 ) -> None:
     """`aisdati train` with its options (see `aisdati.cli.train`)."""
-    check_options({"--seed": seed})
+    check_options({"--seed": seed, "--routes-per-task": routes_per_task})
     (method,) = parse_detectors(method)[:1]
+    execution = Execution(workers=workers, scheduler=scheduler)
     if cluster.strip().lower() == "routes":
-        return train_every_route(
-            method, data, out, preset, lane, episodes, seed, patience, max_tracks, quiet
-        )
+        settings = route_settings(data, out, preset, lane, episodes, seed, patience, max_tracks)
+        return train_every_route(method, settings, execution, routes_per_task, quiet)
+    if execution.distributed:
+        warn("one model trains in this process: --workers and --scheduler spread --cluster routes")
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
     stem = model_name(cluster.strip().lower(), method)
     prepare_output_dir(out, "--out", [stem + x for x in MODEL_SUFFIXES])
@@ -136,8 +144,7 @@ def interrupted_message(method: str, saved: bool, out: Path) -> str:
     )
 
 
-def train_every_route(
-    method: str,
+def route_settings(
     data: Path,
     out: Path,
     preset: str | None,
@@ -146,12 +153,11 @@ def train_every_route(
     seed: int,
     patience: int,
     max_tracks: int,
-    quiet: bool,
-) -> None:
-    """`train --cluster routes`: every route with enough tracks, DATI as one batched ensemble."""
+) -> list[TrainSettings]:
+    """`train --cluster routes`: the settings of every route with enough tracks."""
     routes = routes_with(data, "train")
     prepare_output_dir(out, "--out")
-    settings = [
+    return [
         TrainSettings(
             data_dir=data,
             cluster=route,
@@ -164,8 +170,29 @@ def train_every_route(
         )
         for route in routes
     ]
-    members = len(routes) * (settings[0].lane.members if method == "dati" else 1)
-    with EpisodeProgress(members, episodes, f"training {method}", disable=quiet) as bar:
-        trained = train_routes(method, settings, on_step=bar.on_step)
+
+
+def train_every_route(
+    method: str,
+    settings: list[TrainSettings],
+    execution: Execution,
+    routes_per_task: int,
+    quiet: bool,
+) -> None:
+    """Every route's model, the routes trained as tasks (`aisdati.detectors.train`) here or on
+    the Dask cluster of `execution`."""
+    cls = detector_class(method)
+    members = sum(cls.members(s) for s in settings)
+    label = f"training {method}" + (
+        "" if not execution.distributed else f" on {execution.describe()}"
+    )
+    with (
+        open_runner(execution) as runner,
+        EpisodeProgress(members, settings[0].episodes, label, disable=quiet) as bar,
+    ):
+        trained = train_routes(
+            method, settings, on_step=bar.on_step, runner=runner,
+            routes_per_task=routes_per_task, on_task=bar.members_done,
+        )  # fmt: skip
     if not quiet:
-        console.print(route_models_table(method, routes, trained))
+        console.print(route_models_table(method, [s.cluster for s in settings], trained))

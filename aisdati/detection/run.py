@@ -36,7 +36,9 @@ import pandas as pd
 from aisdati.ais.card import training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
+from aisdati.detectors.base import score_each
 from aisdati.errors import UserError
+from aisdati.execution import Runner
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -266,8 +268,9 @@ def check_settings(settings: DetectSettings) -> None:
         raise UserError(f"--score must be one of {', '.join(SCORES)}, got {settings.score!r}")
 
 
-def detect(settings: DetectSettings) -> Detection:
-    """Score the test tracks; see the module docstring."""
+def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
+    """Score the test tracks (in chunks, as tasks of `runner`: `Detector.score`); see the
+    module docstring."""
     check_settings(settings)
     if settings.labels is not None:
         read_labels(settings.labels)  # fail on a bad file before the scoring
@@ -287,7 +290,7 @@ def detect(settings: DetectSettings) -> Detection:
     owner = [int(o) for o in owners if o >= 0]
     timings["load_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner)
+    raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner, runner)
     timings["score_s"] = time.perf_counter() - t1
     n = len(tracks)
     top = float(np.max(raw)) if n else 1.0
@@ -326,7 +329,11 @@ def detect(settings: DetectSettings) -> Detection:
 
 
 def _score_by_model(
-    settings: DetectSettings, models: Sequence[Detector], tracks: list[Track], owner: list[int]
+    settings: DetectSettings,
+    models: Sequence[Detector],
+    tracks: list[Track],
+    owner: list[int],
+    runner: Runner | None,
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Each track scored by the model that judges it: (score in metres, that model's calibrated
     threshold or NaN without `contamination`, evidence, deviation profile), in track order."""
@@ -335,19 +342,21 @@ def _score_by_model(
     threshold = np.full(n, np.nan)
     evidence: list[np.ndarray] = [np.empty((0, 2))] * n
     profiles: list[np.ndarray] = [np.empty(0)] * n
+    used = sorted({int(o) for o in owner})
     cut: dict[int, float] = {}  # calibrated thresholds, before any scoring: fail fast
     if settings.contamination is not None:
-        for m in sorted({int(o) for o in owner}):
+        for m in used:
             cut[m] = models[m].threshold(settings.how, settings.contamination)
-    for m, model in enumerate(models):
-        idx = [i for i in range(n) if owner[i] == m]
-        if not idx:
-            continue
-        scored = model.score([tracks[i] for i in idx], settings.how)
+    rows = {m: [i for i in range(n) if owner[i] == m] for m in used}
+    scored = score_each(
+        [(models[m], [tracks[i] for i in rows[m]]) for m in used], settings.how, (), runner
+    )
+    for m, got in zip(used, scored, strict=True):
+        idx = rows[m]
         if settings.contamination is not None:
             threshold[idx] = cut[m]
         for j, i in enumerate(idx):
-            raw[i] = scored.score_m[j]
-            evidence[i] = scored.evidence[j]
-            profiles[i] = scored.profiles[j]
+            raw[i] = got.score_m[j]
+            evidence[i] = got.evidence[j]
+            profiles[i] = got.profiles[j]
     return raw, threshold, evidence, profiles

@@ -13,6 +13,7 @@ configuration) and how to score (`ScoreSettings`); fitting or loading gives it a
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from abc import ABC, abstractmethod
@@ -27,8 +28,9 @@ from aisdati.ais.corridor import Corridor
 from aisdati.ais.training import TrainSettings, check_settings
 from aisdati.detectors.od import od_distances
 from aisdati.detectors.registry import load_detector, register
-from aisdati.detectors.scoring import Scores, ScoreSettings
+from aisdati.detectors.scoring import Scores, ScoreSettings, joined, score_chunks
 from aisdati.errors import UserError
+from aisdati.execution import InProcess, Runner
 from aisdati.model.readers import first_line
 from aisdati.model.trainer import Callback
 from aisdati.outdir import atomic_write_bytes
@@ -104,15 +106,22 @@ class Detector(ABC):
         `on_step` follows DATI's training (`aisdati.model.trainer.Callback`)."""
 
     @classmethod
+    def members(cls, settings: TrainSettings) -> int:
+        """Models one training run of `settings` holds (a progress bar counts their episodes)."""
+        return 1
+
+    @classmethod
     def fit_routes(
         cls,
         settings: Sequence[TrainSettings],
         training_sets: Sequence[tuple[list[Track], DataCard]],
         how: ScoreSettings | None = None,
         on_step: Callback | None = None,
+        first_member: int = 0,
     ) -> list[Detector]:
         """One detector per route (settings and training set each); the default fits them one
-        after the other, DATI trains them as one batched ensemble."""
+        after the other, DATI trains them as one batched ensemble (its members' seeds counted
+        from `first_member`: the routes trained before them in other tasks)."""
         return [
             cls(s, how).fit(tracks, data, on_step)
             for s, (tracks, data) in zip(settings, training_sets, strict=True)
@@ -125,17 +134,17 @@ class Detector(ABC):
 
     # ----------------------------------------------------------------------------- scoring
     def score(
-        self, tracks: Sequence[Track], how: ScoreSettings | None = None, also: Sequence[str] = ()
+        self,
+        tracks: Sequence[Track],
+        how: ScoreSettings | None = None,
+        also: Sequence[str] = (),
+        runner: Runner | None = None,
     ) -> Scores:
         """Score tracks the way `how.score` says (default: the detector's `how`; higher = more
-        abnormal), and compute the kinds in `also` in the same pass (into `Scores.parts`).
-        Numbers a kernel refuses (`aisdati.dtw`: NaN or inf) are a one-line `UserError`
-        naming the model."""
-        try:
-            return self.score_tracks(tracks, how or self.how, also)
-        except ValueError as exc:
-            where = self.loaded_from or f"model {self.name}"
-            raise UserError(f"cannot score with {where}: {first_line(exc)}") from None
+        abnormal), and compute the kinds in `also` in the same pass (into `Scores.parts`), in
+        chunks (`score_chunks`) run as tasks of `runner` (default: here). Numbers a kernel
+        refuses (`aisdati.dtw`: NaN or inf) are a one-line `UserError` naming the model."""
+        return score_each([(self, tracks)], how, also, runner)[0]
 
     @abstractmethod
     def score_tracks(
@@ -256,3 +265,34 @@ def _as_option(key: str, value: float | bool, named: bool = True) -> str:
     if isinstance(value, bool):
         return f"--{'' if value else 'no-'}{key.replace('_', '-')}"
     return f"--{key.replace('_', '-')} {value:g}" if named else f"{value:g}"
+
+
+def score_each(
+    work: Sequence[tuple[Detector, Sequence[Track]]],
+    how: ScoreSettings | None = None,
+    also: Sequence[str] = (),
+    runner: Runner | None = None,
+) -> list[Scores]:
+    """`Detector.score` of several detectors, each on its own tracks, as one set of tasks
+    (every detector's chunks at once, so that many models of a few tracks each still fill the
+    workers)."""
+    jobs = [
+        (k, detector, list(tracks[r.start : r.stop]))
+        for k, (detector, tracks) in enumerate(work)
+        for r in score_chunks(len(tracks))
+    ]
+    done = (runner or InProcess()).map(functools.partial(score_chunk, how, tuple(also)), jobs)
+    return [joined([c for (j, _, _), c in zip(jobs, done, strict=True) if j == k])
+            for k in range(len(work))]  # fmt: skip
+
+
+def score_chunk(
+    how: ScoreSettings | None, also: tuple[str, ...], job: tuple[int, Detector, list[Track]]
+) -> Scores:
+    """One scoring task of `score_each`: a chunk of one detector's tracks."""
+    _, detector, tracks = job
+    try:
+        return detector.score_tracks(tracks, how or detector.how, also)
+    except ValueError as exc:
+        where = detector.loaded_from or f"model {detector.name}"
+        raise UserError(f"cannot score with {where}: {first_line(exc)}") from None

@@ -61,12 +61,17 @@ class DATIDetector(PolicyDetector):
         return self
 
     @classmethod
+    def members(cls, settings: TrainSettings) -> int:
+        return settings.lane.members
+
+    @classmethod
     def fit_routes(
         cls,
         settings: Sequence[TrainSettings],
         training_sets: Sequence[tuple[list[Track], DataCard]],
         how: ScoreSettings | None = None,
         on_step: Callback | None = None,
+        first_member: int = 0,
     ) -> list[Detector]:
         """Every route as one batched ensemble (`aisdati.ais.training.EnsembleRun`)."""
         routes = [
@@ -74,7 +79,7 @@ class DATIDetector(PolicyDetector):
             for s, (tracks, data) in zip(settings, training_sets, strict=True)
         ]
         detectors: list[Detector] = []
-        for route, result in zip(routes, train_lanes(routes, on_step), strict=True):
+        for route, result in zip(routes, train_lanes(routes, on_step, first_member), strict=True):
             det = cls(route.settings, how)
             det.take(result, route.tracks)
             detectors.append(det)

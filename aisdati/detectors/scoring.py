@@ -12,6 +12,17 @@ import numpy as np
 from aisdati.ais.card import CalibratedWith
 
 SCORES = ("rollout", "step", "lane", "both", "area")
+SCORE_CHUNK = 64
+"""Tracks one scoring task holds (`Detector.score`): chunks of the test set, in its order, so
+the scores are the same whatever runs the tasks. Each chunk regenerates the lane traffic (one
+rollout per training track, at most 170), which 64 tracks of 30 lane rollouts each outweigh
+more than 10 times; smaller chunks would spread a few hundred tracks wider over workers."""
+
+
+def score_chunks(count: int) -> list[range]:
+    """The tracks (by index) of each scoring task: consecutive chunks of `SCORE_CHUNK`, and
+    one empty chunk for no track (a detector still says what an empty set scores)."""
+    return [range(i, min(i + SCORE_CHUNK, count)) for i in range(0, max(count, 1), SCORE_CHUNK)]
 
 
 def tail_mean(values: np.ndarray, fraction: float) -> float:
@@ -83,3 +94,13 @@ class Scores:
     track, or the one-step predictions."""
     parts: dict[str, np.ndarray] = field(default_factory=dict)
     """Every score computed in the pass, by kind ([N] each, `score_m` among them)."""
+
+
+def joined(chunks: list[Scores]) -> Scores:
+    """The scores of consecutive chunks of tracks as one."""
+    return Scores(
+        np.concatenate([c.score_m for c in chunks]),
+        [p for c in chunks for p in c.profiles],
+        [e for c in chunks for e in c.evidence],
+        {k: np.concatenate([c.parts[k] for c in chunks]) for k in chunks[0].parts},
+    )

@@ -1,9 +1,16 @@
-"""Training any detector on the tracks of an ingest folder: `aisdati train --method`."""
+"""Training any detector on the tracks of an ingest folder: `aisdati train --method`.
+
+Many routes are trained as tasks (`aisdati.execution`): `route_tasks` cuts the routes into
+groups of `routes_per_task` in route order, and each group is one batched ensemble (DATI) on one
+worker. The cut depends on the routes alone, so the models are the same whatever runs the
+tasks; fewer routes per task spread wider over workers, more batch better in one process.
+"""
 
 from __future__ import annotations
 
+import functools
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -12,7 +19,11 @@ from aisdati.ais.training import TrainSettings, check_settings, model_stem, trai
 from aisdati.detectors.registry import detector_class
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
+from aisdati.execution import InProcess, Runner
 from aisdati.model.trainer import Callback
+
+ROUTES_PER_TASK = 1
+"""Routes one training task holds by default: each route is a task of its own."""
 
 
 @dataclass
@@ -24,23 +35,80 @@ class Trained:
     resumed_from: int = 0
 
 
+def route_tasks(count: int, routes_per_task: int) -> list[range]:
+    """The routes (by index) each training task holds: consecutive groups of
+    `routes_per_task` (0: all in one task)."""
+    size = routes_per_task if routes_per_task > 0 else max(count, 1)
+    return [range(i, min(i + size, count)) for i in range(0, count, size)]
+
+
 def train_routes(
     method: str,
     settings: Sequence[TrainSettings],
     how: ScoreSettings | None = None,
     on_step: Callback | None = None,
+    runner: Runner | None = None,
+    routes_per_task: int = ROUTES_PER_TASK,
+    on_task: Callable[[range], None] | None = None,
 ) -> list[Trained]:
     """One model of `method` per settings (route or cluster), calibrated on its training tracks
-    and saved in its `out_dir`: DATI trains all routes as one batched ensemble, the others one
-    after the other (`Detector.fit_routes`)."""
+    and saved in its `out_dir`, the routes trained as tasks of `routes_per_task` on `runner`
+    (module docstring; default: in this process). `on_step` follows the members' training
+    where the tasks run here (member indices counted over all tasks); on a cluster,
+    `on_task(members)` is told of each task's members as it ends."""
     cls = detector_class(method)
     settings = [replace(s, stem=s.stem or cls.model_name(s.cluster)) for s in settings]
     for s in settings:
         check_settings(s)  # before reading any data
         if s.out_dir is None:
             raise UserError("training from an ingest folder needs an output folder (--out)")
+    runner = runner or InProcess()
+    members = [cls.members(s) for s in settings]
+    jobs = [(sum(members[: g.start]), [settings[k] for k in g])
+            for g in route_tasks(len(settings), routes_per_task)]  # fmt: skip
+    follow = on_step if isinstance(runner, InProcess) else None  # callbacks stay in this process
+    ended = None
+    if on_task is not None:
+
+        def ended(i: int) -> None:
+            first, group = jobs[i]
+            on_task(range(first, first + sum(cls.members(s) for s in group)))
+
+    done = runner.map(functools.partial(train_task, method, how, follow), jobs, ended)
+    return [t for group in done for t in group]
+
+
+def train_task(
+    method: str,
+    how: ScoreSettings | None,
+    on_step: Callback | None,
+    job: tuple[int, list[TrainSettings]],
+) -> list[Trained]:
+    """One task of `train_routes`: (the index of its first member among all tasks', its
+    routes); `on_step` sees member indices counted over all tasks."""
+    first, settings = job
+    follow = None
+    if on_step is not None:
+
+        def follow(trainer: object, logs: list) -> None:
+            on_step(trainer, [replace(log, member=log.member + first) for log in logs])
+
+    return train_group(method, how, follow, settings, first)
+
+
+def train_group(
+    method: str,
+    how: ScoreSettings | None,
+    on_step: Callback | None,
+    settings: Sequence[TrainSettings],
+    first_member: int = 0,
+) -> list[Trained]:
+    """The routes of `settings` fitted together (`Detector.fit_routes`: DATI as one batched
+    ensemble, the others one after the other), each calibrated and saved."""
+    cls = detector_class(method)
     t0 = time.perf_counter()
-    detectors = cls.fit_routes(settings, [training_set(s) for s in settings], how, on_step)
+    sets = [training_set(s) for s in settings]
+    detectors = cls.fit_routes(settings, sets, how, on_step, first_member)
     trained = []
     for s, det in zip(settings, detectors, strict=True):
         stem = model_stem(s)

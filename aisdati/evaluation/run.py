@@ -37,6 +37,7 @@ from aisdati.errors import UserError
 from aisdati.evaluation import dataset
 from aisdati.evaluation.inject import parse_params, with_strength
 from aisdati.evaluation.metrics import flagging, ranking
+from aisdati.execution import Runner
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
 SPLITS = ("vessel", "time")
@@ -202,9 +203,11 @@ def evaluate(
     settings: EvaluateSettings,
     on_stage: Callable[[str], None] | None = None,
     train_detector: Callable[..., Any] | None = None,
+    runner: Runner | None = None,
 ) -> Evaluation:
     """Run the benchmark; `train_detector(method, TrainSettings, ScoreSettings)` trains one
-    detector (the CLI passes one with progress bars)."""
+    detector (the CLI passes one with progress bars); the held-out tracks are scored as tasks
+    of `runner` (`Detector.score`)."""
     from aisdati.detectors.train import train_detector as plain_train
 
     check(settings)
@@ -223,7 +226,7 @@ def evaluate(
             trained = train(method, prepared.train_settings(), _how(settings))
             detectors[method] = load_detector(trained.model.with_suffix(""))
         train_s[method] = time.perf_counter() - t0
-    return _score(prepared, detectors, train_s, say)
+    return _score(prepared, detectors, train_s, say, runner)
 
 
 def _score(
@@ -231,6 +234,7 @@ def _score(
     detectors: dict[str, Detector],
     train_s: dict[str, float],
     say: Callable[[str], None],
+    runner: Runner | None,
 ) -> Evaluation:
     """Score the held-out tracks with every detector and tabulate (see the module docstring)."""
     settings, split = prepared.settings, prepared.split
@@ -245,7 +249,7 @@ def _score(
         t1 = time.perf_counter()
         say(f"scoring {settings.cluster} with {method}")
         kinds = scored_kinds(det)
-        scored = det.score(heldout, how, also=kinds)
+        scored = det.score(heldout, how, also=kinds, runner=runner)
         timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
         for kind in kinds:
             values = scored.parts[kind]
@@ -297,6 +301,7 @@ def evaluate_routes(
     on_stage: Callable[[str], None] | None = None,
     train_detector: Callable[..., Any] | None = None,
     train_routes: Callable[..., Any] | None = None,
+    runner: Runner | None = None,
 ) -> RoutesEvaluation:
     """Evaluate every route of the data with at least `MIN_ROUTE_TRACKS` tracks: split and
     inject each on its own, train one model per route (DATI's routes as one batched ensemble,
@@ -304,7 +309,8 @@ def evaluate_routes(
     tracks with its own route's model, and pool. Scores of different routes are put on one
     scale by dividing each by its route model's calibrated threshold (the (1 - contamination)
     quantile of that model's training scores): "how many times what this route's normal
-    traffic reaches", which is also what flags a track."""
+    traffic reaches", which is also what flags a track. Held-out tracks are scored as tasks of
+    `runner`; `train_routes` is the one to spread the training."""
     from aisdati.detectors.train import train_detector as plain_train
     from aisdati.detectors.train import train_routes as plain_routes
 
@@ -344,7 +350,7 @@ def evaluate_routes(
             detectors[k][method] = load_detector(model.with_suffix(""))
             train_s[k][method] = share
     evaluations = [
-        _score(p, d, t, say) for p, d, t in zip(prepared, detectors, train_s, strict=True)
+        _score(p, d, t, say, runner) for p, d, t in zip(prepared, detectors, train_s, strict=True)
     ]
     scores = pd.concat(
         [ev.scores.assign(route=ev.settings.cluster) for ev in evaluations], ignore_index=True

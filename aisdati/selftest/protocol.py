@@ -1,9 +1,11 @@
 """`aisdati selftest`: the paper's synthetic protocol (Table 1 and the Table 2 ablation).
 
-Every (method, family, seed) triple is one member. The members are shared out over `workers`
-processes (one per core); inside a process the DATI members of one variant train as one batched
-ensemble, the BC members of one variant as one ensemble, and the DDPG-TI members as one ensemble
-per episode length, all followed by one trainer callback (`aisdati.model.trainer.Callback`).
+Every (method, family, seed) triple is one member. The members of one (method, family) are one
+task (`aisdati.execution`: here, or on `workers` local Dask processes, or on a cluster), so the
+results do not depend on where the tasks ran; inside a task the DATI members train as one batched
+ensemble, the BC members as one ensemble, and the DDPG-TI members as one ensemble per episode
+length, all followed by one trainer callback (`aisdati.model.trainer.Callback`; in this process
+per episode, on a cluster as each task ends).
 Then each member's policy is rolled out from the first point of unseen references of its
 family. The paper's metric is the lowest normalised smoothed DTW over seeds x references (Table 2
 adds the second lowest). `repeats` runs the whole protocol again on further blocks of seeds, so
@@ -13,17 +15,16 @@ that the metric's own spread over repeats can be read beside it. The methods and
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import signal
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from queue import Empty
 from typing import Any
 
 import numpy as np
 import torch
 
+from aisdati.execution import Execution, open_runner
 from aisdati.model.bc import BCTrainer, bc_act
 from aisdati.model.dati import DATITrainer
 from aisdati.model.ddpg_ti import DDPGTITrainer, ddpg_ti_act
@@ -95,10 +96,10 @@ whole protocol (the same from a worker process)."""
 
 
 def _run_members(
-    members: list[Member], settings: SelftestSettings, report: Report
+    settings: SelftestSettings, report: Report, members: list[Member]
 ) -> list[MemberResult]:
-    """Train and evaluate a group of members: one ensemble per DATI variant, one per BC variant,
-    one DDPG-TI ensemble per episode length."""
+    """Train and evaluate a group of members (one task): one ensemble per DATI variant, one per
+    BC variant, one DDPG-TI ensemble per episode length."""
     torch.set_num_threads(1)
     results: list[MemberResult] = []
     for method in dict.fromkeys(m for _, m, _, _ in members):
@@ -200,19 +201,6 @@ def evaluation_grid(
     return refs, grid
 
 
-def _worker(members, settings, queue) -> None:  # pragma: no cover - runs in a child process
-    # the parent's SIGTERM handler (clean-up of a command's outputs) is not the child's: a
-    # worker stopped by its parent just ends, without a traceback
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    try:
-        results = _run_members(
-            members, settings, lambda i, ep, stop: queue.put(("ep", i, ep, stop))
-        )
-        queue.put(("done", results))
-    except BaseException as exc:
-        queue.put(("error", f"{type(exc).__name__}: {exc}"))
-
-
 def run_selftest(settings: SelftestSettings, report: Report | None = None) -> SelftestResult:
     """Run the protocol; `report(member_index, episode, stopped)` follows training progress."""
     report = report or (lambda i, ep, stop: None)
@@ -230,47 +218,27 @@ def run_selftest(settings: SelftestSettings, report: Report | None = None) -> Se
         )
     ]
     start = time.perf_counter()
-    workers = max(1, min(settings.workers, len(members)))
-    if workers == 1:
-        results = _run_members(members, settings, report)
-    else:
-        results = _run_in_processes(members, settings, workers, report)
+    tasks = [
+        [m for m in members if (m[1], m[2]) == key]
+        for key in dict.fromkeys((method, name) for _, method, name, _ in members)
+    ]
+    execution = Execution(workers=settings.workers, scheduler=settings.scheduler)
+    with open_runner(execution) as runner:
+        follow = report if not execution.distributed else _unreported
+
+        def ended(k: int) -> None:
+            if execution.distributed:
+                for i, *_ in tasks[k]:
+                    report(i, settings.config.episodes, True)
+
+        done = runner.map(functools.partial(_run_members, settings, follow), tasks, ended)
+    results = [r for task in done for r in task]
     wall = time.perf_counter() - start
     return SelftestResult(settings, _aggregate(settings, results), wall)
 
 
-def _run_in_processes(members, settings, workers, report) -> list[MemberResult]:
-    ctx = mp.get_context("fork")  # children inherit user-registered families
-    queue = ctx.Queue()
-    groups = [members[w::workers] for w in range(workers)]
-    procs = [ctx.Process(target=_worker, args=(g, settings, queue), daemon=True) for g in groups]
-    for p in procs:
-        p.start()
-    results: list[MemberResult] = []
-    finished = 0
-    try:
-        while finished < workers:
-            try:
-                msg = queue.get(timeout=1.0)
-            except Empty:
-                if any(p.exitcode not in (None, 0) for p in procs):
-                    raise RuntimeError("a selftest worker died") from None
-                continue
-            if msg[0] == "ep":
-                report(*msg[1:])
-            elif msg[0] == "done":
-                results.extend(msg[1])
-                finished += 1
-            else:
-                raise RuntimeError(f"selftest worker failed: {msg[1]}")
-        for p in procs:  # each has sent its results: let it flush its queue and exit
-            p.join()
-    finally:
-        for p in procs:
-            if p.is_alive():
-                p.terminate()
-            p.join()
-    return results
+def _unreported(i: int, episode: int, stopped: bool) -> None:
+    """The report of a task on a cluster: episodes are not seen from there."""
 
 
 def _lowest_two(scores: np.ndarray) -> tuple[float, float]:

@@ -110,6 +110,9 @@ class SelftestSettings:
     steps: int | None = None
     """Steps per episode τ; None keeps each family's own (200 for the paper's)."""
     workers: int = 1
+    """Local Dask processes the tasks run on (1: this process); see `aisdati.execution`."""
+    scheduler: str | None = None
+    """An existing Dask cluster's address to run the tasks on instead."""
     eval_seed: int = 2024
     config: DATIConfig = field(default_factory=lambda: preset_config(_DEFAULT))
     methods: tuple[str, ...] = ("dati",)

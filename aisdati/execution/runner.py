@@ -1,0 +1,175 @@
+"""One way to run a list of independent tasks, whatever runs them.
+
+Every command that has parallel work (ingest's partitions, one model per group of routes,
+chunks of tracks to score) cuts it into tasks by a rule that depends on the data only, never on
+the number of workers, and hands them to a `Runner`: `InProcess` runs them one after the other
+in this process (the default, and what runs when Dask is not installed), `DaskRunner` as tasks
+of a dask.distributed cluster, local processes started here (`--workers N`) or an existing
+cluster (`--scheduler tcp://HOST:PORT`). The same tasks with the same inputs give the same
+outputs, so the results do not depend on where they ran.
+
+A task that dies with its worker (killed, out of memory) is run again on another one, up to
+`RETRIES` times on a local cluster (an existing cluster keeps its own
+`distributed.scheduler.allowed-failures`); a task that raises raises here, as in-process, and
+is not run again: the same inputs would raise the same error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, TypeVar
+
+from aisdati.errors import UserError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+RETRIES = 3
+"""Times a task lost with its worker is started again elsewhere (local clusters)."""
+CONNECT_TIMEOUT_S = 10
+"""How long `--scheduler` waits for the scheduler to answer before giving up, in one line."""
+WORKER_MEMORY = "auto"
+"""Each local worker's memory limit: the machine's memory shared equally (Dask's `auto`)."""
+INSTALL_HINT = "pip install 'aisdati[dask]'"
+
+
+@dataclass(frozen=True)
+class Execution:
+    """Where a command's tasks run: `workers` local processes, or the cluster behind
+    `scheduler` (an address such as tcp://10.0.0.5:8786). One worker and no scheduler: in this
+    process."""
+
+    workers: int = 1
+    scheduler: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.workers < 1:
+            raise UserError(f"--workers must be at least 1, got {self.workers}")
+        if self.scheduler is not None and self.workers != 1:
+            raise UserError("give --workers or --scheduler, not both")
+
+    @property
+    def distributed(self) -> bool:
+        return self.scheduler is not None or self.workers > 1
+
+    def describe(self) -> str:
+        if self.scheduler is not None:
+            return f"Dask cluster at {self.scheduler}"
+        if self.workers > 1:
+            return f"{self.workers} local Dask workers"
+        return "in-process"
+
+
+class Runner(Protocol):
+    """Runs `fn` on each item and returns the results in the items' order; `on_done(i)` is
+    called as task i ends (in any order), for progress bars."""
+
+    workers: int
+
+    def map(
+        self,
+        fn: Callable[[T], R],
+        items: Sequence[T],
+        on_done: Callable[[int], None] | None = None,
+    ) -> list[R]: ...
+
+
+class InProcess:
+    """The tasks one after the other, here."""
+
+    workers = 1
+
+    def map(
+        self,
+        fn: Callable[[T], R],
+        items: Sequence[T],
+        on_done: Callable[[int], None] | None = None,
+    ) -> list[R]:
+        results = []
+        for i, item in enumerate(items):
+            results.append(fn(item))
+            if on_done is not None:
+                on_done(i)
+        return results
+
+
+class DaskRunner:
+    """The tasks on a dask.distributed cluster, through `client`."""
+
+    def __init__(self, client: Any):
+        self.client = client
+        self.workers = max(1, len(client.scheduler_info().get("workers", {})))
+
+    def map(
+        self,
+        fn: Callable[[T], R],
+        items: Sequence[T],
+        on_done: Callable[[int], None] | None = None,
+    ) -> list[R]:
+        from distributed import as_completed
+
+        if not items:
+            return []
+        futures = self.client.map(fn, list(items), pure=False)  # keys: unique, not by value
+        index = {f.key: i for i, f in enumerate(futures)}
+        try:
+            for future in as_completed(futures):
+                if future.status == "error":
+                    future.result()  # raises the task's own exception here
+                if on_done is not None:
+                    on_done(index[future.key])
+            return self.client.gather(futures)
+        except BaseException:
+            self.client.cancel(futures)  # the others' work is of no use any more
+            raise
+
+
+@contextlib.contextmanager
+def open_runner(execution: Execution) -> Iterator[Runner]:
+    """The runner of `execution`, for the time of the block: a local cluster started and shut
+    down with it, or a client of the existing one. No Dask installed, or a scheduler that does
+    not answer within `CONNECT_TIMEOUT_S`, is a one-line `UserError`."""
+    if not execution.distributed:
+        yield InProcess()
+        return
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise UserError(
+            f"{execution.describe()} needs Dask, which is not installed: {INSTALL_HINT}"
+        ) from None
+    with contextlib.ExitStack() as stack:
+        if execution.scheduler is not None:
+            client = stack.enter_context(_connect(Client, execution.scheduler))
+        else:
+            import dask
+
+            stack.enter_context(
+                dask.config.set({"distributed.scheduler.allowed-failures": RETRIES})
+            )
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=execution.workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",  # any free port, never the 8787 of another cluster
+                    memory_limit=WORKER_MEMORY,
+                    silence_logs=logging.ERROR,
+                )
+            )
+            client = stack.enter_context(Client(cluster))
+        yield DaskRunner(client)
+
+
+@contextlib.contextmanager
+def _connect(client_class: Any, address: str) -> Iterator[Any]:
+    try:
+        client = client_class(address, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise UserError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
+    with client:
+        yield client
