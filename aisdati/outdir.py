@@ -24,6 +24,13 @@ files, so even a SIGKILL or a power cut in the middle of the renames leaves a fo
 report (an unfinished run), not a mixed one. A staging folder left by a killed run is swept like
 the other stale temporaries.
 
+An output may be a folder of part files (`datasets`: ingest's points.parquet, a Parquet dataset
+that tasks on several workers write side by side). It moves in with one rename, and the earlier
+run's folder of that name (or file, from versions that wrote one) is first set aside into the
+staging folder with one rename, and deleted with it: a reader never sees the parts of two runs
+in one folder, nor half of one run's parts. A folder of that name holding anything but part
+files (`is_dataset`) is not ours: the command refuses to start.
+
 Why a staging folder rather than a manifest written last that every reader checks: the readers
 of these folders are mostly not ours (GIS tools, notebooks, `pyarrow`, a browser opening
 map.html), and none of them would check a manifest. With the staging folder every reader sees
@@ -75,10 +82,14 @@ STARTED = time.time()
 
 
 # ------------------------------------------------------------------------------ output folders
-def prepare_output_dir(path: Path, option: str = "--out", outputs: Iterable[str] = ()) -> Path:
+def prepare_output_dir(
+    path: Path, option: str = "--out", outputs: Iterable[str] = (), datasets: Iterable[str] = ()
+) -> Path:
     """Make `path` a folder we can write our outputs into, or raise a one-line `UserError`: the
     path is a file, lies under a file, cannot be created or written, or one of `outputs` (the
-    names about to be written there) is a folder. Then sweep our stale temporaries out of it."""
+    names about to be written there) is a folder (for one of `datasets`, the outputs that are
+    folders of part files: a folder that holds other files). Then sweep our stale temporaries
+    out of it."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise _refuse(path, option, "it is a file, not a folder")
@@ -92,8 +103,16 @@ def prepare_output_dir(path: Path, option: str = "--out", outputs: Iterable[str]
         probe.unlink()
     except OSError as exc:
         raise _refuse(path, option, _reason(exc)) from None
+    datasets = set(datasets)
     for name in outputs:
-        if (path / name).is_dir():
+        if name in datasets and (path / name).is_dir() and not is_dataset(path / name):
+            raise _refuse(
+                path,
+                option,
+                f"{name} there is a folder holding other files than the part-NNNNN.parquet of "
+                "an earlier run; move it away or choose another folder",
+            )
+        if name not in datasets and (path / name).is_dir():
             raise _refuse(
                 path,
                 option,
@@ -102,6 +121,19 @@ def prepare_output_dir(path: Path, option: str = "--out", outputs: Iterable[str]
             )
     sweep_stale_temporaries(path)
     return path
+
+
+DATASET_PART = re.compile(r"^part-\d+\.parquet$")
+"""The name of one part file of a dataset folder (`part-00000.parquet`, ...)."""
+
+
+def is_dataset(path: Path) -> bool:
+    """Whether the folder `path` holds nothing but part files: a dataset an earlier run wrote,
+    which a new run may replace."""
+    try:
+        return all(DATASET_PART.match(p.name) and p.is_file() for p in path.iterdir())
+    except OSError:
+        return False
 
 
 def _refuse(path: Path, option: str, reason: str) -> UserError:
@@ -123,13 +155,22 @@ class OutputSet:
     """A command's outputs: written under `folder` (the staging folder, by their paths relative
     to --out) and moved into `out` as one set by `commit` (see the module docstring)."""
 
-    def __init__(self, out: Path, folder: Path, owned: Sequence[str], report: str) -> None:
+    def __init__(
+        self,
+        out: Path,
+        folder: Path,
+        owned: Sequence[str],
+        report: str,
+        datasets: Sequence[str] = (),
+    ) -> None:
         self.out = out
         self.folder = folder
         self.owned = tuple(owned)
         """Glob patterns, relative to `out`, of every file a run of the command may write."""
         self.report = report
         """The name of the set's report, its seal: moved in last, removed first."""
+        self.datasets = tuple(datasets)
+        """Names among `owned` of outputs that are folders of part files, moved as one."""
 
     def final(self, staged: Path) -> Path:
         """Where the staged file `staged` lands in --out."""
@@ -140,13 +181,13 @@ class OutputSet:
         place what that set describes (evaluate's data and models)."""
         with _signals_held():
             for path in sorted(self._earlier(), key=lambda p: p.name != self.report):
-                _remove(path, self.out)
+                self._remove(path)
 
     def commit(self) -> None:
         """Move every staged file into --out as one set, the earlier run's leftovers removed
         (only our own names: `owned`); a failed rename is one `UserError`."""
         raise_if_interrupted()
-        staged = [p.relative_to(self.folder) for p in self.folder.rglob("*") if p.is_file()]
+        staged = self._staged()
         new = set(staged)
         seals = [self.out / rel for rel in staged if rel.name == self.report]
         seals.append(self.out / self.report)
@@ -155,39 +196,68 @@ class OutputSet:
         staged.sort(key=lambda rel: (rel.name == self.report, -len(rel.parts)))
         with _signals_held():
             for path in seals + leftovers:
-                _remove(path, self.out)
+                self._remove(path)
             for rel in staged:
                 target = self.out / rel
                 try:
                     target.parent.mkdir(parents=True, exist_ok=True)
+                    if rel.as_posix() in self.datasets and (target.exists() or target.is_symlink()):
+                        self._set_aside(target)  # a rename cannot replace a folder, or by one
                     os.replace(self.folder / rel, target)
                 except OSError as exc:
                     raise UserError(f"cannot write {target}: {_reason(exc)}") from None
 
+    def _staged(self) -> list[Path]:
+        """What to move in, relative to the staging folder: each dataset folder as one, and
+        every other file."""
+        folders = [Path(d) for d in self.datasets if _is_folder(self.folder / d)]
+        files = [p.relative_to(self.folder) for p in self.folder.rglob("*") if p.is_file()]
+        return folders + [f for f in files if not any(d in f.parents for d in folders)]
+
     def _earlier(self) -> list[Path]:
-        """The files of ours in --out now: what earlier runs left."""
+        """The files (and dataset folders) of ours in --out now: what earlier runs left."""
         found = {p for pattern in self.owned for p in self.out.glob(pattern)}
-        return sorted(p for p in found if p.is_file() or p.is_symlink())
+        files = {p for p in found if p.is_file() or p.is_symlink()}
+        return sorted(files | {self.out / d for d in self.datasets if _is_folder(self.out / d)})
+
+    def _remove(self, path: Path) -> None:
+        """Delete one output of ours (a dataset folder: set aside whole), and its folder under
+        --out if that is left empty (evidence/)."""
+        if _is_folder(path):
+            self._set_aside(path)
+        else:
+            path.unlink(missing_ok=True)
+        parent = path.parent
+        if parent != self.out:
+            with contextlib.suppress(OSError):  # not empty: it holds the user's files or new ones
+                parent.rmdir()
+
+    def _set_aside(self, path: Path) -> None:
+        """Move an earlier output out of --out with one rename, into the staging folder, which
+        is deleted with everything in it once the command ends."""
+        aside = self.folder / ".replaced"
+        aside.mkdir(exist_ok=True)
+        os.rename(path, aside / f"{sum(1 for _ in aside.iterdir())}-{path.name}")
 
 
-def _remove(path: Path, out: Path) -> None:
-    """Delete one file of ours, and its folder under `out` if that is left empty (evidence/)."""
-    path.unlink(missing_ok=True)
-    parent = path.parent
-    if parent != out:
-        with contextlib.suppress(OSError):  # not empty: it holds files of the user's or new ones
-            parent.rmdir()
+def _is_folder(path: Path) -> bool:
+    return path.is_dir() and not path.is_symlink()
 
 
 @contextlib.contextmanager
 def staged_outputs(
-    out: Path, owned: Sequence[str], report: str, option: str = "--out"
+    out: Path,
+    owned: Sequence[str],
+    report: str,
+    option: str = "--out",
+    datasets: Sequence[str] = (),
 ) -> Iterator[OutputSet]:
     """Prepare `out` (`prepare_output_dir`), lock it for this run (a second writer: one-line
-    `UserError`), and yield the `OutputSet` to write into; whatever ends the block before its
-    `commit` (an error, Ctrl-C, SIGTERM) leaves --out as it was."""
+    `UserError`), and yield the `OutputSet` to write into (`datasets`: the outputs that are
+    folders of part files); whatever ends the block before its `commit` (an error, Ctrl-C,
+    SIGTERM) leaves --out as it was."""
     out = Path(out)
-    prepare_output_dir(out, option, [n for n in owned if not _is_glob(n)])
+    prepare_output_dir(out, option, [n for n in owned if not _is_glob(n)], datasets)
     for sub in sorted({Path(n).parts[0] for n in owned if len(Path(n).parts) > 1}):
         if (out / sub).exists() and not (out / sub).is_dir():
             raise _refuse(out, option, f"{sub} there is a file, where the output folder goes")
@@ -200,7 +270,7 @@ def staged_outputs(
             raise _refuse(out, option, busy) from None
         folder = Path(tempfile.mkdtemp(dir=out, prefix=f".staging-{os.getpid()}-"))
         stack.callback(shutil.rmtree, folder, ignore_errors=True)
-        yield OutputSet(out, folder, owned, report)
+        yield OutputSet(out, folder, owned, report, datasets)
 
 
 def _is_glob(name: str) -> bool:

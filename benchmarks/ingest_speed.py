@@ -11,8 +11,9 @@ its own:
   '.[bench]'`; a near-limit reference, not a dependency of aisdati): its query time is its
   read+filter rate, printed beside aisdati's read+clean+filter rate.
 
-Usage: python benchmarks/ingest_speed.py [--rows 10000000] [--work-dir data/raw/bench]
-Prints a markdown table.
+Usage: python benchmarks/ingest_speed.py [--rows 10000000] [--work-dir data/raw/bench] [--workers N]
+Prints a markdown table. `--workers N` runs aisdati's tasks on N local Dask workers; the zip is
+one member, so one read task: its rate is that of one worker, the later stages are shared.
 """
 
 from __future__ import annotations
@@ -108,6 +109,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=10_000_000)
     parser.add_argument("--work-dir", type=Path, default=ROOT / "data" / "raw" / "bench")
+    parser.add_argument("--workers", type=int, default=1, help="aisdati ingest --workers")
     args = parser.parse_args()
     big_zip, big_csv, n = build(args.rows, args.work_dir)
     print(f"input: {big_zip} ({n:,} rows, {big_zip.stat().st_size / 2**20:.0f} MiB zipped)")
@@ -116,11 +118,19 @@ def main() -> None:
         out = args.work_dir / f"out-{roi}"
         cmd = [sys.executable, "-c", AISDATI, *_ingest_command(), "--input", str(big_zip)]
         cmd += ["--out", str(out), "--roi", roi, "--min-points", "5", "--json", "--quiet"]
+        cmd += ["--workers", str(args.workers)]
         seconds, rss, stdout = measure(cmd)
         report = json.loads(stdout)
         stage = report["stage_seconds"]["read_clean_filter"]
         results.append(
-            (f"aisdati ingest --roi {roi}", seconds, n / stage, n / seconds, rss, report)
+            (
+                f"aisdati ingest --roi {roi} --workers {args.workers}",
+                seconds,
+                n / stage,
+                n / seconds,
+                rss,
+                report,
+            )
         )
     try:
         import duckdb  # noqa: F401

@@ -266,7 +266,7 @@ def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat
 def test_evaluate_every_route_needs_routes(cli, kitimat, tmp_path):
     data = tmp_path / "direction"  # as ingest --clusters direction writes it: no routes
     data.mkdir()
-    shutil.copy(kitimat / "points.parquet", data / "points.parquet")
+    shutil.copytree(kitimat / "points.parquet", data / "points.parquet")  # a dataset folder
     tracks = pd.read_parquet(kitimat / "tracks.parquet")
     tracks.assign(route=None).to_parquet(data / "tracks.parquet")
     r = cli("evaluate", "--data", data, "--cluster", "routes", "--detectors", "nearest",

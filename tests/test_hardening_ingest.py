@@ -183,10 +183,10 @@ def test_out_is_a_file_or_under_a_file(cli, data, tmp_path):
 
 def test_an_output_name_taken_by_a_folder_leaves_nothing_behind(cli, data, tmp_path):
     out = tmp_path / "out"
-    (out / "points.parquet").mkdir(parents=True)
+    (out / "tracks.parquet").mkdir(parents=True)  # points.parquet is a folder (of parts) itself
     result, _ = ingest(cli, out, data / NY_HOUR)
-    one_line_error(result, "points.parquet there is a folder")
-    assert leftovers(out) == [] and sorted(p.name for p in out.iterdir()) == ["points.parquet"]
+    one_line_error(result, "tracks.parquet there is a folder")
+    assert leftovers(out) == [] and sorted(p.name for p in out.iterdir()) == ["tracks.parquet"]
 
 
 # ----------------------------------------------------------------- 9: line ends, long header
@@ -289,7 +289,7 @@ def test_a_60_mb_line_among_good_rows(cli, data, tmp_path, baseline):
 def test_rejects_of_an_earlier_run_do_not_stay(cli, data, tmp_path):
     out = tmp_path / "out"
     result, _ = ingest(cli, out, data / NY_HOUR, extra=(*SETTINGS, "--keep-rejects"))
-    assert result.exit_code == 0 and (out / "rejects.parquet").is_file()
+    assert result.exit_code == 0 and (out / "rejects.parquet").is_dir()  # a Parquet dataset
     result, report = ingest(cli, out, data / NY_HOUR)
     assert result.exit_code == 0, result.output
     assert not (out / "rejects.parquet").exists()

@@ -101,7 +101,7 @@ def test_the_next_run_sweeps_what_sigkill_left(cli, tmp_path):
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert temporaries(out) == []
-    assert (out / "points.parquet").is_file()
+    assert (out / "points.parquet").is_dir()  # a Parquet dataset
 
 
 def test_the_sweep_removes_only_stale_temporaries_of_ours(tmp_path):

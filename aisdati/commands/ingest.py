@@ -13,11 +13,12 @@ from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeR
 from aisdati.commands.common import console, err_console, warn
 from aisdati.commands.tables import routes_table, summary_table
 from aisdati.errors import UserError
+from aisdati.execution.runner import Execution
 from aisdati.options import check_options
 from aisdati.outdir import prepare_output_dir
 from aisdati.preprocess.download import download, marinecadastre_files
 from aisdati.preprocess.inputs import expand_inputs
-from aisdati.preprocess.output import OUTPUT_NAMES
+from aisdati.preprocess.output import DATASET_NAMES, OUTPUT_NAMES
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.roi import load_roi
 from aisdati.preprocess.settings import IngestSettings, parse_duration
@@ -45,11 +46,16 @@ def run(
     route_eps_km: str,
     route_seed: int,
     keep_rejects: bool,
+    workers: int,
+    scheduler: str | None,
     quiet: bool,
     as_json: bool,
 ) -> None:
-    """`aisdati ingest` with its options (see `aisdati.cli.ingest`)."""
+    """`aisdati ingest` with its options (see `aisdati.cli.ingest`): its tasks on `workers`
+    local processes, or on the Dask cluster at `scheduler` (whose workers must see the inputs
+    and --out at the same paths: ingest's spill files and staged outputs live in --out)."""
     check_options({"--min-sog": min_sog, "--max-speed": max_speed, "--route-seed": route_seed})
+    execution = Execution(workers=workers, scheduler=scheduler)
     if not inputs and year is None:
         raise UserError("nothing to ingest: give --input FILES or --year (with --months/--zone)")
     settings = IngestSettings(
@@ -76,12 +82,12 @@ def run(
     area = load_roi(roi, warn=warn)
     remote = marinecadastre_files(year, months, days, zone) if year is not None else []
     local = expand_inputs(inputs) if inputs else []
-    prepare_output_dir(out, "--out", OUTPUT_NAMES)
+    prepare_output_dir(out, "--out", OUTPUT_NAMES, DATASET_NAMES)
     if remote:
         prepare_output_dir(data_dir, "--data-dir")
     with download_progress(err_console if as_json else console, quiet) as progress:
         files = download(remote, data_dir, base_url, force, progress=progress) + local
-        result = ingest(files, out, settings, area, roi, progress)
+        result = ingest(files, out, settings, area, roi, progress, execution)
     if as_json:
         print(json.dumps(result.as_dict(), default=str))
     elif not quiet:

@@ -24,7 +24,6 @@ EVIDENCE_FIGURES = 20
 """At most this many flagged tracks (the highest ranked) get an evidence figure."""
 
 
-
 # ------------------------------------------------------------------------------- map.png
 @plain_text()  # its texts may hold model names: drawn as they are
 def plot_detection_map(

@@ -32,6 +32,7 @@ from aisdati.preprocess.streams import (
     bom_encoding,
     counted_stream,
 )
+from aisdati.preprocess.zipmember import InflatedMember, open_member
 
 Kind = Literal["csv", "parquet", "nmea"]
 COMPRESSED = {".gz": "gzip", ".zst": "zstd"}
@@ -85,6 +86,11 @@ class Archive:
             self._zip = zipfile.ZipFile(self.path)
         return self._zip
 
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled (for a task in another process, perhaps in another working folder) without
+        its open file, which is opened there anew, by its absolute path."""
+        return {"path": self.path.absolute(), "_zip": None}
+
 
 @dataclass(frozen=True)
 class Source:
@@ -128,9 +134,11 @@ class Source:
         """A fresh (decompressed) byte stream of the source, and the counter of its bytes read
         from disk (or from the zip member)."""
         if self.also:
-            raw: BinaryIO | MemberChain = MemberChain(self._zip(), (self.member, *self.also))
+            raw: BinaryIO | MemberChain | InflatedMember = MemberChain(
+                self._zip(), (self.member, *self.also)
+            )
         elif self.member is not None:
-            raw = self._zip().open(self.member)
+            raw = open_member(self._zip(), self.member)
         else:
             raw = open(self.path, "rb")  # noqa: SIM115 - closed with the stream
         return counted_stream(raw, self.compression)

