@@ -14,7 +14,7 @@ $(VENV)/.installed: pyproject.toml
 
 test: setup browser
 	$(BIN)/ruff check aisdati tests benchmarks scripts
-	$(BIN)/pytest
+	$(BIN)/pytest -n 2 --dist loadfile
 
 # Headless Chromium (Debian's package) for the offline-map test; where it cannot be installed
 # (not root, no apt-get, no registry) that test skips with a message instead of failing.

@@ -4,7 +4,7 @@ from aisdati.startup import guard_startup
 
 guard_startup()  # first: a Ctrl-C while the CLI imports exits 130 without a traceback
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 ENV_ID = "aisdati/TrajectoryImitation-v0"
 """Gymnasium id of the trajectory-imitation environment over a synthetic family:

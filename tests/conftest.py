@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,14 @@ from typer.testing import CliRunner
 
 DATA = Path(__file__).parent / "data"
 KITIMAT = DATA / "AIS_2018_07-08_Kitimat.csv.gz"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """pytest-xdist's workers ignore SIGINT (the controller takes Ctrl-C), and a child process
+    inherits an ignored signal: restore it, so the CLI processes the tests start see Ctrl-C as
+    a shell would give it to them."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
