@@ -94,7 +94,6 @@ OPTION_RANGES: dict[str, Range] = {
     "--seed": Range(low=0, high=SEED_MAX),
     "--route-seed": Range(low=0, high=SEED_MAX),
     "--routes-per-task": Range(low=0),
-    "--workers": Range(low=1, high=1024),
 }
 """Every numeric option that needs more than its type, with its allowed range. Floats are always
 checked for finiteness, ranged or not."""

@@ -63,17 +63,11 @@ def train_routes(
         if s.out_dir is None:
             raise UserError("training from an ingest folder needs an output folder (--out)")
     runner = runner or InProcess()
-    members = [cls.members(s) for s in settings]
-    jobs = [(sum(members[: g.start]), [settings[k] for k in g])
+    counts = [cls.members(s) for s in settings]
+    jobs = [(range(sum(counts[: g.start]), sum(counts[: g.stop])), [settings[k] for k in g])
             for g in route_tasks(len(settings), routes_per_task)]  # fmt: skip
     follow = on_step if isinstance(runner, InProcess) else None  # callbacks stay in this process
-    ended = None
-    if on_task is not None:
-
-        def ended(i: int) -> None:
-            first, group = jobs[i]
-            on_task(range(first, first + sum(cls.members(s) for s in group)))
-
+    ended = None if on_task is None else (lambda i: on_task(jobs[i][0]))
     done = runner.map(functools.partial(train_task, method, how, follow), jobs, ended)
     return [t for group in done for t in group]
 
@@ -82,11 +76,12 @@ def train_task(
     method: str,
     how: ScoreSettings | None,
     on_step: Callback | None,
-    job: tuple[int, list[TrainSettings]],
+    job: tuple[range, list[TrainSettings]],
 ) -> list[Trained]:
-    """One task of `train_routes`: (the index of its first member among all tasks', its
-    routes); `on_step` sees member indices counted over all tasks."""
-    first, settings = job
+    """One task of `train_routes`: (its members' indices among all tasks', its routes);
+    `on_step` sees member indices counted over all tasks."""
+    members, settings = job
+    first = members.start
     follow = None
     if on_step is not None:
 

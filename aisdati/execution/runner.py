@@ -3,7 +3,7 @@
 Every command that has parallel work (ingest's partitions, one model per group of routes,
 chunks of tracks to score) cuts it into tasks by a rule that depends on the data only, never on
 the number of workers, and hands them to a `Runner`: `InProcess` runs them one after the other
-in this process (the default, and what runs when Dask is not installed), `DaskRunner` as tasks
+in this process (the default), `DaskRunner` as tasks
 of a dask.distributed cluster, local processes started here (`--workers N`) or an existing
 cluster (`--scheduler tcp://HOST:PORT`). The same tasks with the same inputs give the same
 outputs, so the results do not depend on where they ran.
@@ -33,7 +33,6 @@ CONNECT_TIMEOUT_S = 10
 """How long `--scheduler` waits for the scheduler to answer before giving up, in one line."""
 WORKER_MEMORY = "auto"
 """Each local worker's memory limit: the machine's memory shared equally (Dask's `auto`)."""
-INSTALL_HINT = "pip install 'aisdati[dask]'"
 
 
 @dataclass(frozen=True)
@@ -130,17 +129,13 @@ class DaskRunner:
 @contextlib.contextmanager
 def open_runner(execution: Execution) -> Iterator[Runner]:
     """The runner of `execution`, for the time of the block: a local cluster started and shut
-    down with it, or a client of the existing one. No Dask installed, or a scheduler that does
-    not answer within `CONNECT_TIMEOUT_S`, is a one-line `UserError`."""
+    down with it, or a client of the existing one. A scheduler that does not answer within
+    `CONNECT_TIMEOUT_S` is a one-line `UserError`."""
     if not execution.distributed:
         yield InProcess()
         return
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise UserError(
-            f"{execution.describe()} needs Dask, which is not installed: {INSTALL_HINT}"
-        ) from None
+    from distributed import Client, LocalCluster  # here: in-process runs never load Dask
+
     with contextlib.ExitStack() as stack:
         if execution.scheduler is not None:
             client = stack.enter_context(_connect(Client, execution.scheduler))
