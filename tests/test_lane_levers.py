@@ -245,6 +245,19 @@ def test_a_member_leaving_takes_its_average_along():
     assert trainer.average.forward_actor.out.weight.shape[0] == 1
 
 
+def test_a_member_can_leave_while_an_old_graph_is_still_alive():
+    """A graph built before a member leaves (kept alive here as a reference cycle would keep
+    it until the garbage collector runs) must not break the next training step."""
+    envs = [make_family_env(replace(get_family("circles"), steps=12)) for _ in range(3)]
+    trainer = DATITrainer(envs, [0, 1, 2], DATIConfig(batch_size=16))
+    trainer.step()
+    held = trainer.nets.time_features(torch.zeros(3, 1, 1))
+    trainer.remove_members([0])
+    trainer.step()
+    assert trainer.nets.time2vec.phase.shape[0] == 2
+    assert held[1].shape[0] == 3
+
+
 def test_average_option_reaches_the_card_and_is_checked(kitimat, tmp_path):
     with pytest.raises(UserError, match="average must be in"):
         lane_config("lanes", ["average=1"])
