@@ -71,6 +71,12 @@ SCHEDULER_OPTION = typer.Option(
     help="Run the command's tasks on the existing Dask cluster at this address "
     "(tcp://HOST:PORT) instead; every worker must see the input and output folders.",
 )
+DEVICE_OPTION = typer.Option(
+    "cpu",
+    "--device",
+    help="Where DATI's networks run: cpu, cuda, cuda:N or auto (CUDA when torch sees a GPU). "
+    "The environments, DTW and the other detectors always run on the CPU.",
+)
 LANE_OPTION = typer.Option(
     None,
     "--lane",
@@ -181,6 +187,7 @@ def selftest(
         "1: in this process.",
     ),
     scheduler: str | None = SCHEDULER_OPTION,
+    device: str = DEVICE_OPTION,
     preset: str = SELFTEST_PRESET_OPTION,
     repeats: int = typer.Option(
         1, help="Run the whole protocol this many times on further seed blocks (its spread)."
@@ -240,6 +247,7 @@ def train(
     ),
     workers: int = WORKERS_OPTION,
     scheduler: str | None = SCHEDULER_OPTION,
+    device: str = DEVICE_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the model card as JSON on stdout."),
 ) -> None:
@@ -324,6 +332,7 @@ def evaluate(
     seed: int = typer.Option(0, help="Seed of the split, the injections and the training."),
     workers: int = WORKERS_OPTION,
     scheduler: str | None = SCHEDULER_OPTION,
+    device: str = DEVICE_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress or table."),
     as_json: bool = typer.Option(False, "--json", help="Print evaluation.json on stdout."),
 ) -> None:
@@ -387,6 +396,7 @@ def detect(
     seed: int = typer.Option(0, help="Seed of the rollouts' latent noise."),
     workers: int = WORKERS_OPTION,
     scheduler: str | None = SCHEDULER_OPTION,
+    device: str = DEVICE_OPTION,
     labels: Path | None = typer.Option(
         None,
         "--labels",

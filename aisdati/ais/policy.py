@@ -203,6 +203,7 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
     over its members; each member computes its own rows only). Each row draws its own latent
     noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
+    device = nets.forward_actor.out.weight.device  # the rollout runs where the networks are
 
     def make(n: int, seed: int, temporal: bool) -> Act:
         process = config.noise_process if temporal else NoiseProcess("gaussian")
@@ -217,7 +218,7 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
 
         def act(obs: np.ndarray) -> np.ndarray:
             eta = noise.sample()[0]
-            out = nets.decide(torch.as_tensor(obs)[grid], eta[grid])
+            out = nets.decide(torch.as_tensor(obs)[grid].to(device), eta[grid].to(device)).cpu()
             if member is not None:
                 return out[member].numpy()
             decided = torch.empty(n, out.shape[-1], dtype=out.dtype)

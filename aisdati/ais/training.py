@@ -86,6 +86,9 @@ class TrainSettings:
     """Model file name in `out_dir` (default: the cluster's name)."""
     resume: bool = False
     """Continue from <out>/<stem>.ckpt (written after every episode) when it exists."""
+    device: str = "cpu"
+    """Where DATI's networks train and calibrate (`aisdati.execution.device`); not part of
+    the model: a checkpoint resumes on any device."""
 
 
 def check_settings(settings: TrainSettings) -> None:
@@ -433,7 +436,7 @@ class EnsembleRun:
                 ]
             )
         self.envs = envs
-        self.trainer = DATITrainer(envs, self.seeds, self.config, validate)
+        self.trainer = DATITrainer(envs, self.seeds, self.config, validate, device=first.device)
         self.log_lines: list[list[str]] = [[] for _ in self.routes]
         self.steps, self.wall_before, self.resumed_from = 0, 0.0, 0
         self.started = time.perf_counter()

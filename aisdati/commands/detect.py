@@ -15,7 +15,7 @@ from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
 from aisdati.detection.run import Coverage, Detection, DetectSettings, check_settings, detect
 from aisdati.detectors import parse_detectors
-from aisdati.execution import Execution, open_runner
+from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import staged_outputs
 
@@ -41,6 +41,7 @@ def run(
     labels: Path | None,
     workers: int,
     scheduler: str | None,
+    device: str,
     quiet: bool,
     as_json: bool,
 ) -> None:
@@ -74,6 +75,7 @@ def run(
         near_km=near_km,
         seed=seed,
         labels=labels,
+        device=resolve_device(device),
     )
     check_settings(settings)
     execution = Execution(workers=workers, scheduler=scheduler)

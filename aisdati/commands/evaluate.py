@@ -33,7 +33,7 @@ from aisdati.evaluation.run import (
     evaluate,
     evaluate_routes,
 )
-from aisdati.execution import Execution, Runner, open_runner
+from aisdati.execution import Execution, Runner, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import OutputSet, staged_outputs
 from aisdati.progress import EpisodeProgress, TrainingProgress
@@ -66,6 +66,7 @@ def run(
     seed: int,
     workers: int,
     scheduler: str | None,
+    device: str,
     quiet: bool,
     as_json: bool,
 ) -> None:
@@ -101,6 +102,7 @@ def run(
         before=None if before is None else pd.Timestamp(before, tz="UTC"),
         altered=altered,
         strength=strength,
+        device=resolve_device(device),
         **lane_settings(preset, lane, cluster),
     )
     check(settings)

@@ -12,6 +12,7 @@ from rich.markup import escape
 from aisdati.commands.common import console
 from aisdati.commands.tables import ablation_table, selftest_table
 from aisdati.errors import UserError
+from aisdati.execution import resolve_device
 from aisdati.outdir import prepare_output_dir
 from aisdati.progress import EpisodeProgress
 from aisdati.selftest.families import FAMILIES
@@ -31,6 +32,7 @@ def run(
     references: int,
     workers: int,
     scheduler: str | None,
+    device: str,
     preset: str,
     repeats: int,
     noise: str | None,
@@ -64,6 +66,7 @@ def run(
         steps=steps,
         workers=workers,
         scheduler=scheduler,
+        device=resolve_device(device),
         methods=tuple(method_names),
         repeats=repeats,
     )

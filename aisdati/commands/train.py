@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ from aisdati.commands.tables import dati_model_table, route_models_table
 from aisdati.detectors import model_name, parse_detectors
 from aisdati.detectors.registry import detector_class
 from aisdati.detectors.train import Trained, train_detector, train_routes
-from aisdati.execution import Execution, open_runner
+from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.interrupts import Terminated
 from aisdati.options import check_options
 from aisdati.outdir import prepare_output_dir
@@ -50,6 +51,7 @@ def run(
     routes_per_task: int,
     workers: int,
     scheduler: str | None,
+    device: str,
     quiet: bool,
     as_json: bool,
 ) -> None:
@@ -57,8 +59,10 @@ def run(
     check_options({"--seed": seed, "--routes-per-task": routes_per_task})
     (method,) = parse_detectors(method)[:1]
     execution = Execution(workers=workers, scheduler=scheduler)
+    device = resolve_device(device)
     if cluster.strip().lower() == "routes":
         settings = route_settings(data, out, preset, lane, episodes, seed, patience, max_tracks)
+        settings = [replace(s, device=device) for s in settings]
         return train_every_route(method, settings, execution, routes_per_task, quiet)
     if execution.distributed:
         warn("one model trains in this process: --workers and --scheduler spread --cluster routes")
@@ -75,6 +79,7 @@ def run(
         max_tracks=max_tracks or None,
         patience=patience,
         resume=resume,
+        device=device,
     )
     resuming = resume and (out / f"{stem}.ckpt").is_file()
     result = train_with_bars(method, settings, resuming, disable=quiet or as_json)

@@ -75,6 +75,8 @@ class DetectSettings:
     seed: int = 0
     labels: Path | None = None
     """CSV of hand labels (track_id or mmsi + start, label 0/1) for precision/recall/F1/AUC."""
+    device: str = "cpu"
+    """Where DATI's networks roll out (`aisdati.execution.device`)."""
 
     @property
     def how(self) -> ScoreSettings:
@@ -151,6 +153,8 @@ def load_models(settings: DetectSettings) -> list[Detector]:
                 f"no {settings.method} models in {settings.models_dir}: run "
                 f"`aisdati train --method {settings.method} --cluster ...` first"
             )
+    for model in models:
+        model.to_device(settings.device)
     return models
 
 

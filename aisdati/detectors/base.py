@@ -152,6 +152,12 @@ class Detector(ABC):
     ) -> Scores:
         """`score`'s work, with the settings chosen."""
 
+    def to_device(self, device: str) -> None:
+        """Run the detector's networks on `device` (`aisdati.execution.device`) from now on;
+        a detector without torch networks (or one whose networks are too small to gain from
+        a GPU: BC) runs on the CPU whatever it is told."""
+        del device  # only DATI's networks move (`DATIDetector.to_device`)
+
     def decision_function(self, tracks: Sequence[Track]) -> np.ndarray:
         """Each track's score (metres, higher = more abnormal) of the detector's `how`."""
         return self.score(tracks).score_m

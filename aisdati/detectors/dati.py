@@ -88,6 +88,7 @@ class DATIDetector(PolicyDetector):
     def take(self, result: TrainResult, tracks: Sequence[Track]) -> None:
         """Become the model `result` trained on `tracks`, and calibrate it on them."""
         self.nets, self.config, self.corridor = result.networks, result.config, result.corridor
+        self.to_device(self.settings.device)  # calibrate where it trained
         self.card, self.resumed_from = result.card, result.resumed_from
         self.card.training.finished = True
         lane = self.card.lane_config
@@ -96,6 +97,9 @@ class DATIDetector(PolicyDetector):
 
     def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
         return dati_act(self.trained(), self.config, member)(n, seed, temporal)
+
+    def to_device(self, device: str) -> None:
+        self.trained().to(device)
 
     def trained(self) -> DATINetworks:
         if self.nets is None:

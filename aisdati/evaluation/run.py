@@ -73,6 +73,8 @@ class EvaluateSettings:
     """Share of the held-out tracks that take an anomaly."""
     strength: float = 1.0
     """Anomaly distances x this (`aisdati.evaluation.inject.with_strength`; 0.3: subtle)."""
+    device: str = "cpu"
+    """Where DATI's networks train and score (`aisdati.execution.device`)."""
 
     @property
     def anomaly_params(self) -> dict[str, Any]:
@@ -111,6 +113,13 @@ def check(settings: EvaluateSettings) -> None:
     with_strength({}, settings.strength)  # a --strength out of range fails here
 
 
+def _load(stem: Path, settings: EvaluateSettings) -> Detector:
+    """The detector saved at `stem`, on the evaluation's device."""
+    det = load_detector(stem)
+    det.to_device(settings.device)
+    return det
+
+
 def _existing(settings: EvaluateSettings) -> dict[str, Detector]:
     """Detectors of `models_dir` trained on this cluster, by method."""
     found: dict[str, Detector] = {}
@@ -119,7 +128,7 @@ def _existing(settings: EvaluateSettings) -> dict[str, Detector]:
     for method in settings.detectors:
         stem = settings.models_dir / model_name(settings.cluster, method)
         if stem.with_suffix(".json").is_file():
-            found[method] = load_detector(stem)
+            found[method] = _load(stem, settings)
     if not found:
         raise UserError(
             f"no model of cluster {settings.cluster!r} for {', '.join(settings.detectors)} in "
@@ -168,6 +177,7 @@ class _Prepared:
             track_ids=tuple(self.split.train_ids),
             preset=s.preset,
             lane=s.lane,
+            device=s.device,
         )
 
 
@@ -224,7 +234,7 @@ def evaluate(
         else:
             say(f"training {method}")
             trained = train(method, prepared.train_settings(), _how(settings))
-            detectors[method] = load_detector(trained.model.with_suffix(""))
+            detectors[method] = _load(trained.model.with_suffix(""), settings)
         train_s[method] = time.perf_counter() - t0
     return _score(prepared, detectors, train_s, say, runner)
 
@@ -347,7 +357,7 @@ def evaluate_routes(
             ]
         share = (time.perf_counter() - t0) / len(todo)  # an ensemble's time, shared out
         for k, model in zip(todo, models, strict=True):
-            detectors[k][method] = load_detector(model.with_suffix(""))
+            detectors[k][method] = _load(model.with_suffix(""), settings)
             train_s[k][method] = share
     evaluations = [
         _score(p, d, t, say, runner) for p, d, t in zip(prepared, detectors, train_s, strict=True)

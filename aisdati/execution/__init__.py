@@ -1,6 +1,8 @@
 """Where the work runs: in this process, or as tasks on a Dask cluster (`--workers`,
-`--scheduler`); see `aisdati.execution.runner`."""
+`--scheduler`; `aisdati.execution.runner`), and on which torch device DATI's networks run
+(`--device`; `aisdati.execution.device`)."""
 
+from aisdati.execution.device import resolve_device
 from aisdati.execution.runner import Execution, InProcess, Runner, open_runner
 
-__all__ = ["Execution", "InProcess", "Runner", "open_runner"]
+__all__ = ["Execution", "InProcess", "Runner", "open_runner", "resolve_device"]

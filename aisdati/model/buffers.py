@@ -15,9 +15,14 @@ from aisdati.model.env import TrajectoryImitationEnv
 class EnsembleReplayBuffer:
     """A ring buffer per member of the transitions' fields (`dims`: name -> width, in order)."""
 
-    def __init__(self, members: int, capacity: int, dims: dict[str, int]):
+    def __init__(
+        self, members: int, capacity: int, dims: dict[str, int], device: torch.device | None = None
+    ):
+        """The buffer lives on `device` (the networks'); indices are drawn on the CPU."""
         self.capacity = capacity
-        self.data = {k: torch.zeros(members, capacity, width) for k, width in dims.items()}
+        self.data = {
+            k: torch.zeros(members, capacity, width, device=device) for k, width in dims.items()
+        }
         self.size = 0
         self.ptr = 0
 
@@ -28,7 +33,7 @@ class EnsembleReplayBuffer:
     def add(self, **batch: Tensor) -> None:
         """Append one transition per member; each value is [E, dim]."""
         for key in self.fields:
-            self.data[key][:, self.ptr] = batch[key]
+            self.data[key][:, self.ptr] = batch[key].to(self.data[key].device)
         self.ptr = (self.ptr + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
@@ -37,7 +42,8 @@ class EnsembleReplayBuffer:
         idx = torch.stack(
             [torch.randint(self.size, (batch_size,), generator=g) for g in generators]
         )
-        rows = torch.arange(len(generators))[:, None]
+        device = next(iter(self.data.values())).device
+        idx, rows = idx.to(device), torch.arange(len(generators), device=device)[:, None]
         return {k: v[rows, idx] for k, v in self.data.items()}
 
     def keep(self, idx: list[int]) -> None:
@@ -56,7 +62,7 @@ class EnsembleReplayBuffer:
         size = int(state["size"])
         for k, v in state["data"].items():
             self.data[k].zero_()
-            self.data[k][:, :size] = v
+            self.data[k][:, :size] = v.to(self.data[k].device)
         self.size, self.ptr = size, int(state["ptr"])
 
 

@@ -152,18 +152,24 @@ class DATITrainer(Trainer[DATINetworks]):
         config: DATIConfig | None = None,
         validate: Callable[[DATITrainer, int], float] | None = None,
         noise: Sequence[NoiseProcess] | None = None,
+        device: str = "cpu",
     ):
         """`validate(trainer, k)`, when given, scores live member k at the end of each of its
         episodes (lower is better); the best actor and early stopping then follow that score
         instead of the episode's loss (the AIS training's validator scores the DTW of the
         actor's rollouts on validation tracks). `noise` gives each member its own latent noise
-        process (default: the config's)."""
+        process (default: the config's). `device` is where the networks, their optimisers
+        and the replay buffer live (`aisdati.execution.device`): every random draw is still
+        taken on the CPU from the members' generators and moved there, so a member trains the
+        same on any device up to the device's float rounding."""
         super().__init__(envs, seeds)
         self.cfg = config or DATIConfig()
+        self.device = torch.device(device)
         self.validate = validate
         self.state_dim = envs[0].observation_space.shape[0] - 1
         self.decision_dim = envs[0].action_space.shape[0]
         self.nets = DATINetworks(self.state_dim, self.decision_dim, self.cfg.network, self.seeds)
+        self.nets.to(self.device)
         self.final = copy.deepcopy(self.nets)  # receives each member's best forward actor
         self.average = copy.deepcopy(self.nets) if self.cfg.actor_average else None
         """The moving average of the live forward actors (`DATIConfig.actor_average`)."""
@@ -181,7 +187,7 @@ class DATITrainer(Trainer[DATINetworks]):
             "noise": self.cfg.network.latent_dim,
             "time": 1,
         }
-        self.buffer = EnsembleReplayBuffer(len(seeds), self.cfg.buffer_capacity, dims)
+        self.buffer = EnsembleReplayBuffer(len(seeds), self.cfg.buffer_capacity, dims, self.device)
         n = len(seeds)
         self.best_loss = [float("inf")] * n
         self.wait = [0] * n
@@ -252,6 +258,7 @@ class DATITrainer(Trainer[DATINetworks]):
                 fake_s = nets.backward_actor(a_hat, eta, t)
             u_f = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
             u_b = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
+            u_f, u_b = u_f.to(self.device), u_b.to(self.device)
             cf, cb = nets.forward_critic, nets.backward_critic
             real_f = nets.forward_critic_input(a_real, s)
             fake_f = nets.forward_critic_input(fake_a, s)
@@ -321,17 +328,21 @@ class DATITrainer(Trainer[DATINetworks]):
             return
         if len(demonstrations) != len(self.active) or self.history:
             raise ValueError("pretrain once, before training, with one demonstration per member")
-        data = [[torch.as_tensor(x, dtype=torch.float32) for x in d] for d in demonstrations]
+        data = [
+            [torch.as_tensor(x, dtype=torch.float32, device=self.device) for x in d]
+            for d in demonstrations
+        ]
         updates = c.pretrain_epochs * -(-max(len(d[0]) for d in data) // c.batch_size)
         for _ in range(updates):
             picks = [
-                torch.randint(len(d[0]), (c.batch_size,), generator=g)
+                torch.randint(len(d[0]), (c.batch_size,), generator=g).to(self.device)
                 for d, g in zip(data, self.generators, strict=True)
             ]
             s, step, a = (
                 torch.stack([d[i][p] for d, p in zip(data, picks, strict=True)]) for i in range(3)
             )
             eta = torch.stack([self.noise.draw(k, c.batch_size) for k in range(len(data))])
+            eta = eta.to(self.device)
             t = nets.time_features(step[..., None])
             pull = (nets.forward_actor(s, eta, t) - a).abs().mean(dim=(1, 2))
             self.opt_l1.zero_grad(set_to_none=True)
@@ -363,15 +374,17 @@ class DATITrainer(Trainer[DATINetworks]):
                     p.lerp_(live[name], 1.0 - decay)
 
     def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """Every member's state, decision, latent noise and time input, on the CPU (where the
+        environments step)."""
         obs = torch.as_tensor(np.stack(self._obs), dtype=torch.float32)[:, None, :]
         eta = self.noise.sample()
-        action = self.nets.decide(obs, eta)
+        action = self.nets.decide(obs.to(self.device), eta.to(self.device)).cpu()
         state, t = obs[:, 0, : self.state_dim], obs[:, 0, self.state_dim :]
         return state, action[:, 0], eta[:, 0], t
 
     def step(self) -> list[EpisodeLog]:
         """One environment step of every active member (with its training batch first)."""
-        losses = self.train_batch()
+        losses = self.train_batch().cpu()
         self._update_average(self.cfg.actor_average)
         state, action, eta, t = self._act()
         rewards, perfect, ended = [], [], []

@@ -45,7 +45,7 @@ MAX_SEEDS = 64
 def save_networks(stem: Path, nets: DATINetworks, config: DATIConfig, card: dict[str, Any]) -> None:
     """Write `<stem>.pt` (state dict) and `<stem>.json` (config, dimensions, seeds, card)."""
     buf = io.BytesIO()
-    torch.save(nets.state_dict(), buf)
+    torch.save({name: w.cpu() for name, w in nets.state_dict().items()}, buf)  # any device
     meta = {
         "format": NETWORKS_FORMAT,
         "state_dim": nets.state_dim,

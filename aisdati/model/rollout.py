@@ -74,8 +74,10 @@ def dati_policy(
         for member_seed, p in zip(nets.seeds, processes, strict=True)
     ]
 
+    device = nets.forward_actor.out.weight.device  # the rollout runs where the networks are
+
     def act(obs: np.ndarray) -> np.ndarray:
-        eta = torch.stack([n.sample()[:, 0] for n in noises])
-        return nets.decide(torch.as_tensor(obs), eta).numpy()
+        eta = torch.stack([n.sample()[:, 0] for n in noises]).to(device)
+        return nets.decide(torch.as_tensor(obs).to(device), eta).cpu().numpy()
 
     return act

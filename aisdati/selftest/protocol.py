@@ -166,7 +166,7 @@ def _trainer(
         ddpg = DDPGTITrainer(envs, seeds, settings.ddpg)
         return ddpg, lambda: ddpg_ti_act(ddpg.actor, seeds, refs, settings.ddpg, seed)
     config = settings.dati_config(method)
-    dati = DATITrainer(envs, seeds, config, noise=noise)
+    dati = DATITrainer(envs, seeds, config, noise=noise, device=settings.device)
     return dati, lambda: dati_policy(dati.final, config, refs, seed, noise)
 
 

@@ -113,6 +113,9 @@ class SelftestSettings:
     """Local Dask processes the tasks run on (1: this process); see `aisdati.execution`."""
     scheduler: str | None = None
     """An existing Dask cluster's address to run the tasks on instead."""
+    device: str = "cpu"
+    """Where DATI's networks train and roll out (`aisdati.execution.device`); the baselines
+    stay on the CPU."""
     eval_seed: int = 2024
     config: DATIConfig = field(default_factory=lambda: preset_config(_DEFAULT))
     methods: tuple[str, ...] = ("dati",)
