@@ -318,16 +318,15 @@ def dtw_path_length(a, b, metric: str = "euclidean") -> tuple[float, int]:
 
 def prepare_lonlat(series: np.ndarray) -> np.ndarray:
     """Lon/lat series of one length, [n, k, 2] degrees, in the form `pairs_mean_dtw_m` reads:
-    [n, k, 3] (lon, lat, cos lat) in radians, so that comparing each series with many others
-    takes each cosine once. Reversing a prepared series equals preparing the reversed one."""
+    [n, k, 3] unit vectors, so that comparing each series with many others takes each point's
+    trigonometry once, and each cell costs a chord and its arc (the great-circle distance,
+    exact: 2R asin(chord / 2)), half the haversine's work. Reversing a prepared series equals
+    preparing the reversed one."""
     series = np.asarray(series, dtype=np.float64)
     if series.ndim != 3 or series.shape[1] == 0 or series.shape[2] != 2:
         raise ValueError(f"series must be lon/lat [n, k >= 1, 2], got shape {series.shape}")
     _check_finite(series, "series")
-    out = np.empty((series.shape[0], series.shape[1], 3))
-    for i in range(series.shape[0]):
-        out[i] = _prepare(np.ascontiguousarray(series[i]), _HAVERSINE)
-    return out
+    return unit_vectors(series.reshape(-1, 2)).reshape(series.shape[0], series.shape[1], 3)
 
 
 def pairs_mean_dtw_m(a: np.ndarray, b: np.ndarray, pairs: np.ndarray) -> np.ndarray:
@@ -351,8 +350,10 @@ def pairs_mean_dtw_m(a: np.ndarray, b: np.ndarray, pairs: np.ndarray) -> np.ndar
 @njit(cache=True, parallel=True)
 def _prepared_pairs_mean(a, b, pairs):  # pragma: no cover - compiled
     out = np.empty(pairs.shape[0])
+    n, m = a.shape[1], b.shape[1]
+    no_tail = np.zeros(n)
     for p in prange(pairs.shape[0]):
-        cost, length = _cost_and_length(a[pairs[p, 0]], b[pairs[p, 1]], _HAVERSINE)
+        cost, length = _gc_cost_length(a[pairs[p, 0]], 0, n, b[pairs[p, 1]], 0, m, no_tail, np.inf)
         out[p] = cost / length
     return out
 

@@ -40,6 +40,7 @@ print(int(ok.sum()))
 
 DUCKDB = """
 import sys, time, duckdb
+duckdb.sql("SET enable_progress_bar = false")  # it would print its bar on stdout
 start = time.perf_counter()
 n = duckdb.sql(
     "SELECT count(*) FROM read_csv('" + sys.argv[1] + "', header=true) "

@@ -187,18 +187,16 @@ class ShapeDistance:
         if len(cols) <= CANDIDATES:
             return np.argmin(self.cross(rows, cols), axis=1)
         out = np.empty(len(rows), dtype=np.int64)
-        b = self.fwd[cols]
-        for lo in range(0, len(rows), 1024):
-            a = self.fwd[rows[lo : lo + 1024], None]
-            h = (
-                np.sin((b[None, :, :, 1] - a[..., 1]) / 2) ** 2
-                + a[..., 2] * b[None, :, :, 2] * np.sin((b[None, :, :, 0] - a[..., 0]) / 2) ** 2
-            )
-            lockstep = np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0))).mean(axis=2)
+        b = self.fwd[cols]  # unit vectors (`prepare_lonlat`)
+        step = max(1, LOCKSTEP_CELLS // b[..., 0].size)  # rows per chunk: bounded memory
+        for lo in range(0, len(rows), step):
+            a = self.fwd[rows[lo : lo + step], None]
+            chord = np.linalg.norm(b[None] - a, axis=-1)
+            lockstep = np.arcsin(np.clip(chord / 2, 0.0, 1.0)).mean(axis=2)
             pick = np.sort(np.argsort(lockstep, axis=1, kind="stable")[:, :CANDIDATES], axis=1)
-            rows_lo = np.repeat(rows[lo : lo + 1024], CANDIDATES)
+            rows_lo = np.repeat(rows[lo : lo + step], CANDIDATES)
             d = self.pairs(rows_lo, cols[pick.ravel()]).reshape(pick.shape)
-            out[lo : lo + 1024] = pick[np.arange(len(pick)), np.argmin(d, axis=1)]
+            out[lo : lo + step] = pick[np.arange(len(pick)), np.argmin(d, axis=1)]
         return out
 
     def cross(self, rows: np.ndarray, cols: np.ndarray, reverse: bool = False) -> np.ndarray:
@@ -219,6 +217,9 @@ SHAPE_PAIRS = 500_000
 """DTW pairs the shape split compares at most (about 15 s on 2 idle cores): when the groups'
 samples of `max_sample` would need more, every group's sample shrinks to the size that fits."""
 CANDIDATES = 3
+LOCKSTEP_CELLS = 2_000_000
+"""Point pairs one chunk of `ShapeDistance.nearest`'s lock-step distances holds (about 50 MB
+of differences)."""
 """Path medoids a track is compared with by DTW: the nearest in lock-step distance."""
 
 
