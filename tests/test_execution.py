@@ -101,6 +101,38 @@ def test_runners_return_results_in_order_and_say_when_each_ends(cluster):
     assert DaskRunner(cluster).workers == 2
 
 
+def started_at(x: int) -> float:
+    time.sleep(0.05)
+    return time.monotonic()
+
+
+def test_the_costliest_tasks_start_first_and_results_keep_their_order():
+    """On one worker the tasks run one at a time: in the order of their costs, largest first
+    (so on many workers the last to end is a short one); the results in the items' order."""
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0"
+        ) as local,
+        distributed.Client(local) as client,
+    ):
+        runner = DaskRunner(client)
+        costs = [3.0, 40.0, 1.0, 12.0, 7.0]
+        starts = runner.map(started_at, list(range(5)), costs=costs)
+        assert runner.map(square, [1, 2, 3], costs=[1.0, 5.0, 2.0]) == [1, 4, 9]
+    assert list(np.argsort(starts)) == [1, 3, 4, 0, 2]
+
+
+def test_route_tasks_are_costed_by_their_tracks(kitimat):
+    from aisdati.detectors.train import training_costs
+    from aisdati.tracks.store import read_track_table
+
+    table = read_track_table(kitimat)
+    costs = training_costs(settings_of(kitimat, kitimat / "unused"))
+    for name, cost in zip(ROUTES, costs, strict=True):
+        assert cost == pytest.approx(table.loc[table["route"] == name, "n_points"].mean())
+    assert training_costs([TrainSettings(cluster="nowhere")]) == [1.0]
+
+
 def test_a_task_error_reaches_the_caller_as_itself(cluster):
     with pytest.raises(UserError, match="task 0 refuses"):
         DaskRunner(cluster).map(refuse, [0])

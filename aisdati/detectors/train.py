@@ -15,12 +15,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+
 from aisdati.ais.training import TrainSettings, check_settings, model_stem, training_set
 from aisdati.detectors.registry import detector_class
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.model.trainer import Callback
+from aisdati.tracks.store import read_track_table, select_cluster
 
 ROUTES_PER_TASK = 1
 """Routes one training task holds by default: each route is a task of its own."""
@@ -64,12 +67,37 @@ def train_routes(
             raise UserError("training from an ingest folder needs an output folder (--out)")
     runner = runner or InProcess()
     counts = [cls.members(s) for s in settings]
+    groups = route_tasks(len(settings), routes_per_task)
     jobs = [(range(sum(counts[: g.start]), sum(counts[: g.stop])), [settings[k] for k in g])
-            for g in route_tasks(len(settings), routes_per_task)]  # fmt: skip
+            for g in groups]  # fmt: skip
+    cost = training_costs(settings)
+    costs = [sum(cost[k] * counts[k] for k in g) for g in groups]
     follow = on_step if isinstance(runner, InProcess) else None  # callbacks stay in this process
     ended = None if on_task is None else (lambda i: on_task(jobs[i][0]))
-    done = runner.map(functools.partial(train_task, method, how, follow), jobs, ended)
+    done = runner.map(functools.partial(train_task, method, how, follow), jobs, ended, costs)
     return [t for group in done for t in group]
+
+
+def training_costs(settings: Sequence[TrainSettings]) -> list[float]:
+    """Each model's expected training work per member, for the order the tasks start in: the
+    mean report count of its tracks (a DATI episode sails one track, and every route has the
+    same episode budget). Only an order: 1 where the tracks cannot be read here. Each ingest
+    folder's track table is read once."""
+    tables: dict[Path, pd.DataFrame | None] = {}
+    out = []
+    for s in settings:
+        if s.data_dir is not None and s.data_dir not in tables:
+            try:
+                tables[s.data_dir] = read_track_table(s.data_dir)
+            except UserError:
+                tables[s.data_dir] = None
+        table = tables.get(s.data_dir) if s.data_dir is not None else None
+        try:
+            chosen = None if table is None else select_cluster(table, s.cluster, s.data_dir, 1)
+        except UserError:
+            chosen = None
+        out.append(1.0 if chosen is None else float(chosen["n_points"].mean()))
+    return out
 
 
 def train_task(
