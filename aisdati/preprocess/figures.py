@@ -44,6 +44,14 @@ def _keep_right(xy: np.ndarray, shift: float, coslat: float) -> np.ndarray:
     return np.column_stack([moved[:, 0] / coslat, moved[:, 1]])
 
 
+def _extent(lines: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The lon/lat box of the lines, from each line's extremes: no copy of every point."""
+    if not lines:
+        return np.zeros(2), np.zeros(2)
+    lo = np.min([xy.min(axis=0) for xy in lines], axis=0)
+    return lo, np.max([xy.max(axis=0) for xy in lines], axis=0)
+
+
 @plain_text()  # the title names the input files, the legend the routes: drawn as they are
 def plot_routes(
     lines: Sequence[np.ndarray],
@@ -66,11 +74,7 @@ def plot_routes(
     colour = dict(zip(names, _route_colours(len(names)), strict=True))
     shown = set(names[:ROUTE_LEGEND_MAX])
     framed = [xy for xy, label in zip(lines, labels, strict=True) if label in shown] or list(lines)
-    if framed:  # the frame from each line's extremes: no copy of every point
-        lo = np.min([xy.min(axis=0) for xy in framed], axis=0)
-        hi = np.max([xy.max(axis=0) for xy in framed], axis=0)
-    else:
-        lo = hi = np.zeros(2)
+    lo, hi = _extent(framed)
     coslat = float(np.cos(np.radians((lo[1] + hi[1]) / 2)))
     shift = ROUTE_OFFSET * max((hi[0] - lo[0]) * coslat, hi[1] - lo[1], 1e-3)
     from matplotlib.collections import LineCollection
