@@ -203,7 +203,7 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
     over its members; each member computes its own rows only). Each row draws its own latent
     noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
-    device = nets.forward_actor.out.weight.device  # the rollout runs where the networks are
+    device = nets.device
 
     def make(n: int, seed: int, temporal: bool) -> Act:
         process = config.noise_process if temporal else NoiseProcess("gaussian")

@@ -14,11 +14,6 @@ import re
 
 from aisdati.errors import UserError
 
-DEVICE_HELP = (
-    "Where DATI's networks run: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or "
-    "cuda:N. The environments, DTW and the baselines always run on the CPU."
-)
-
 
 def resolve_device(choice: str) -> str:
     """'auto' -> 'cuda:0' when torch sees a CUDA device, else 'cpu'; 'cpu'; 'cuda' or 'cuda:N'

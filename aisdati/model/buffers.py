@@ -16,10 +16,10 @@ class EnsembleReplayBuffer:
     """A ring buffer per member of the transitions' fields (`dims`: name -> width, in order)."""
 
     def __init__(
-        self, members: int, capacity: int, dims: dict[str, int], device: torch.device | None = None
+        self, members: int, capacity: int, dims: dict[str, int], device: torch.device | str = "cpu"
     ):
         """The buffer lives on `device` (the networks'); indices are drawn on the CPU."""
-        self.capacity = capacity
+        self.capacity, self.device = capacity, device
         self.data = {
             k: torch.zeros(members, capacity, width, device=device) for k, width in dims.items()
         }
@@ -33,7 +33,7 @@ class EnsembleReplayBuffer:
     def add(self, **batch: Tensor) -> None:
         """Append one transition per member; each value is [E, dim]."""
         for key in self.fields:
-            self.data[key][:, self.ptr] = batch[key].to(self.data[key].device)
+            self.data[key][:, self.ptr] = batch[key].to(self.device)
         self.ptr = (self.ptr + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
@@ -42,8 +42,7 @@ class EnsembleReplayBuffer:
         idx = torch.stack(
             [torch.randint(self.size, (batch_size,), generator=g) for g in generators]
         )
-        device = next(iter(self.data.values())).device
-        idx, rows = idx.to(device), torch.arange(len(generators), device=device)[:, None]
+        idx, rows = idx.to(self.device), torch.arange(len(generators), device=self.device)[:, None]
         return {k: v[rows, idx] for k, v in self.data.items()}
 
     def keep(self, idx: list[int]) -> None:
@@ -62,7 +61,7 @@ class EnsembleReplayBuffer:
         size = int(state["size"])
         for k, v in state["data"].items():
             self.data[k].zero_()
-            self.data[k][:, :size] = v.to(self.data[k].device)
+            self.data[k][:, :size] = v.to(self.device)
         self.size, self.ptr = size, int(state["ptr"])
 
 

@@ -238,6 +238,11 @@ class DATINetworks(nn.Module):
         return len(self.seeds)
 
     @property
+    def device(self) -> torch.device:
+        """Where the networks are: every rollout runs there (`aisdati.execution.device`)."""
+        return self.forward_actor.out.weight.device
+
+    @property
     def state_dim(self) -> int:
         return self.forward_actor.input_features.weight.shape[1]
 

@@ -74,7 +74,7 @@ def dati_policy(
         for member_seed, p in zip(nets.seeds, processes, strict=True)
     ]
 
-    device = nets.forward_actor.out.weight.device  # the rollout runs where the networks are
+    device = nets.device
 
     def act(obs: np.ndarray) -> np.ndarray:
         eta = torch.stack([n.sample()[:, 0] for n in noises]).to(device)

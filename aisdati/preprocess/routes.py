@@ -67,7 +67,7 @@ import shapely
 from numba import njit
 
 from aisdati.dtw import pairs_mean_dtw_m, prepare_lonlat
-from aisdati.geo import EARTH_RADIUS_M, haversine_m, unit_vectors
+from aisdati.geo import EARTH_RADIUS_M, arc_m, haversine_m, unit_vectors
 from aisdati.tracks.schema import GEO_METADATA, ROUTE_COLUMNS, ROUTE_PREFIX, ROUTES_SCHEMA
 
 
@@ -191,8 +191,7 @@ class ShapeDistance:
         step = max(1, LOCKSTEP_CELLS // b[..., 0].size)  # rows per chunk: bounded memory
         for lo in range(0, len(rows), step):
             a = self.fwd[rows[lo : lo + step], None]
-            chord = np.linalg.norm(b[None] - a, axis=-1)
-            lockstep = np.arcsin(np.clip(chord / 2, 0.0, 1.0)).mean(axis=2)
+            lockstep = arc_m(np.linalg.norm(b[None] - a, axis=-1)).mean(axis=2)
             pick = np.sort(np.argsort(lockstep, axis=1, kind="stable")[:, :CANDIDATES], axis=1)
             rows_lo = np.repeat(rows[lo : lo + step], CANDIDATES)
             d = self.pairs(rows_lo, cols[pick.ravel()]).reshape(pick.shape)
@@ -217,10 +216,10 @@ SHAPE_PAIRS = 500_000
 """DTW pairs the shape split compares at most (about 15 s on 2 idle cores): when the groups'
 samples of `max_sample` would need more, every group's sample shrinks to the size that fits."""
 CANDIDATES = 3
+"""Path medoids a track is compared with by DTW: the nearest in lock-step distance."""
 LOCKSTEP_CELLS = 2_000_000
 """Point pairs one chunk of `ShapeDistance.nearest`'s lock-step distances holds (about 50 MB
 of differences)."""
-"""Path medoids a track is compared with by DTW: the nearest in lock-step distance."""
 
 
 def endpoint_groups(first: np.ndarray, last: np.ndarray, settings: RouteSettings) -> np.ndarray:
