@@ -19,6 +19,7 @@ from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
 from aisdati.commands import run_command
 from aisdati.commands.common import user_errors
 from aisdati.startup import end_startup_guard
+from aisdati.tracks.ashore import AshoreCheck
 
 app = typer.Typer(
     help="aisdati: find abnormal vessel tracks in AIS data with DATI (domain-adaptive trajectory "
@@ -57,6 +58,14 @@ LANE_TRAFFIC_OPTION = typer.Option(
     "--lane-traffic/--no-lane-traffic",
     help="Lane score of dati and bc: the lane also holds one rollout from every training "
     "track's start (where the model's traffic goes). As the models were calibrated.",
+)
+ASHORE = AshoreCheck()
+ASHORE_OPTION = typer.Option(
+    True,
+    "--ashore/--no-ashore",
+    help=f"Flag every track with at least {ASHORE.min_reports} reports {ASHORE.margin_m:g} m or "
+    "more inland, whatever its score, and rank those first (a vessel cannot sail there); "
+    "--no-ashore judges by the model alone, as the paper does.",
 )
 WORKERS_OPTION = typer.Option(
     1,
@@ -309,6 +318,13 @@ def evaluate(
     strength: float = typer.Option(
         1.0, "--strength", help="Anomaly distances x this (0.3: the subtle tier)."
     ),
+    at_sea: bool = typer.Option(
+        False,
+        "--at-sea",
+        help="Write only anomalies that put no more reports ashore than their track had "
+        "(redrawn with new parameters, else the track stays normal and is counted): what a vessel "
+        "could sail, which the ashore rule cannot see.",
+    ),
     models: Path | None = typer.Option(
         None,
         "--models",
@@ -325,6 +341,7 @@ def evaluate(
     ),
     lane_course_km: float = LANE_COURSE_OPTION,
     lane_traffic: bool = LANE_TRAFFIC_OPTION,
+    ashore: bool = ASHORE_OPTION,
     near_km: float = typer.Option(10.0, "--near-km", help="nearest: start-distance filter."),
     contamination: float = typer.Option(
         0.05, help="Calibrated flagging: share of training tracks a detector would flag."
@@ -380,6 +397,7 @@ def detect(
     ),
     lane_course_km: float = LANE_COURSE_OPTION,
     lane_traffic: bool = LANE_TRAFFIC_OPTION,
+    ashore: bool = ASHORE_OPTION,
     threshold: float = typer.Option(0.75, help="Flag normalised scores above this, in (0, 1]."),
     top_percent: float | None = typer.Option(
         None, "--top-percent", help="Flag this percentage of highest scores instead."

@@ -13,6 +13,7 @@ of normal tracks and of anomalies flagged, AUC per kind, and the routes' trainin
 Run: python benchmarks/forward_mixture.py RUN --before DATE [--episodes 30] [--score lane]
      [--method nearest]   # the same mixture of nearest-track models (the baseline)
      [--area-models DIR]  # a run made with `evaluate --models DIR` (e.g. --strength 0.3)
+     [--no-ashore]        # the models' scores alone (`aisdati.tracks.ashore`)
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import pyarrow.parquet as pq
 
 from aisdati.detection.run import DetectSettings, detect
 from aisdati.evaluation.metrics import flagging, ranking
+from aisdati.tracks.ashore import AshoreCheck
 
 
 def training_period(data: Path, out: Path, before: pd.Timestamp) -> None:
@@ -53,6 +55,7 @@ def main() -> None:
     ap.add_argument("--score", default="lane")
     ap.add_argument("--method", default="dati", choices=("dati", "nearest"))
     ap.add_argument("--area-models", type=Path, help="where the area model is (default RUN/models)")
+    ap.add_argument("--no-ashore", dest="ashore", action="store_false", help="no ashore rule")
     args = ap.parse_args()
     before = pd.Timestamp(args.before, tz="UTC")
     past = args.run / "mixture" / "past"
@@ -71,11 +74,13 @@ def main() -> None:
     settings = DetectSettings(
         data_dir=args.run / "data", models_dir=models, out_dir=args.run / "mixture" / "report",
         cluster="all", contamination=0.05, score=args.score, method=args.method,
+        ashore=args.ashore,
     )  # fmt: skip
     result = detect(settings)
     sc = result.scores
     cut = {m.name: m.threshold(settings.how, 0.05) for m in result.models}
-    sc["ratio"] = sc["score_m"] / sc["model"].map(cut)
+    ratio = sc["score_m"] / sc["model"].map(cut)
+    sc["ratio"] = AshoreCheck().ranked(ratio, sc["ashore_reports"], sc["n_points"])
     labels = pd.read_csv(args.run / "data" / "labels.csv").set_index("track_id")
     sc = sc[sc["track_id"].isin(labels.index)]
     y = labels.loc[sc["track_id"], "label"].to_numpy()

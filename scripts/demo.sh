@@ -8,8 +8,8 @@
 #      destination, and the nearest-track baseline) on July, write detours, position jumps and
 #      loitering circles into 30 % of the August tracks, and judge every August track;
 #   3. detect: judge August with the July model, flag what scores above the threshold calibrated
-#      on July tracks the model did not fit (--contamination 0.05), check the flags against the
-#      injected labels and draw the map.
+#      on July tracks the model did not fit (--contamination 0.05) and every track with reports
+#      well inland, check the flags against the injected labels and draw the map.
 #
 #   scripts/demo.sh            # outputs under runs/demo (OUT=dir, EPISODES=n to change)
 set -euo pipefail
@@ -63,5 +63,6 @@ skipped = ", ".join(f"{v} ({k})" for k, v in cov["not_judged"].items()) or "none
 print(f"   coverage: {cov['judged']} of {cov['candidates']} tracks judged; not judged: {skipped}")
 print(f"   August: {m['labelled_tracks']} tracks, {m['anomalies_labelled']} altered; ROC AUC {auc}")
 print(f"   at --contamination 0.05: {m['false_alarm_rate']:.0%} of the {normal} normal tracks "
-      f"flagged, {found} of {m['anomalies_labelled']} anomalies (recall {m['recall']:.2f})")
+      f"flagged, {found} of {m['anomalies_labelled']} anomalies (recall {m['recall']:.2f}); "
+      f"{rep['flagged_ashore']} of the flags for reports ashore (--no-ashore: the model alone)")
 PY

@@ -11,6 +11,7 @@ import pytest
 
 from aisdati.evaluation.inject import DEFAULTS, inject, parse_params
 from aisdati.geo import haversine_m
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import load_tracks, read_track_table
 
 
@@ -251,7 +252,8 @@ def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat
     scores = pd.read_parquet(out / "scores.parquet")
     assert set(scores["route"]) == {"route-1", "route-2"}
     np.testing.assert_allclose(scores["ratio"], scores["value"] / scores["threshold"])
-    np.testing.assert_array_equal(scores["flagged"], scores["ratio"] > 1)
+    ashore = scores["ashore_reports"] >= AshoreCheck().min_reports  # flagged by the rule too
+    np.testing.assert_array_equal(scores["flagged"], (scores["ratio"] > 1) | ashore)
     assert set(scores["score"]) == {"nearest", "lane"}  # nearest's DTW and lane scores
     for route, info in doc["routes"].items():
         per = json.loads((out / route / "evaluation.json").read_text())

@@ -31,6 +31,8 @@ def scored(kitimat):
             "mmsi": [t.mmsi for t in tracks],
             "score": score,
             "flagged": score > 0.75,
+            "n_points": [len(t.positions) for t in tracks],
+            "ashore_reports": 0,
         }
     )
     return out, tracks, scores

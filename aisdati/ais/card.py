@@ -36,6 +36,7 @@ from aisdati.errors import UserError
 from aisdati.model.persistence import MAX_LAYERS, MAX_UNITS, NETWORKS_FORMAT
 from aisdati.model.readers import read_json
 from aisdati.model.rules import SphericalRule
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track
 
 CARD_FORMATS: dict[str, str] = {
@@ -137,6 +138,10 @@ class DataCard:
     end_points: list[list[float]] | None = None
     """[lon, lat] of each track's last report (where it was bound: goal-conditioned models and
     the origin-destination score read them); None in cards before 0.2.0."""
+    ashore_points: list[list[float]] | None = None
+    """[lon, lat] where the tracks reported ashore by the coastline: water it misses (creeks,
+    rivers), which the ashore rule then excuses (`aisdati.tracks.ashore`); None in cards written
+    before the rule (it then excuses nothing)."""
     track_keys: list[list[Any]] | None = None
     """[mmsi, "start", "end"] per track (ISO 8601, UTC; `track_keys`); None in cards before
     0.1.0, which `training_mask` matches by id."""
@@ -167,12 +172,14 @@ class DataCard:
             time_span=[str(spans["start"].min()), str(spans["end"].max())],
             start_points=[[float(t.positions[0, 0]), float(t.positions[0, 1])] for t in tracks],
             end_points=[[float(t.positions[-1, 0]), float(t.positions[-1, 1])] for t in tracks],
+            ashore_points=AshoreCheck().seen([t.positions for t in tracks]),
             **source,
         )
 
     def to_dict(self) -> dict[str, Any]:
         order = ("dir", "files", "cluster", "tracks_in_cluster", "tracks_used", "track_ids",
-                 "track_keys", "points", "time_span", "start_points", "end_points")  # fmt: skip
+                 "track_keys", "points", "time_span", "start_points", "end_points",
+                 "ashore_points")  # fmt: skip
         return _present({k: getattr(self, k) for k in order})
 
 
@@ -395,6 +402,9 @@ def _read_data(f: CardFields) -> DataCard:
             f.integer(f"data.{key}", 0, most)
     starts = _read_points(f, "data.start_points", len(ids))
     ends = _read_points(f, "data.end_points", len(ids)) if f.get("data.end_points", None) else None
+    ashore = f.get("data.ashore_points", None)
+    if ashore is not None:
+        ashore = _read_points(f, "data.ashore_points", max_length=points)
     keys = f.get("data.track_keys", None)
     if keys is not None:
         f.array("data.track_keys", length=len(ids))
@@ -404,13 +414,15 @@ def _read_data(f: CardFields) -> DataCard:
                                        "tracks_used", "time_span")}  # fmt: skip
     return DataCard(
         track_ids=ids, points=points, start_points=starts, end_points=ends, track_keys=keys,
-        **source,
+        ashore_points=ashore, **source,
     )  # fmt: skip
 
 
-def _read_points(f: CardFields, key: str, n: int) -> list[list[float]]:
-    """n [lon, lat] pairs in degrees."""
-    points = f.array(key, length=n)
+def _read_points(
+    f: CardFields, key: str, n: int | None = None, max_length: int | None = None
+) -> list[list[float]]:
+    """n (or at most `max_length`) [lon, lat] pairs in degrees."""
+    points = f.array(key, length=n, max_length=max_length)
     for i, point in enumerate(points):
         name = f"{key}[{i}]"
         if not isinstance(point, list) or len(point) != 2:

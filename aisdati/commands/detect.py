@@ -18,6 +18,7 @@ from aisdati.detectors import parse_detectors
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import staged_outputs
+from aisdati.tracks.ashore import AshoreCheck
 
 
 def run(
@@ -33,6 +34,7 @@ def run(
     lane_rollouts: int,
     lane_course_km: float,
     lane_traffic: bool,
+    ashore: bool,
     threshold: float,
     top_percent: float | None,
     contamination: float | None,
@@ -69,6 +71,7 @@ def run(
         lane_rollouts=lane_rollouts,
         lane_course_km=lane_course_km,
         lane_traffic=lane_traffic,
+        ashore=ashore,
         threshold=threshold,
         top_percent=top_percent,
         contamination=contamination,
@@ -120,6 +123,15 @@ def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     console.print(detection_table(result.scores))
     if result.coverage is not None:
         console.print(coverage_line(result.coverage), highlight=False)
+    check = AshoreCheck()
+    ashore = int(check.flags(result.scores["ashore_reports"]).sum())
+    if ashore:
+        console.print(
+            f"{ashore} flagged for reports ashore (at least {check.min_reports} reports "
+            f"{check.margin_m:g} m or more inland, whatever the score; --no-ashore: the model "
+            "alone)",
+            highlight=False,
+        )
     if result.metrics is not None:
         m = result.metrics
         auc = "n/a (one class only)" if m["roc_auc"] is None else f"{m['roc_auc']:.3f}"

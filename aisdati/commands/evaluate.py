@@ -21,6 +21,7 @@ from aisdati.evaluation.inject import parse_kinds, parse_params
 from aisdati.evaluation.outputs import (
     REPORT,
     RESULTS,
+    ashore_counts,
     report,
     routes_report,
     write,
@@ -52,6 +53,7 @@ def run(
     before: datetime | None,
     altered: float,
     strength: float,
+    at_sea: bool,
     models: Path | None,
     preset: str | None,
     lane: list[str] | None,
@@ -61,6 +63,7 @@ def run(
     lane_rollouts: int,
     lane_course_km: float,
     lane_traffic: bool,
+    ashore: bool,
     near_km: float,
     contamination: float,
     seed: int,
@@ -95,6 +98,7 @@ def run(
         lane_rollouts=lane_rollouts,
         lane_course_km=lane_course_km,
         lane_traffic=lane_traffic,
+        ashore=ashore,
         near_km=near_km,
         contamination=contamination,
         models_dir=models,
@@ -102,18 +106,18 @@ def run(
         before=None if before is None else pd.Timestamp(before, tz="UTC"),
         altered=altered,
         strength=strength,
+        at_sea=at_sea,
         device=resolve_device(device),
         **lane_settings(preset, lane, cluster),
     )
     check(settings)
-    every_route = settings.cluster == ALL_ROUTES
     with (
         staged_outputs(settings.out_dir, owned_outputs(settings), REPORT) as outputs,
         open_runner(Execution(workers=workers, scheduler=scheduler)) as runner,
     ):
         outputs.retire_earlier()  # the data and models it describes are about to change
         shown = Display(settings, runner, show=not (quiet or as_json))
-        if every_route:
+        if settings.cluster == ALL_ROUTES:
             evaluate_every_route(settings, shown, outputs, quiet, as_json)
         else:
             evaluate_one(settings, shown, outputs, quiet, as_json)
@@ -183,6 +187,20 @@ def evaluate_one(
     if quiet:
         return
     console.print(results_table(result, console.width))
+    if settings.ashore:
+        n = ashore_counts(result.scores)
+        console.print(
+            f"ashore rule (every detector): flagged {n['altered']} altered and {n['normal']} "
+            "normal tracks for reports well inland",
+            highlight=False,
+        )
+    if settings.at_sea:
+        left = result.split.not_at_sea
+        console.print(
+            f"--at-sea: {len(left)} tracks drawn for an anomaly could not take one at sea and "
+            f"stay normal{': ' + ', '.join(map(str, left)) if left else ''}",
+            highlight=False,
+        )
     for method, t in result.timings.items():
         line = f"{method}: training {t['train_s']:.1f} s, scoring {t['score_s']:.1f} s"
         console.print(line, highlight=False)

@@ -287,6 +287,9 @@ def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
     several = scores["model"].nunique() > 1
     if several:
         cols.insert(3, "model")
+    ashore = bool((scores["ashore_reports"] > 0).any())
+    if ashore:
+        cols.append("ashore")
     for col in cols:
         table.add_column(
             col, justify="left" if col in ("model", "at (lat, lon)") else "right", no_wrap=True
@@ -303,6 +306,8 @@ def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
         ]
         if several:
             row.insert(3, escape(str(r.model)))
+        if ashore:
+            row.append(str(r.ashore_reports))
         table.add_row(*row)
     if len(shown) > limit:
         table.caption = f"... and {len(shown) - limit} more in scores.parquet"

@@ -31,6 +31,7 @@ import pandas as pd
 
 from aisdati.errors import UserError
 from aisdati.evaluation.metrics import flagging, ranking, weighted_f1
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track
 
 MATCH_S = 60
@@ -223,7 +224,7 @@ def match_labels(scores: pd.DataFrame, tracks: Sequence[Track], labels: Labels) 
 def label_metrics(y: np.ndarray, flagged: np.ndarray, score: np.ndarray) -> dict[str, Any]:
     """Precision and recall of the anomaly class, weighted F1 (the paper's metric: per-class F1
     weighted by class support), the share of normal tracks flagged (the false-alarm rate a
-    calibrated threshold promises) and ROC AUC of the normalised score."""
+    calibrated threshold promises) and ROC AUC of the normalised score (tracks ashore first)."""
     y, p = np.asarray(y, int), np.asarray(flagged, int)
     anomaly = flagging(y, p)
     return {
@@ -266,7 +267,8 @@ def evaluate_labels(scores: pd.DataFrame, tracks: Sequence[Track], path: Path) -
     matched = match_labels(scores, tracks, labels)
     keep = matched.label >= 0
     flagged = scores["flagged"].to_numpy()[keep]
-    score = scores["score"].to_numpy()[keep]
+    ranked = AshoreCheck().ranked(scores["score"], scores["ashore_reports"], scores["n_points"])
+    score = ranked[keep]
     metrics = label_metrics(matched.label[keep], flagged, score)
     kept_kinds = [k for k, m in zip(matched.kinds, keep, strict=True) if m]
     if (labels.rows["kind"] != "").any():

@@ -13,6 +13,7 @@ import pyarrow as pa
 from aisdati.ais.card import card_warnings
 from aisdati.detection.run import Detection
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
+from aisdati.tracks.ashore import AshoreCheck
 
 OUTPUTS = (
     "scores.parquet",
@@ -43,11 +44,14 @@ SCORES_SCHEMA = pa.schema(
         ("max_dev_lon", pa.float64()),
         ("max_dev_lat", pa.float64()),
         ("max_dev_index", pa.int64()),
+        ("ashore_reports", pa.int64()),
     ]
 )
 """scores.parquet, one row per test track, sorted by rank (1 = most abnormal). score_m: best-of-K
 mean great-circle distance along the warping path (metres); score: score_m / max over the test
-set; max_dev_*: the track point with the largest distance to its matched rollout point."""
+set; max_dev_*: the track point with the largest distance to its matched rollout point;
+ashore_reports: reports well inland (`aisdati.tracks.ashore`; 0 with --no-ashore), which flag
+the track from `AshoreCheck.min_reports` on and rank it above every track at sea."""
 
 SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
@@ -137,6 +141,7 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
             "score": float(row.score),
             "score_m": float(row.score_m),
             "max_dev_m": float(row.max_dev_m),
+            "ashore_reports": int(row.ashore_reports),
             "start": str(track.start),
         }
         features.append(
@@ -202,6 +207,7 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "coverage": result.coverage.as_dict() if result.coverage else None,
         "thresholds": thresholds(result),
         "flagged": int(sc["flagged"].sum()),
+        "flagged_ashore": int(AshoreCheck().flags(sc["ashore_reports"]).sum()),
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,

@@ -12,8 +12,9 @@ the origin-destination term added (`--score area`), by its best rollout
 Flags: scores divided by their maximum over the test set above `threshold` (the paper's
 Λ = 0.75), or the `top_percent` highest, or scores above the model's calibrated threshold
 (`contamination`: the share of its own training tracks it would flag; cross-fitted for an area
-model), which does not depend on the test set. For every track the point of largest local
-deviation (the peak of its deviation profile) tells where it strays most.
+model), which does not depend on the test set; and, unless `ashore` is off, every track with
+reports well inland (`aisdati.tracks.ashore`), which also rank first. For every track the
+point of largest local deviation (the peak of its deviation profile) tells where it strays most.
 
 Default test set (section 6.2): tracks of the `other` cluster, not used in training; `--cluster
 all`: every track of the ingest.
@@ -39,6 +40,7 @@ from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import score_each
 from aisdati.errors import UserError
 from aisdati.execution import Runner
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -77,6 +79,9 @@ class DetectSettings:
     """CSV of hand labels (track_id or mmsi + start, label 0/1) for precision/recall/F1/AUC."""
     device: str = "cpu"
     """Where DATI's networks roll out (`aisdati.execution.device`)."""
+    ashore: bool = True
+    """Flag tracks with reports well inland whatever their score (`aisdati.tracks.ashore`);
+    False scores the paper's way, by the model alone."""
 
     @property
     def how(self) -> ScoreSettings:
@@ -303,7 +308,11 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
         flagged = raw > threshold
     else:
         flagged = flag(norm, settings.threshold, settings.top_percent)
-    order = np.argsort(-norm, kind="stable")
+    check = AshoreCheck()
+    ashore = ashore_counts(models, tracks, owner) if settings.ashore else np.zeros(n, np.int64)
+    flagged = flagged | check.flags(ashore)
+    lengths = np.array([len(t.positions) for t in tracks])
+    order = np.argsort(-check.ranked(norm, ashore, lengths), kind="stable")
     rank = np.empty(n, dtype=np.int64)
     rank[order] = np.arange(1, n + 1)
     peak = [int(np.argmax(p)) for p in profiles]
@@ -312,7 +321,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
             "track_id": [t.track_id for t in tracks],
             "mmsi": [t.mmsi for t in tracks],
             "model": [models[o].name for o in owner],
-            "n_points": [len(t.positions) for t in tracks],
+            "n_points": lengths,
             "score_m": raw,
             "score": norm,
             "flagged": flagged,
@@ -321,6 +330,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
             "max_dev_lon": [t.positions[k, 0] for t, k in zip(tracks, peak, strict=True)],
             "max_dev_lat": [t.positions[k, 1] for t, k in zip(tracks, peak, strict=True)],
             "max_dev_index": peak,
+            "ashore_reports": ashore,
         }
     )
     timings["total_s"] = time.perf_counter() - t0
@@ -330,6 +340,18 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     if settings.labels is not None:
         result.metrics = evaluate_labels(scores, tracks, settings.labels)
     return result
+
+
+def ashore_counts(models: Sequence[Detector], tracks: list[Track], owner: list[int]) -> np.ndarray:
+    """Each track's reports ashore (`aisdati.tracks.ashore`), excusing the water that its
+    judging model's training traffic sailed."""
+    check = AshoreCheck()
+    out = np.zeros(len(tracks), np.int64)
+    owner_of = np.asarray(owner, np.int64)
+    for m in np.unique(owner_of):
+        rows = np.flatnonzero(owner_of == m)
+        out[rows] = check.counts([tracks[i].positions for i in rows], models[m].ashore_points)
+    return out
 
 
 def _score_by_model(

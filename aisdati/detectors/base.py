@@ -231,6 +231,12 @@ class Detector(ABC):
         return od_distances(starts, ends, self.start_points, self.end_points)
 
     @property
+    def ashore_points(self) -> np.ndarray:
+        """[m, 2] where the training tracks reported ashore (`aisdati.tracks.ashore`: water
+        the coastline misses); none for a card from before they were recorded."""
+        return np.asarray(self.card.data.ashore_points or [], np.float64).reshape(-1, 2)
+
+    @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return self.card.region.bounds
 

@@ -8,7 +8,7 @@ like any ingest output."""
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ from aisdati.errors import UserError
 from aisdati.evaluation.inject import MIN_POINTS, Injected, inject
 from aisdati.geo import haversine_m, initial_bearing_deg
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.schema import KNOT_MPS, POINTS_SCHEMA, UTC_US
 from aisdati.tracks.store import read_track_table, select_cluster
 
@@ -38,6 +39,30 @@ class Split:
     labels: pd.DataFrame
     """track_id, label (0/1), kind ('' for normal), source_track_id, start, end (the altered
     stretch's [start, end) report indices)."""
+    not_at_sea: list[int] = field(default_factory=list)
+    """With `at_sea`: tracks drawn to take an anomaly that no draw kept at sea (left normal)."""
+
+
+AT_SEA_DRAWS = 50
+"""`at_sea`: anomalies drawn per track (each with new parameters) before it is left normal."""
+
+
+def _anomaly(
+    kind: str, pos: np.ndarray, times_s: np.ndarray, rng: np.random.Generator, params: dict,
+    at_sea: bool,
+) -> Injected | None:
+    """One anomaly of `kind` written into a track; with `at_sea`, the first of `AT_SEA_DRAWS`
+    draws that puts no more reports ashore (`aisdati.tracks.ashore`) than the track had, so
+    that what is measured is what a vessel could sail; None when none does."""
+    if not at_sea:
+        return inject(kind, pos, times_s, rng, params)
+    rule = AshoreCheck()
+    before = int(rule.reports(pos).sum())
+    for _ in range(AT_SEA_DRAWS):
+        got = inject(kind, pos, times_s, rng, params)
+        if int(rule.reports(got.positions).sum()) <= before:
+            return got
+    return None
 
 
 def split_by_vessel(
@@ -94,10 +119,12 @@ def build(
     train_ids: list[int] | None = None,
     before: pd.Timestamp | None = None,
     altered: float = 0.5,
+    at_sea: bool = False,
 ) -> Split:
     """Split, inject and write the evaluation data set to `out`; see the module docstring.
     `before`: split by time instead of by vessel; `altered`: the share of the held-out tracks
-    that take an anomaly."""
+    that take an anomaly; `at_sea`: only anomalies that keep the track off the land
+    (`_anomaly`)."""
     table = select_cluster(read_track_table(data_dir), cluster, data_dir)
     table = table[table["n_points"] >= MIN_POINTS]
     if before is not None:
@@ -131,6 +158,7 @@ def build(
     keep_pts = [points.filter(pc.invert(pc.is_in(points["track_id"], pa.array(altered))))]
     keep_trk = [tracks.filter(pc.invert(pc.is_in(tracks["track_id"], pa.array(altered))))]
     rows = [(tid, 0, "", tid, -1, -1) for tid in held if tid not in assign]
+    not_at_sea = []
     for k, src in enumerate(sorted(assign)):
         kind = assign[src]
         pts = points.filter(pc.equal(points["track_id"], src))
@@ -138,10 +166,16 @@ def build(
         t_us = pts["time"].cast(pa.int64()).to_numpy()
         t0 = int(t_us[0])
         rng_k = np.random.default_rng([seed, 2, k])
-        got: Injected = inject(kind, pos, (t_us - t0) / 1e6, rng_k, params)
+        got = _anomaly(kind, pos, (t_us - t0) / 1e6, rng_k, params, at_sea)
+        source_row = tracks.filter(pc.equal(tracks["track_id"], src))
+        if got is None:  # counted, and judged as the normal track it is
+            not_at_sea.append(src)
+            keep_pts.append(pts)
+            keep_trk.append(source_row)
+            rows.append((src, 0, "", src, -1, -1))
+            continue
         new_id = next_id + k
         keep_pts.append(_points(new_id, pts["mmsi"][0].as_py(), t0, got))
-        source_row = tracks.filter(pc.equal(tracks["track_id"], src))
         keep_trk.append(_track_row(source_row, new_id, t0, got))
         rows.append((new_id, 1, kind, src, *got.stretch))
     labels = pd.DataFrame(
@@ -149,7 +183,7 @@ def build(
     ).sort_values("track_id", kind="stable")
     _write(out, pa.concat_tables(keep_pts), pa.concat_tables(keep_trk), labels)
     heldout = sorted(int(i) for i in labels["track_id"])
-    return Split(train, heldout, labels.reset_index(drop=True))
+    return Split(train, heldout, labels.reset_index(drop=True), not_at_sea)
 
 
 def _points(track_id: int, mmsi: int, t0_us: int, got: Injected) -> pa.Table:

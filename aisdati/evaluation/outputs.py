@@ -17,6 +17,7 @@ import pyarrow as pa
 
 from aisdati.evaluation.run import Evaluation, RoutesEvaluation
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import load_tracks
 
 
@@ -42,12 +43,23 @@ def report(ev: Evaluation) -> dict[str, Any]:
             "training_tracks": len(ev.split.train_ids),
             "heldout_tracks": len(ev.split.heldout_ids),
             "injected": int(ev.split.labels["label"].sum()),
+            "not_at_sea": ev.split.not_at_sea,
             "training_track_ids": ev.split.train_ids,
         },
         "lane_fidelity_m": lane_fidelity(ev),
+        "ashore": ashore_counts(ev.scores),
         "timings_s": {k: {n: round(v, 2) for n, v in t.items()} for k, t in ev.timings.items()},
         "results": table.to_dict(orient="records"),
     }
+
+
+def ashore_counts(scores: pd.DataFrame) -> dict[str, int]:
+    """Held-out tracks the ashore rule flags (`aisdati.tracks.ashore`), normal and altered:
+    the normal ones are false alarms of every detector alike."""
+    tracks = scores.drop_duplicates("track_id")
+    flagged = AshoreCheck().flags(tracks["ashore_reports"].to_numpy())
+    altered = tracks["label"].to_numpy() == 1
+    return {"normal": int((flagged & ~altered).sum()), "altered": int((flagged & altered).sum())}
 
 
 def routes_report(rev: RoutesEvaluation) -> dict[str, Any]:
@@ -120,10 +132,11 @@ def _curves(scores: pd.DataFrame, column: str, path: Path) -> Path:
     from aisdati.evaluation.figures import plot_roc_pr
 
     curves = {}
+    check = AshoreCheck()
     for (det, score), g in scores.groupby(["detector", "score"], sort=False):
         curves[det if det == score else f"{det} ({score})"] = (
             g["label"].to_numpy(),
-            g[column].to_numpy(),
+            check.ranked(g[column].to_numpy(), g["ashore_reports"], g["n_points"]),
         )
     plot_roc_pr(curves, path)
     return path

@@ -38,6 +38,7 @@ from aisdati.evaluation import dataset
 from aisdati.evaluation.inject import parse_params, with_strength
 from aisdati.evaluation.metrics import flagging, ranking
 from aisdati.execution import Runner
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
 SPLITS = ("vessel", "time")
@@ -75,6 +76,12 @@ class EvaluateSettings:
     """Anomaly distances x this (`aisdati.evaluation.inject.with_strength`; 0.3: subtle)."""
     device: str = "cpu"
     """Where DATI's networks train and score (`aisdati.execution.device`)."""
+    ashore: bool = True
+    """Every detector's flags and ranking go through the ashore rule (`aisdati.tracks.ashore`);
+    False: the models' scores alone, the paper's way."""
+    at_sea: bool = False
+    """Write only anomalies that put no more reports ashore than their track had
+    (`aisdati.evaluation.dataset`): what a vessel could sail, which the ashore rule cannot see."""
 
     @property
     def anomaly_params(self) -> dict[str, Any]:
@@ -205,6 +212,7 @@ def _prepare(settings: EvaluateSettings) -> _Prepared:
         train_ids,
         settings.before,
         settings.altered,
+        settings.at_sea,
     )
     return _Prepared(settings, split, existing)
 
@@ -251,6 +259,9 @@ def _score(
     how = _how(settings)
     heldout = load_tracks(prepared.data, split.heldout_ids)
     labels = split.labels.set_index("track_id").loc[split.heldout_ids]
+    rule = AshoreCheck()
+    lengths = np.array([len(t.positions) for t in heldout])
+    per_track = []
     timings: dict[str, dict[str, float]] = {}
     rows, score_rows = [], []
     result = Evaluation(settings, split, pd.DataFrame(), pd.DataFrame(), timings, detectors)
@@ -261,19 +272,26 @@ def _score(
         kinds = scored_kinds(det)
         scored = det.score(heldout, how, also=kinds, runner=runner)
         timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
+        ashore = np.zeros(len(heldout), np.int64)
+        if settings.ashore:
+            ashore = rule.counts([t.positions for t in heldout], det.ashore_points)
+        per_track.append(pd.DataFrame({"detector": method, "track_id": split.heldout_ids,
+                                       "n_points": lengths, "ashore_reports": ashore}))  # fmt: skip
         for kind in kinds:
             values = scored.parts[kind]
             threshold = det.threshold(replace(how, score=kind), settings.contamination)
-            flagged = values > threshold
+            flagged = (values > threshold) | rule.flags(ashore)
+            ranked = rule.ranked(values, ashore, lengths)
             key = (method, kind)
             result.profiles[key] = scored.profiles
             result.evidence[key] = scored.evidence
             for tid, v, f in zip(split.heldout_ids, values, flagged, strict=True):
                 score_rows.append((method, kind, tid, float(v), float(threshold), bool(f)))
-            rows += _rows(method, kind, labels, values, flagged, threshold, settings.kinds)
+            rows += _rows(method, kind, labels, values, ranked, flagged, threshold, settings.kinds)
     result.table = pd.DataFrame(rows)
     columns = ["detector", "score", "track_id", "value", "threshold", "flagged"]
     scores = pd.DataFrame(score_rows, columns=columns)
+    scores = scores.merge(pd.concat(per_track), on=["detector", "track_id"], how="left")
     result.scores = scores.merge(split.labels, on="track_id", how="left")
     return result
 
@@ -366,11 +384,14 @@ def evaluate_routes(
         [ev.scores.assign(route=ev.settings.cluster) for ev in evaluations], ignore_index=True
     )
     scores["ratio"] = scores["value"] / scores["threshold"]
+    rule = AshoreCheck()
     rows = []
     for (method, kind), g in scores.groupby(["detector", "score"], sort=False):
         labels = g.set_index("track_id")[["label", "kind"]]
         values = g["ratio"].to_numpy()
-        rows += _rows(method, kind, labels, values, g["flagged"].to_numpy(), 1.0, settings.kinds)
+        ranked = rule.ranked(values, g["ashore_reports"], g["n_points"])
+        flagged = g["flagged"].to_numpy()
+        rows += _rows(method, kind, labels, values, ranked, flagged, 1.0, settings.kinds)
     return RoutesEvaluation(settings, evaluations, skipped, pd.DataFrame(rows), scores)
 
 
@@ -379,10 +400,14 @@ def _rows(
     score: str,
     labels: pd.DataFrame,
     values: np.ndarray,
+    ranked: np.ndarray,
     flagged: np.ndarray,
     threshold: float,
     kinds: tuple[str, ...],
 ) -> list[dict[str, Any]]:
+    """The table's rows of one detector and score: per anomaly kind (and pooled), how `ranked`
+    orders and `flagged` flags the altered tracks against the normal ones, and the median
+    `values` of each."""
     y = labels["label"].to_numpy()
     kind = labels["kind"].to_numpy()
     normal = y == 0
@@ -400,7 +425,7 @@ def _rows(
             "kind": name,
             "anomalies": int(anomalous.sum()),
             "normal": int(normal.sum()),
-            **ranking(y[keep], values[keep]),
+            **ranking(y[keep], ranked[keep]),
             **flagging(y[keep], flagged[keep]),
             "threshold_m": float(threshold),
             "median_normal_m": float(np.median(values[normal])),

@@ -1,0 +1,116 @@
+"""Reports ashore: a physical check that every detector's score goes through.
+
+A vessel cannot sail over land, so a track whose positions lie well inland is abnormal whatever
+any model of the traffic says: a spoofed or corrupted position (the classic AIS jump), or a
+report stream that is not a vessel's. DATI and the nearest-track baseline judge a track by how
+far it strays from what they learnt, in metres; a stretch 300 m inland across a headland can be
+no farther from the learnt lane than a normal track's wide turn, so neither sees it.
+
+The rule (a departure from the paper, which scores position deviation alone; `--no-ashore`
+scores the paper's way): a report is *ashore* when the coastline (`aisdati.coastline`) puts it
+on land and `margin_m` inland, i.e. it and all `PROBES` points `margin_m` around it are on
+land. The margin absorbs the coastline's resolution (~100-200 m between vertices), piers and
+berths, and GPS error: a moored vessel reports a few tens of metres from its quay. A track
+with at least `min_reports` reports ashore is flagged whatever its score, and ranks above every
+track at sea (`ranked`), the ones with the larger share of reports ashore first.
+
+Water the coastline misses: OpenStreetMap's land polygons end at the coastline, so narrow
+tidal creeks, rivers and basins mapped as water areas inside the land (NY Harbor's Newtown
+Creek, the Raritan, the Bronx River) count as land, and their everyday traffic would be
+flagged. A model's card records where its training tracks reported ashore (`seen`,
+`DataCard.ashore_points`, on a `SEEN_GRID_DEG` grid); a report within `margin_m` of one of them
+is water the area's own traffic sails, not ashore. Cards from before this record have none.
+
+The calibrated thresholds stay the models' (the share of normal traffic a model flags); the
+rule flags on its own and its false alarms are counted with the others (`aisdati evaluate`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from aisdati.geo import EARTH_RADIUS_M, haversine_m
+
+PROBES = 8
+"""Points around each report (evenly spaced bearings) that must be on land too."""
+SEEN_GRID_DEG = 0.001
+"""`seen` points are rounded to this grid (~110 m of latitude) and kept once each, so that a
+card holds a few of them per creek, not one per report."""
+CHUNK = 4096
+"""Reports compared with every `seen` point at once."""
+LIFT_M = 1.0e7
+"""What `ranked` adds to the score of a track ashore: 10,000 km, more than any score of a
+track at sea in an area can reach, so that the ashore tracks rank first."""
+
+
+@dataclass(frozen=True)
+class AshoreCheck:
+    """Parameters of the rule (module docstring); fixed, not tuned on any data set: the margin
+    is twice the coastline's coarsest vertex spacing, and one stray report is not enough."""
+
+    margin_m: float = 400.0
+    min_reports: int = 2
+
+    def reports(self, positions: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
+        """[n] bool: which reports ([n, 2] lon/lat degrees) are ashore; none within `margin_m`
+        of a `seen` point ([m, 2]: where training traffic reported ashore)."""
+        from aisdati.coastline import on_land
+
+        p = np.asarray(positions, np.float64).reshape(-1, 2)
+        out = on_land(p[:, 0], p[:, 1])
+        idx = np.flatnonzero(out)
+        if idx.size == 0:
+            return out
+        bearing = np.radians(np.arange(PROBES) * 360.0 / PROBES)
+        dlat = np.degrees(self.margin_m * np.cos(bearing) / EARTH_RADIUS_M)
+        dlon = np.degrees(self.margin_m * np.sin(bearing) / EARTH_RADIUS_M)
+        coslat = np.maximum(np.cos(np.radians(p[idx, 1])), 1e-6)
+        lon = p[idx, 0, None] + dlon[None, :] / coslat[:, None]
+        lat = p[idx, 1, None] + dlat[None, :]
+        out[idx] = on_land(lon, lat).all(axis=1)
+        if seen is not None and len(seen):
+            idx = np.flatnonzero(out)
+            out[idx] = ~self.near(p[idx], np.asarray(seen, np.float64).reshape(-1, 2))
+        return out
+
+    def near(self, points: np.ndarray, seen: np.ndarray) -> np.ndarray:
+        """[n] bool: which points lie within `margin_m` of a `seen` point."""
+        out = np.zeros(len(points), dtype=bool)
+        for lo in range(0, len(points), CHUNK):
+            q = points[lo : lo + CHUNK]
+            d = haversine_m(q[:, None, 0], q[:, None, 1], seen[None, :, 0], seen[None, :, 1])
+            out[lo : lo + CHUNK] = (d <= self.margin_m).any(axis=1)
+        return out
+
+    def counts(self, tracks: Sequence[np.ndarray], seen: np.ndarray | None = None) -> np.ndarray:
+        """[N] int: reports ashore per track (positions of each), `seen` as in `reports`; all
+        tracks' reports in one pass (2-3x faster than track by track: ~2 M reports/s)."""
+        sizes = np.array([len(p) for p in tracks], dtype=np.int64)
+        if not sizes.size:
+            return sizes
+        ashore = self.reports(np.concatenate([np.reshape(p, (-1, 2)) for p in tracks]), seen)
+        total = np.concatenate([[0], np.cumsum(ashore, dtype=np.int64)])
+        ends = np.cumsum(sizes)
+        return total[ends] - total[ends - sizes]
+
+    def seen(self, tracks: Sequence[np.ndarray]) -> list[list[float]]:
+        """Where these (training) tracks report ashore, on the `SEEN_GRID_DEG` grid, once each:
+        what a card records as water its traffic sails (module docstring)."""
+        found = [p[self.reports(p)] for p in tracks]
+        points = np.concatenate([np.empty((0, 2)), *found])
+        grid = np.unique(np.round(points / SEEN_GRID_DEG).astype(np.int64), axis=0)
+        return [[round(float(x), 6), round(float(y), 6)] for x, y in grid * SEEN_GRID_DEG]
+
+    def flags(self, counts: np.ndarray) -> np.ndarray:
+        """[N] bool: the tracks the rule flags."""
+        return np.asarray(counts) >= self.min_reports
+
+    def ranked(self, score_m: np.ndarray, counts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        """Scores to rank tracks by: a flagged track's score lifted by `LIFT_M` x (1 + its share
+        of reports ashore), the others' as they are."""
+        share = np.asarray(counts, np.float64) / np.maximum(np.asarray(lengths, np.float64), 1.0)
+        lift = np.where(self.flags(counts), LIFT_M * (1.0 + share), 0.0)
+        return np.asarray(score_m, np.float64) + lift
