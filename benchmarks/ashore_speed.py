@@ -1,5 +1,6 @@
-"""Speed of the ashore rule (`aisdati.tracks.ashore`), which `detect` and `evaluate` run in the
-command's own process for every judged report (not on Dask workers). Not a test.
+"""Speed of the ashore rule (`aisdati.tracks.ashore`), which `detect` and `evaluate` run for every
+judged report (as tasks of `aisdati.detection.run.ASHORE_TRACKS` tracks: on the Dask workers
+with `--workers`). One core, not a test.
 
 Takes the real reports shipped in tests/data (Kitimat July-August 2018, NY Harbor's first week
 of December 2020), repeated to each size asked for, and times `AshoreCheck.counts` on them as

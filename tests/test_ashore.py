@@ -231,3 +231,29 @@ def test_evaluate_at_sea_writes_only_anomalies_a_vessel_could_sail(cli, kitimat,
     altered = labels[labels["label"] == 1]
     mine = load_tracks(out / "data", [int(i) for i in altered["track_id"]])
     assert RULE.counts([t.positions for t in mine]).sum() == 0
+
+
+def test_the_check_on_two_dask_workers_counts_as_in_process(ny_tracks, monkeypatch):
+    """NY Harbor's later tracks judged by a nearest model of the first four days, the check
+    split into tasks of 16 tracks on a real local cluster of 2 worker processes."""
+    import distributed
+
+    from aisdati.detection import run as detection
+    from aisdati.execution.runner import DaskRunner
+
+    before = pd.Timestamp("2020-12-05", tz="UTC")
+    past = [t for t in ny_tracks if t.start < before]
+    later = [t for t in ny_tracks if t.start >= before]
+    model = NearestDetector(TrainSettings(cluster="all")).fit(past)
+    monkeypatch.setattr(detection, "ASHORE_TRACKS", 16)
+    here = detection.ashore_counts([model], later, [0] * len(later))
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                 dashboard_address=":0") as local,
+        distributed.Client(local) as client,
+    ):  # fmt: skip
+        there = detection.ashore_counts([model], later, [0] * len(later), DaskRunner(client))
+    assert len(later) > 2 * 16 and here.sum() > 0
+    np.testing.assert_array_equal(here, there)
+    alone = RULE.counts([t.positions for t in later])  # the model's water excuses some
+    assert (here <= alone).all()

@@ -39,7 +39,7 @@ from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import score_each
 from aisdati.errors import UserError
-from aisdati.execution import Runner
+from aisdati.execution import InProcess, Runner
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
@@ -309,7 +309,9 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     else:
         flagged = flag(norm, settings.threshold, settings.top_percent)
     check = AshoreCheck()
-    ashore = ashore_counts(models, tracks, owner) if settings.ashore else np.zeros(n, np.int64)
+    ashore = np.zeros(n, np.int64)
+    if settings.ashore:
+        ashore = ashore_counts(models, tracks, owner, runner)
     flagged = flagged | check.flags(ashore)
     lengths = np.array([len(t.positions) for t in tracks])
     order = np.argsort(-check.ranked(norm, ashore, lengths), kind="stable")
@@ -342,16 +344,38 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     return result
 
 
-def ashore_counts(models: Sequence[Detector], tracks: list[Track], owner: list[int]) -> np.ndarray:
+ASHORE_TRACKS = 1024
+"""Tracks per task of the ashore check (`ashore_counts`): ~2 M reports/s, so a task of 1,024
+tracks of a few hundred reports takes a fraction of a second, well above a task's overhead."""
+
+
+def ashore_counts(
+    models: Sequence[Detector],
+    tracks: Sequence[Track],
+    owner: Sequence[int],
+    runner: Runner | None = None,
+) -> np.ndarray:
     """Each track's reports ashore (`aisdati.tracks.ashore`), excusing the water that its
-    judging model's training traffic sailed."""
-    check = AshoreCheck()
+    judging model's training traffic sailed; in chunks of `ASHORE_TRACKS`, as tasks of
+    `runner` (default: here)."""
     out = np.zeros(len(tracks), np.int64)
     owner_of = np.asarray(owner, np.int64)
+    rows = []
+    jobs = []
     for m in np.unique(owner_of):
-        rows = np.flatnonzero(owner_of == m)
-        out[rows] = check.counts([tracks[i].positions for i in rows], models[m].ashore_points)
+        mine = np.flatnonzero(owner_of == m)
+        for lo in range(0, len(mine), ASHORE_TRACKS):
+            rows.append(mine[lo : lo + ASHORE_TRACKS])
+            jobs.append((models[m].ashore_points, [tracks[i].positions for i in rows[-1]]))
+    for idx, counts in zip(rows, (runner or InProcess()).map(ashore_job, jobs), strict=True):
+        out[idx] = counts
     return out
+
+
+def ashore_job(job: tuple[np.ndarray, list[np.ndarray]]) -> np.ndarray:
+    """One task of `ashore_counts`: (seen water, positions of each track) -> counts."""
+    seen, positions = job
+    return AshoreCheck().counts(positions, seen)
 
 
 def _score_by_model(

@@ -31,7 +31,7 @@ import pandas as pd
 from aisdati.ais import DEFAULT_PRESET
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
-from aisdati.detection.run import score_settings
+from aisdati.detection.run import ashore_counts, score_settings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
@@ -274,7 +274,7 @@ def _score(
         timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
         ashore = np.zeros(len(heldout), np.int64)
         if settings.ashore:
-            ashore = rule.counts([t.positions for t in heldout], det.ashore_points)
+            ashore = ashore_counts([det], heldout, [0] * len(heldout), runner)
         per_track.append(pd.DataFrame({"detector": method, "track_id": split.heldout_ids,
                                        "n_points": lengths, "ashore_reports": ashore}))  # fmt: skip
         for kind in kinds:
