@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -257,3 +258,29 @@ def test_the_check_on_two_dask_workers_counts_as_in_process(ny_tracks, monkeypat
     np.testing.assert_array_equal(here, there)
     alone = RULE.counts([t.positions for t in later])  # the model's water excuses some
     assert (here <= alone).all()
+
+
+def test_on_the_coarse_fallback_coastline_the_rule_is_off_with_a_warning(
+    ny_tracks, monkeypatch
+):
+    """Natural Earth's 1:110m outline puts harbour water on land; the rule then flags nothing
+    and says why (the fallback is what an install without roaring-landmask gets)."""
+    from aisdati import coastline
+    from aisdati.detection import run as detection
+
+    model = NearestDetector(TrainSettings(cluster="all")).fit(ny_tracks[:20])
+    assert AshoreCheck.available()
+    with_osm = detection.ashore_counts([model], ny_tracks, [0] * len(ny_tracks))
+    coastline.clear_caches()
+    monkeypatch.setitem(sys.modules, "roaring_landmask", None)  # its import raises ImportError
+    try:
+        with (
+            pytest.warns(RuntimeWarning, match="roaring-landmask is not installed"),
+            pytest.warns(RuntimeWarning, match="ashore rule is off"),
+        ):
+            assert not AshoreCheck.available()
+            off = detection.ashore_counts([model], ny_tracks, [0] * len(ny_tracks))
+    finally:
+        monkeypatch.undo()
+        coastline.clear_caches()
+    assert with_osm.sum() > 0 and off.sum() == 0

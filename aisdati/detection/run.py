@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -359,6 +360,14 @@ def ashore_counts(
     judging model's training traffic sailed; in chunks of `ASHORE_TRACKS`, as tasks of
     `runner` (default: here)."""
     out = np.zeros(len(tracks), np.int64)
+    if not AshoreCheck.available():
+        warnings.warn(
+            "the ashore rule is off: only the coarse fallback coastline is installed (pip "
+            "install roaring-landmask for the harbour-scale one)",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return out
     owner_of = np.asarray(owner, np.int64)
     rows = []
     jobs = []

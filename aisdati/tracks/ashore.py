@@ -23,6 +23,9 @@ is water the area's own traffic sails, not ashore. Cards from before this record
 
 The calibrated thresholds stay the models' (the share of normal traffic a model flags); the
 rule flags on its own and its false alarms are counted with the others (`aisdati evaluate`).
+
+The rule needs the harbour-scale coastline (`roaring-landmask`); on the coarse Natural Earth
+fallback, whose outline puts coastal water on land, it is off (`available`), with a warning.
 """
 
 from __future__ import annotations
@@ -53,6 +56,14 @@ class AshoreCheck:
 
     margin_m: float = 400.0
     min_reports: int = 2
+
+    @staticmethod
+    def available() -> bool:
+        """Whether the coastline is fine enough for the rule (OpenStreetMap's, not the coarse
+        fallback)."""
+        from aisdati.coastline import OSM, source
+
+        return source() == OSM
 
     def reports(self, positions: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
         """[n] bool: which reports ([n, 2] lon/lat degrees) are ashore; none within `margin_m`
