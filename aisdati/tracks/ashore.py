@@ -109,9 +109,12 @@ class AshoreCheck:
 
     def seen(self, tracks: Sequence[np.ndarray]) -> list[list[float]]:
         """Where these (training) tracks report ashore, on the `SEEN_GRID_DEG` grid, once each:
-        what a card records as water its traffic sails (module docstring)."""
-        found = [p[self.reports(p)] for p in tracks]
-        points = np.concatenate([np.empty((0, 2)), *found])
+        what a card records as water its traffic sails (module docstring); none on the coarse
+        fallback coastline, whose outline would put the whole coastal traffic here."""
+        if not self.available():
+            return []
+        points = np.concatenate([np.empty((0, 2)), *[np.reshape(p, (-1, 2)) for p in tracks]])
+        points = points[self.reports(points)]
         grid = np.unique(np.round(points / SEEN_GRID_DEG).astype(np.int64), axis=0)
         return [[round(float(x), 6), round(float(y), 6)] for x, y in grid * SEEN_GRID_DEG]
 
