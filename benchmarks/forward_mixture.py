@@ -97,7 +97,8 @@ def main() -> None:
         per_kind.append(ranking(y[keep], sc["ratio"].to_numpy()[keep])["roc_auc"])
     cells = [rank["roc_auc"], rank["average_precision"], flags["false_alarm_rate"],
              flags["recall"], *per_kind]  # fmt: skip
-    print("| " + " | ".join(f"{c:.3f}" for c in cells) + f" | {train_s:.0f} |")
+    shown = ["n/a" if c is None else f"{c:.3f}" for c in cells]  # a kind with no anomaly
+    print("| " + " | ".join(shown) + f" | {train_s:.0f} |")
 
 
 if __name__ == "__main__":
