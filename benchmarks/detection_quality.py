@@ -9,7 +9,7 @@ Run: python benchmarks/detection_quality.py [--seeds 0,1,2] [--data kitimat] [--
      [--detectors dati,nearest,bc] [--kinds detour,jump,loiter] [--lane KEY=VALUE ...]
      [--out runs/quality]
      python benchmarks/detection_quality.py --forward [--data kitimat|nyharbor|both]
-     [--strength 1] [--seeds 0,1,2] [--no-ashore] ...
+     [--strength 1] [--seeds 0,1,2] [--no-ashore] [--at-sea] ...
 
 `--forward` is the analyst's protocol instead (`aisdati evaluate --cluster all --split time`):
 train one model of the whole area on the tracks before the split date (Kitimat: July -> August;
@@ -17,7 +17,8 @@ NY Harbor: December 1-4 -> 5-7), write anomalies into 30 % of the later tracks a
 later track; the table gives, per detector and score, the coverage, ROC AUC, average precision,
 the share of normal tracks flagged and of anomalies flagged at the calibrated threshold
 (--contamination 0.05), the AUC per kind, and the training time; `--no-ashore` the same with
-the models' scores alone (no ashore rule, `aisdati.tracks.ashore`).
+the models' scores alone (no ashore rule, `aisdati.tracks.ashore`), `--at-sea` with anomalies
+that stay off the land.
 Not part of the test suite: DATI's training dominates (4-6 minutes per seed for the two Kitimat
 routes on 2 cores). A seed whose `<out>/<data>/seed<k>/evaluation.json` exists is read, not
 rerun, so an interrupted run goes on where it stopped (delete the folder to rerun a seed).
@@ -87,7 +88,7 @@ def run_forward(area: str, seed: int, args: argparse.Namespace) -> dict:
     path, min_points, before = FORWARD[area]
     data = args.out / area / "processed"
     ingest(path, min_points, data)
-    ashore = "" if args.ashore else "-no-ashore"
+    ashore = ("" if args.ashore else "-no-ashore") + ("-at-sea" if args.at_sea else "")
     out = args.out / area / f"forward-s{args.strength:g}-seed{seed}{ashore}"
     if not (out / "evaluation.json").is_file():
         lanes = [x for kv in args.lane for x in ("--lane", kv)]
@@ -95,7 +96,8 @@ def run_forward(area: str, seed: int, args: argparse.Namespace) -> dict:
                 "--before", before, "--altered", "0.3", "--strength", str(args.strength),
                 "--detectors", args.detectors, "--kinds", args.kinds,
                 "--episodes", str(args.episodes), "--seed", str(seed), "--out", str(out),
-                "--quiet", *lanes, *([] if args.ashore else ["--no-ashore"]))  # fmt: skip
+                "--quiet", *lanes, *([] if args.ashore else ["--no-ashore"]),
+                *(["--at-sea"] if args.at_sea else []))  # fmt: skip
     return json.loads((out / "evaluation.json").read_text())
 
 
@@ -156,6 +158,8 @@ def main() -> None:
     ap.add_argument("--lane", action="append", default=[], help="KEY=VALUE for DATI")
     ap.add_argument("--no-ashore", dest="ashore", action="store_false",
                     help="--forward: the models' scores alone, no ashore rule")  # fmt: skip
+    ap.add_argument("--at-sea", action="store_true",
+                    help="--forward: only anomalies a vessel could sail")  # fmt: skip
     ap.add_argument("--out", type=Path, default=Path("runs/quality"))
     args = ap.parse_args()
     if args.forward:
