@@ -21,7 +21,7 @@ from aisdati.evaluation.inject import parse_kinds, parse_params
 from aisdati.evaluation.outputs import (
     REPORT,
     RESULTS,
-    ashore_counts,
+    ashore_summary,
     report,
     routes_report,
     write,
@@ -188,7 +188,7 @@ def evaluate_one(
         return
     console.print(results_table(result, console.width))
     if settings.ashore:
-        n = ashore_counts(result.scores)
+        n = ashore_summary(result.scores)
         console.print(
             f"ashore rule (every detector): flagged {n['altered']} altered and {n['normal']} "
             "normal tracks for reports well inland",

@@ -47,13 +47,13 @@ def report(ev: Evaluation) -> dict[str, Any]:
             "training_track_ids": ev.split.train_ids,
         },
         "lane_fidelity_m": lane_fidelity(ev),
-        "ashore": ashore_counts(ev.scores),
+        "ashore": ashore_summary(ev.scores),
         "timings_s": {k: {n: round(v, 2) for n, v in t.items()} for k, t in ev.timings.items()},
         "results": table.to_dict(orient="records"),
     }
 
 
-def ashore_counts(scores: pd.DataFrame) -> dict[str, int]:
+def ashore_summary(scores: pd.DataFrame) -> dict[str, int]:
     """Held-out tracks the ashore rule flags (`aisdati.tracks.ashore`), normal and altered:
     the normal ones are false alarms of every detector alike."""
     tracks = scores.drop_duplicates("track_id")
