@@ -7,7 +7,7 @@ mean over seeds is what the README's choices rest on.
 
 Run: python benchmarks/detection_quality.py [--seeds 0,1,2] [--data kitimat] [--episodes 60]
      [--detectors dati,nearest,bc] [--kinds detour,jump,loiter] [--lane KEY=VALUE ...]
-     [--out runs/quality]
+     [--no-ashore] [--out runs/quality]
      python benchmarks/detection_quality.py --forward [--data kitimat|nyharbor|both]
      [--strength 1] [--seeds 0,1,2] [--no-ashore] [--at-sea] ...
 
@@ -73,6 +73,7 @@ def run_seed(data: Path, out: Path, seed: int, args: argparse.Namespace) -> dict
             str(out),
             "--quiet",
             *lanes,
+            *([] if args.ashore else ["--no-ashore"]),
         )
     return json.loads((out / "evaluation.json").read_text())
 
@@ -157,7 +158,7 @@ def main() -> None:
     ap.add_argument("--kinds", default="detour,jump,loiter")
     ap.add_argument("--lane", action="append", default=[], help="KEY=VALUE for DATI")
     ap.add_argument("--no-ashore", dest="ashore", action="store_false",
-                    help="--forward: the models' scores alone, no ashore rule")  # fmt: skip
+                    help="the models' scores alone, no ashore rule")  # fmt: skip
     ap.add_argument("--at-sea", action="store_true",
                     help="--forward: only anomalies a vessel could sail")  # fmt: skip
     ap.add_argument("--out", type=Path, default=Path("runs/quality"))
@@ -174,7 +175,7 @@ def main() -> None:
     pooled: dict[tuple[str, str], list[float]] = {}
     per_route: dict[tuple[str, str], dict[str, list[float]]] = {}
     for seed in seeds:
-        out = args.out / args.data / f"seed{seed}"
+        out = args.out / args.data / f"seed{seed}{'' if args.ashore else '-no-ashore'}"
         doc = run_seed(data, out, seed, args)
         for key, auc in aucs(doc["results"]).items():
             pooled.setdefault(key, []).append(auc)
