@@ -19,13 +19,13 @@ sampled every 0.2 s:
   same two places (other vessels, later days): tracks/s.
 
 It prints one markdown table (seconds, rate, peak RSS of the largest process, which is a worker
-when there are workers, speed-up and scaling efficiency of 2 workers over 1) and a projection of
-a national year (3e9 reports, 12 M tracks, 2,000 routes) on 16 and 64 workers, from the
+when there are workers, and of the command's own process, speed-up and scaling efficiency of 2
+workers over 1) and a projection of a national year (3e9 reports, 12 M tracks, 2,000 routes) on 16 and 64 workers, from the
 2-worker rates per worker and the measured 2-worker efficiency held constant: a projection, not
 a measurement.
 
 Usage: python benchmarks/scale.py [--rows 100000000] [--work-dir data/raw/scale]
-       [--episodes 2] [--max-tracks 10]
+       [--episodes 2] [--max-tracks 10] [--stages ingest]
 """
 
 from __future__ import annotations
@@ -117,18 +117,20 @@ def build(rows: int, rows_per_file: int, work: Path) -> tuple[Path, Path, Path, 
     return full, small, later, written
 
 
-def measured(args: list[str], report: bool = True) -> tuple[float, float, dict]:
+def measured(args: list[str], report: bool = True) -> tuple[float, tuple[float, float], dict]:
     """Run `aisdati ARGS --json` (or `--quiet` where there is no `report`) in a fresh process:
-    (seconds, peak RSS in MiB of its largest process, its JSON output)."""
+    (seconds, peak RSS in MiB of (its largest process, the command's own process), its JSON
+    output)."""
     start = time.perf_counter()
     flag = "--json" if report else "--quiet"
     with tempfile.TemporaryFile("w+") as stdout:  # a report can outgrow a pipe's buffer
         proc = subprocess.Popen([*AISDATI, *args, flag], stdout=stdout, text=True)
-        root, peak = psutil.Process(proc.pid), 0
+        root, peak, own = psutil.Process(proc.pid), 0, 0
         while proc.poll() is None:
             try:
                 procs = [root, *root.children(recursive=True)]
                 peak = max([peak, *(p.memory_info().rss for p in procs if p.is_running())])
+                own = max(own, root.memory_info().rss)
             except psutil.Error:
                 pass
             time.sleep(0.2)
@@ -138,7 +140,7 @@ def measured(args: list[str], report: bool = True) -> tuple[float, float, dict]:
     if proc.returncode != 0:
         raise SystemExit(f"aisdati {' '.join(args)} failed ({proc.returncode})")
     last = [line for line in out.splitlines() if line.startswith("{")]
-    return seconds, peak / 2**20, json.loads(last[-1]) if last else {}
+    return seconds, (peak / 2**20, own / 2**20), json.loads(last[-1]) if last else {}
 
 
 def stages(
@@ -152,6 +154,8 @@ def stages(
     ingest = ["ingest", "--roi", "none", "--min-points", "50", *w]
     s, mem, doc = measured([*ingest, "--input", str(full), "--out", str(out)])
     result = {"ingest": (s, doc["rows_read"] / s, "rows/s", mem)}
+    if opts.stages == ["ingest"]:
+        return result
     for source, target in ((small, tout), (later, dout)):
         measured(["ingest", "--roi", "none", "--min-points", "100", *w, "--input", str(source),
                   "--out", str(target)])  # fmt: skip
@@ -175,19 +179,26 @@ def main() -> None:
     ap.add_argument("--work-dir", type=Path, default=ROOT / "data" / "raw" / "scale")
     ap.add_argument("--episodes", type=int, default=2)
     ap.add_argument("--max-tracks", type=int, default=10)
+    ap.add_argument("--stages", default="ingest,train,detect",
+                    help="ingest alone (its memory at scale) or all three")  # fmt: skip
     opts = ap.parse_args()
+    opts.stages = opts.stages.split(",")
+    if opts.stages not in (["ingest"], ["ingest", "train", "detect"]):
+        raise SystemExit("--stages: ingest, or ingest,train,detect")
     *inputs, rows = build(opts.rows, opts.rows_per_file, opts.work_dir)
     print(f"input: {rows:,} rows in {len(list(inputs[0].glob('*.csv')))} files under {inputs[0]}")
     runs = {w: stages(w, tuple(inputs), opts.work_dir, opts) for w in (1, 2)}
-    print("\n| stage | workers | seconds | rate | peak RSS of one process | speed-up | "
-          "efficiency |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|")
-    for stage in ("ingest", "train", "detect"):
+    print("\n| stage | workers | seconds | rate | peak RSS of one process | of the command's "
+          "process | speed-up | efficiency |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
+    for stage in opts.stages:
         for w in (1, 2):
-            s, rate, unit, mem = runs[w][stage]
+            s, rate, unit, (mem, own) = runs[w][stage]
             up = runs[1][stage][0] / s
             print(f"| {stage} | {w} | {s:.1f} | {rate:,.1f} {unit} | {mem:,.0f} MiB | "
-                  f"{up:.2f}x | {up / w:.0%} |")  # fmt: skip
+                  f"{own:,.0f} MiB | {up:.2f}x | {up / w:.0%} |")  # fmt: skip
+    if opts.stages == ["ingest"]:
+        return
     print("\nProjection of a national year (3e9 reports, 12 M tracks, 2,000 routes), at the "
           "2-worker rate per worker (its efficiency held):\n")  # fmt: skip
     print("| stage | 16 workers | 64 workers |")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -195,12 +196,15 @@ class PartWriter:
             self.tmp.unlink(missing_ok=True)
 
 
-def write_tracks(final: Path, tables: list[pa.Table]) -> StagedFile:
-    """tracks.parquet as GeoParquet (the track geometry as a WKB LineString)."""
+def write_tracks(final: Path, tables: Iterable[pa.Table]) -> StagedFile:
+    """tracks.parquet as GeoParquet (the track geometry as a WKB LineString), one row group
+    per table as they come: a national month's tracks need not be in memory at once."""
     staged = StagedFile(final)
-    table = pa.concat_tables(tables) if tables else TRACKS_SCHEMA.empty_table()
-    table = table.replace_schema_metadata({"geo": json.dumps(GEO_METADATA)})
-    pq.write_table(table, staged.tmp, compression="zstd")
+    schema = TRACKS_SCHEMA.with_metadata({"geo": json.dumps(GEO_METADATA)})
+    with pq.ParquetWriter(staged.tmp, schema, compression="zstd") as writer:
+        writer.write_table(schema.empty_table())  # the schema, were there no tables
+        for table in tables:
+            writer.write_table(table.cast(schema))
     return staged
 
 

@@ -12,11 +12,14 @@ workers, so the outputs are the same wherever they ran:
 3. here, each partition's track ids are shifted past those of the partitions before it (the
    ids of one process numbering them in partition order), and one task per partition writes
    its points as a part of points.parquet with the ids shifted the same;
-4. here, the route clusters and tracks.parquet.
+4. here, the route clusters, from the tracks' shapes the tasks returned (`TrackShapes`: the
+   ends and 32 points per track, not its reports), and tracks.parquet, written partition by
+   partition from the tasks' spill files.
 
 Memory is bounded twice over: the row-wise stages see one record batch at a time, and the
 per-vessel stages one partition (or piece of one) at a time, each holding at most about
-`settings.rows_per_bucket` rows.
+`settings.rows_per_bucket` rows. This process holds a few hundred bytes per track (its row
+of tracks.parquet without the geometry, and its shape), never every track's reports.
 """
 
 from __future__ import annotations
@@ -52,8 +55,11 @@ from aisdati.preprocess.output import (
 from aisdati.preprocess.read import open_reader
 from aisdati.preprocess.report import IngestCounts, no_tracks_message
 from aisdati.preprocess.routes import (
+    TrackShapes,
+    cluster_shapes,
+    lines_from_wkb,
     route_summary,
-    route_tracks,
+    with_routes,
     write_routes,
 )
 from aisdati.preprocess.routes import settings_of as route_settings
@@ -69,7 +75,7 @@ from aisdati.preprocess.tasks import (
     vessel_stages,
     write_points,
 )
-from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, TRACKS_SCHEMA
+from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -183,18 +189,19 @@ def _run(
             shutil.rmtree(read.folder)
         for vessel in vessels:
             counts.merge(vessel.counts)
-        tracks = _write_points(runner, tasks, vessels, points.tmp.absolute(), progress)
-        if not tracks:
+        parts = _write_points(runner, tasks, vessels, points.tmp.absolute(), progress)
+        if not parts:
             raise UserError(no_tracks_message(counts))
         stage_seconds["vessel_segment_cluster"] = (
             time.perf_counter() - started - stage_seconds["read_clean_filter"]
         )
         routed_at = time.perf_counter()
         what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
-        table, route_files, routes = _route_stage(tracks, stage, settings, what, progress)
+        labels_of, route_files, routes = _route_stage(parts, stage, settings, what, progress)
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)
-        staged.append(write_tracks(stage / "tracks.parquet", [table]))
+        rows = (with_routes(p.spilled(), labels_of(p)) for p in parts)
+        staged.append(write_tracks(stage / "tracks.parquet", rows))
     if not counts.balanced():
         raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
     result = IngestResult(counts, settings, area[1])
@@ -259,27 +266,64 @@ def _vessel_tasks(
     ]
 
 
+@dataclass(frozen=True)
+class PartTracks:
+    """A partition's tracks once numbered: ids from `offset` on, in `table` (without their
+    geometry) and, geometry and all, in the spill file `spill` (numbered from 0)."""
+
+    offset: int
+    table: pa.Table
+    spill: Path
+    shapes: TrackShapes | None
+
+    def spilled(self) -> pa.Table:
+        """The partition's rows of tracks.parquet, with their ids shifted past `offset`."""
+        with pa.OSFile(str(self.spill)) as f:
+            return shift_track_ids(pa.ipc.open_stream(f).read_all(), self.offset)
+
+
 def _write_points(
     runner: Runner,
     tasks: list[VesselTask],
     vessels: list[VesselResult],
     folder: Path,
     progress: Progress | None,
-) -> list[pa.Table]:
+) -> list[PartTracks]:
     """Each partition's track ids shifted past the tracks of the partitions before it, in
     its track table and (one `write_points` task per partition with tracks, into the dataset
-    folder `folder`) its points; the track tables, in partition order."""
-    tracks, writes, offset = [], [], 0
+    folder `folder`) its points; the partitions with tracks, in partition order."""
+    parts, writes, offset = [], [], 0
     for task, vessel in zip(tasks, vessels, strict=True):
         if vessel.tracks.num_rows:
-            tracks.append(shift_track_ids(vessel.tracks, offset))
+            table = shift_track_ids(vessel.tracks, offset)
+            parts.append(PartTracks(offset, table, task.tracks, vessel.shapes))
             writes.append(PointsTask(task.points, folder, task.part, offset))
             offset += vessel.tracks.num_rows
     written = sum(_map(runner, write_points, writes, progress, "write points"))
     kept = sum(vessel.counts.kept_points for vessel in vessels)
     if written != kept:
         raise RuntimeError(f"wrote {written} points of the {kept} kept")
-    return tracks
+    return parts
+
+
+def _lines_of(parts: list[PartTracks]) -> Callable[[np.ndarray], list[np.ndarray]]:
+    """Route clustering's `LinesOf` over the spilled partitions: the lines of a few tracks
+    (by row, = track id), each partition read only where one of them is."""
+    starts = np.array([p.offset for p in parts])
+
+    def lines(rows: np.ndarray) -> list[np.ndarray]:
+        found: dict[int, np.ndarray] = {}
+        owner = np.searchsorted(starts, rows, side="right") - 1
+        for k in np.unique(owner):
+            part = parts[k]
+            with pa.OSFile(str(part.spill)) as f:
+                wkb = pa.ipc.open_stream(f).read_all().column("geometry")
+            wanted = rows[owner == k]
+            got = lines_from_wkb(wkb.take(pa.array(wanted - part.offset)).to_pylist())
+            found.update(zip(wanted.tolist(), got, strict=True))
+        return [found[int(r)] for r in rows]
+
+    return lines
 
 
 def _map(
@@ -314,23 +358,35 @@ def _output_key(path: Path) -> str:
 
 
 def _route_stage(
-    tracks: list[pa.Table],
+    parts: list[PartTracks],
     out_dir: Path,
     settings: IngestSettings,
     what: str,
     progress: Progress | None,
-) -> tuple[pa.Table, list[StagedFile], dict[str, Any] | None]:
-    """All tracks as one table, with route clusters when `settings.clusters` is 'routes' (and
-    their staged files and summary)."""
-    table = pa.concat_tables(tracks) if tracks else TRACKS_SCHEMA.empty_table()
+) -> tuple[Callable[[PartTracks], np.ndarray], list[StagedFile], dict[str, Any] | None]:
+    """Route clusters when `settings.clusters` is 'routes', from the tracks' shapes alone:
+    each partition's route labels, the staged route files and their summary."""
     if settings.clusters == "direction":
-        return table, [], None
+        return lambda p: np.full(p.table.num_rows, None, dtype=object), [], None
     task = progress.add_task("route clusters", total=None) if progress else None
-    table, routes, lines = route_tracks(table, route_settings(settings))
-    files = write_routes(out_dir, routes, lines, what)
+    how = route_settings(settings)
+    table = pa.concat_tables([p.table for p in parts])
+    shapes = TrackShapes.joined([p.shapes for p in parts if p.shapes is not None], how.samples)
+    routes = cluster_shapes(
+        shapes,
+        table.column("track_id").to_numpy(),
+        table.column("length_km").to_numpy(),
+        _lines_of(parts),
+        how,
+    )
+    files = write_routes(out_dir, routes, shapes, what)
     if task is not None:
         progress.update(task, total=1, completed=1)
-    return table, files, route_summary(routes)
+    return (
+        lambda p: routes.labels[p.offset : p.offset + p.table.num_rows],
+        files,
+        route_summary(routes),
+    )
 
 
 def _partition_count(sources: list[Source], settings: IngestSettings) -> int:

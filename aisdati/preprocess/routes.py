@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -101,7 +102,46 @@ class Routes:
     table: pd.DataFrame
     medoids: list[np.ndarray]
     seconds: dict[str, float] = field(default_factory=dict)
-    """Wall time of each step: resample, endpoints, split, merge, describe."""
+    """Wall time of each step: resample (`cluster_routes` only: ingest's tasks resample),
+    endpoints, split, merge, describe."""
+
+
+@dataclass
+class TrackShapes:
+    """What route clustering needs of each track, small whatever its number of reports: its
+    first and last points [n, 2] and its line resampled to `samples` points [n, samples, 2].
+    Ingest's tasks compute them where the tracks are made, so the process that clusters never
+    holds every track's reports (at 100 M rows those were 3.4 GB)."""
+
+    first: np.ndarray
+    last: np.ndarray
+    resampled: np.ndarray
+
+    @classmethod
+    def of(cls, lines: list[np.ndarray], samples: int) -> TrackShapes:
+        ends = np.array([(xy[0], xy[-1]) for xy in lines]).reshape(-1, 2, 2)
+        return cls(ends[:, 0], ends[:, 1], resample(lines, samples))
+
+    @classmethod
+    def joined(cls, parts: list[TrackShapes], samples: int) -> TrackShapes:
+        if not parts:
+            return cls(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, samples, 2)))
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in cls.fields()))
+
+    @staticmethod
+    def fields() -> tuple[str, ...]:
+        return ("first", "last", "resampled")
+
+    def take(self, rows: np.ndarray) -> TrackShapes:
+        return TrackShapes(self.first[rows], self.last[rows], self.resampled[rows])
+
+    def __len__(self) -> int:
+        return len(self.first)
+
+
+LinesOf = Callable[[np.ndarray], list[np.ndarray]]
+"""Track rows (indices in the order the tracks were given) -> their [n, 2] lon/lat lines: how
+route clustering fetches its few medoid tracks' reports."""
 
 
 # ------------------------------------------------------------------------------ geometry
@@ -425,21 +465,37 @@ def cluster_routes(
     length_km: np.ndarray,
     settings: RouteSettings | None = None,
 ) -> Routes:
-    """Routes of tracks given as [n, 2] lon/lat lines (with their distinct ids and lengths).
-    The result depends on the tracks and the seed, not on the order they come in (they are
-    processed in the order of their ids)."""
+    """Routes of tracks given as [n, 2] lon/lat lines (with their distinct ids and lengths):
+    `cluster_shapes` of their `TrackShapes`."""
+    settings = settings or RouteSettings()
+    started = time.perf_counter()
+    shapes = TrackShapes.of(lines, settings.samples)
+    resampled_s = round(time.perf_counter() - started, 3)
+    routes = cluster_shapes(
+        shapes, track_ids, length_km, lambda rows: [lines[i] for i in rows], settings
+    )
+    routes.seconds = {"resample": resampled_s, **routes.seconds}
+    return routes
+
+
+def cluster_shapes(
+    tracks: TrackShapes,
+    track_ids: np.ndarray,
+    length_km: np.ndarray,
+    lines_of: LinesOf,
+    settings: RouteSettings | None = None,
+) -> Routes:
+    """Routes of tracks given by their `TrackShapes` (with their distinct ids and lengths;
+    `lines_of` fetches the medoids' reports). The result depends on the tracks and the seed,
+    not on the order they come in (they are processed in the order of their ids)."""
     settings = settings or RouteSettings()
     if settings.min_tracks < 2:
         raise ValueError("a route needs at least 2 tracks")
     track_ids = np.asarray(track_ids, dtype=np.int64)
     order = np.argsort(track_ids, kind="stable")
     if (order != np.arange(len(order))).any():
-        routes = cluster_routes(
-            [lines[i] for i in order], track_ids[order], np.asarray(length_km)[order], settings
-        )
-        routes.labels[order] = routes.labels.copy()
-        return routes
-    n = len(lines)
+        return _in_id_order(order, tracks, track_ids, length_km, lines_of, settings)
+    n = len(tracks)
     length_km = np.asarray(length_km, dtype=np.float64)
     labels = np.full(n, None, dtype=object)
     if n == 0:
@@ -453,10 +509,8 @@ def cluster_routes(
         seconds[step] = round(now - clock, 3)
         clock = now
 
-    first = np.array([xy[0] for xy in lines])
-    last = np.array([xy[-1] for xy in lines])
-    shapes = ShapeDistance(resample(lines, settings.samples))
-    lap("resample")
+    first, last = tracks.first, tracks.last
+    shapes = ShapeDistance(tracks.resampled)
     groups = endpoint_groups(first, last, settings)
     lap("endpoints")
     rng = np.random.default_rng(settings.seed)
@@ -494,10 +548,31 @@ def cluster_routes(
                 "spread_km": float(np.median(spread)),
             }
         )
-        medoids.append(lines[medoid])
+        medoids.append(medoid)
     table = pd.DataFrame(rows, columns=ROUTE_COLUMNS) if rows else _empty_table()
+    medoids = lines_of(np.array(medoids, dtype=np.int64)) if medoids else []
     lap("describe")
     return Routes(labels, table, medoids, seconds)
+
+
+def _in_id_order(
+    order: np.ndarray,
+    tracks: TrackShapes,
+    track_ids: np.ndarray,
+    length_km: np.ndarray,
+    lines_of: LinesOf,
+    settings: RouteSettings,
+) -> Routes:
+    """`cluster_shapes` of tracks not given in the order of their ids (`order` sorts them)."""
+    routes = cluster_shapes(
+        tracks.take(order),
+        track_ids[order],
+        np.asarray(length_km)[order],
+        lambda rows: lines_of(order[rows]),
+        settings,
+    )
+    routes.labels[order] = routes.labels.copy()
+    return routes
 
 
 def _merged_routes(
@@ -555,19 +630,10 @@ def settings_of(ingest_settings: Any) -> RouteSettings:
     )
 
 
-def route_tracks(tracks: pa.Table, settings: RouteSettings) -> tuple[pa.Table, Routes, list]:
-    """tracks.parquet's table with its `route` column filled in, the routes, and each track's
-    [n, 2] lon/lat line."""
-    lines = lines_from_wkb(tracks.column("geometry").to_pylist())
-    routes = cluster_routes(
-        lines,
-        tracks.column("track_id").to_numpy(),
-        tracks.column("length_km").to_numpy(),
-        settings,
-    )
+def with_routes(tracks: pa.Table, labels: np.ndarray) -> pa.Table:
+    """tracks.parquet's rows with their `route` column filled in (None: no route)."""
     col = tracks.schema.get_field_index("route")
-    tracks = tracks.set_column(col, "route", pa.array(list(routes.labels), pa.string()))
-    return tracks, routes, lines
+    return tracks.set_column(col, "route", pa.array(list(labels), pa.string()))
 
 
 def routes_arrow(routes: Routes) -> pa.Table:
@@ -596,8 +662,11 @@ def routes_geojson(routes: Routes) -> dict[str, Any]:
     return {"type": "FeatureCollection", "features": features}
 
 
-def write_routes(out_dir: Path, routes: Routes, lines: list[np.ndarray], title: str) -> list:
-    """routes.parquet, routes.geojson and routes.png, staged (renamed when the run commits)."""
+def write_routes(
+    out_dir: Path, routes: Routes, shapes: TrackShapes, title: str
+) -> list:
+    """routes.parquet, routes.geojson and routes.png (each track drawn as its resampled
+    shape), staged (renamed when the run commits)."""
     from aisdati.preprocess.figures import plot_routes
     from aisdati.preprocess.output import StagedFile
 
@@ -608,6 +677,7 @@ def write_routes(out_dir: Path, routes: Routes, lines: list[np.ndarray], title: 
     geojson.tmp.write_text(json.dumps(routes_geojson(routes)) + "\n", encoding="utf-8")
     png = StagedFile(out_dir / "routes.png")
     png.tmp = png.tmp.with_name(png.tmp.name + ".png")  # matplotlib picks the format by suffix
+    lines = list(shapes.resampled)
     plot_routes(lines, routes.labels, routes.table, routes.medoids, png.tmp, title)
     return [parquet, geojson, png]
 

@@ -4,16 +4,17 @@ that a Dask worker runs it as well as this process does (`aisdati.execution.runn
 * `read_source` (`ReadTask`): one input source read, checked and filtered batch by batch, its
   survivors spilled into vessel partitions of its own, its rejects into a part of its own.
 * `vessel_stages` (`VesselTask`): one vessel partition, from the spill files of every source:
-  cleaned per vessel, segmented and made tracks; its points spilled with the partition's own
-  track numbers (0, 1, ...), its track summaries returned.
+  cleaned per vessel, segmented and made tracks; its points and its rows of tracks.parquet
+  spilled with the partition's own track numbers (0, 1, ...), the rows but their geometry
+  returned, with each track's shape for route clustering (`TrackShapes`).
 * `write_points` (`PointsTask`): a partition's points as one part of points.parquet, its track
   numbers shifted past the tracks of the partitions before it: the ids one process numbering
   the tracks in partition order would give.
 
 They share files in folders every worker sees (the spill folder and the staging folder, both
-in --out) and return small things only: counts, track summaries. A task never deletes its
-inputs: one lost with its worker (even after it ended, before its result was fetched) is run
-again on the same files and writes the same outputs.
+in --out) and return small things only: counts, track summaries, 32-point shapes. A task never
+deletes its inputs: one lost with its worker (even after it ended, before its result was
+fetched) is run again on the same files and writes the same outputs.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ from aisdati.preprocess.partition import VesselPartitions, partition_tables
 from aisdati.preprocess.read import open_reader
 from aisdati.preprocess.rejects import malformed_rows, reject_rows
 from aisdati.preprocess.report import IngestCounts
+from aisdati.preprocess.routes import TrackShapes
+from aisdati.preprocess.routes import settings_of as route_settings
 from aisdati.preprocess.segment import segment
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.preprocess.stops import Splitter, dwell_rules
@@ -139,12 +142,20 @@ class VesselTask:
     rejects: Path | None = None
     reject_part: int = 0
 
+    @property
+    def tracks(self) -> Path:
+        """Where the partition's rows of tracks.parquet, geometry and all, are spilled."""
+        return self.points.with_name(self.points.stem.replace("points", "tracks") + ".arrow")
+
 
 @dataclass(frozen=True)
 class VesselResult:
     counts: IngestCounts
     tracks: pa.Table
-    """One row per track (tracks.parquet's schema), numbered from 0 in the partition."""
+    """One row per track (tracks.parquet's schema but its geometry, which stays in the spill
+    file `VesselTask.tracks`), numbered from 0 in the partition."""
+    shapes: TrackShapes | None
+    """The tracks' shapes for route clustering (None with `--clusters direction`)."""
 
 
 def vessel_stages(task: VesselTask) -> VesselResult:
@@ -153,6 +164,8 @@ def vessel_stages(task: VesselTask) -> VesselResult:
     settings = task.settings
     counts = IngestCounts()
     tracks: list[pa.Table] = []
+    shapes: list[TrackShapes] = []
+    samples = route_settings(settings).samples
     stops = dwell_rules(settings.dwell_radius_m, settings.dwell_time_s, settings.min_sog_kn)
     # reports further apart than both the stop gap and the dwell time are independent
     independent_s = max(settings.stop_gap_s, settings.dwell_time_s)
@@ -162,6 +175,7 @@ def vessel_stages(task: VesselTask) -> VesselResult:
     with (
         contextlib.ExitStack() as stack,
         pa.ipc.new_stream(str(task.points), POINTS_SCHEMA) as points,
+        pa.ipc.new_stream(str(task.tracks), TRACKS_SCHEMA) as spilled,
     ):
         rejects = _rejects_part(stack, task.rejects, task.reject_part)
         for table in pieces:
@@ -175,12 +189,24 @@ def vessel_stages(task: VesselTask) -> VesselResult:
                 rows = table.take(pa.array(np.flatnonzero(track >= 0)))
                 out_points, out_tracks = build_tracks(rows, track[track >= 0], first_id)
                 points.write_table(out_points)
-                tracks.append(out_tracks)
+                spilled.write_table(out_tracks)
+                tracks.append(out_tracks.drop_columns(["geometry"]))
+                if settings.clusters == "routes":
+                    shapes.append(TrackShapes.of(_lines(out_points), samples))
                 counts.kept_points += out_points.num_rows
                 for name in out_tracks.column("cluster").to_pylist():
                     counts.tracks[name] += 1
-    table = pa.concat_tables(tracks) if tracks else TRACKS_SCHEMA.empty_table()
-    return VesselResult(counts, table)
+    empty = TRACKS_SCHEMA.empty_table().drop_columns(["geometry"])
+    table = pa.concat_tables(tracks) if tracks else empty
+    joined = TrackShapes.joined(shapes, samples) if settings.clusters == "routes" else None
+    return VesselResult(counts, table, joined)
+
+
+def _lines(points: pa.Table) -> list[np.ndarray]:
+    """Each track's [n, 2] lon/lat line, from its rows of points.parquet (by track, in order)."""
+    track = points.column("track_id").to_numpy()
+    xy = np.column_stack([points.column("lon").to_numpy(), points.column("lat").to_numpy()])
+    return np.split(xy, np.flatnonzero(np.diff(track)) + 1)
 
 
 def _segment(
