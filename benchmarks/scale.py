@@ -20,9 +20,9 @@ sampled every 0.2 s:
 
 It prints one markdown table (seconds, rate, peak RSS of the largest process, which is a worker
 when there are workers, and of the command's own process, speed-up and scaling efficiency of 2
-workers over 1) and a projection of a national year (3e9 reports, 12 M tracks, 2,000 routes) on 16 and 64 workers, from the
-2-worker rates per worker and the measured 2-worker efficiency held constant: a projection, not
-a measurement.
+workers over 1) and a projection of a national year (3e9 reports, 12 M tracks, 2,000 routes)
+on 16 and 64 workers, from the 2-worker rates per worker and the measured 2-worker efficiency
+held constant: a projection, not a measurement. `--stages ingest` runs the ingest alone.
 
 Usage: python benchmarks/scale.py [--rows 100000000] [--work-dir data/raw/scale]
        [--episodes 2] [--max-tracks 10] [--stages ingest]
