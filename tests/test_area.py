@@ -17,11 +17,12 @@ from aisdati.ais.card import DataCard
 from aisdati.ais.space import PRESETS, AISSpace
 from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, crossfit_folds
 from aisdati.detection.outputs import report_dict
-from aisdati.detection.run import NOT_JUDGED_FAR, DetectSettings, detect
+from aisdati.detection.run import NOT_JUDGED_FAR, DetectSettings, detect, with_own_score
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.od import OD_QUANTILE, od_distances, od_excess
+from aisdati.errors import UserError
 from aisdati.tracks.store import Track, load_tracks, read_track_table
 
 AUGUST = pd.Timestamp("2018-08-01", tz="UTC")
@@ -208,3 +209,30 @@ def test_evaluate_splits_by_time_and_judges_every_later_track(cli, kitimat, tmp_
     assert 0.0 <= row["false_alarm_rate"] <= 1.0 and row["roc_auc"] is not None
     bad = cli("evaluate", "--data", kitimat, "--cluster", "all", "--split", "time", "-q")
     assert bad.exit_code == 2 and "--before" in bad.output
+
+
+def test_an_area_model_judges_by_its_one_step_score_unless_told(area_dati, tmp_path):
+    """The area preset's card records its score (step); loaded, the model judges by it; a
+    card from before the field judges by the lane; a bad value is one line."""
+    assert PRESETS["area"].state == "motion"  # the last move tells a lane's two ways apart
+    assert area_dati.card.score == "step"
+    area_dati.save(tmp_path / "all")
+    assert load_detector(tmp_path / "all").how.score == "step"
+    card = json.loads((tmp_path / "all.json").read_text())
+    for name, value in (("old", None), ("bad", "fastest")):
+        if value is None:
+            card.pop("score")
+        else:
+            card["score"] = value
+        (tmp_path / f"{name}.json").write_text(json.dumps(card))
+        for suffix in (".pt", ".corridor.npz"):
+            (tmp_path / f"{name}{suffix}").write_bytes((tmp_path / f"all{suffix}").read_bytes())
+    assert load_detector(tmp_path / "old").how.score == "lane"
+    with pytest.raises(UserError, match="score must be one of"):
+        load_detector(tmp_path / "bad")
+    settings = DetectSettings(data_dir=tmp_path, models_dir=tmp_path, out_dir=tmp_path / "out")
+    both = [load_detector(tmp_path / "all"), load_detector(tmp_path / "old")]
+    assert with_own_score(settings, both[:1]).score == "step"
+    assert with_own_score(replace(settings, score="lane"), both).score == "lane"
+    with pytest.raises(UserError, match=r"score differently.*step: all.*pass --score"):
+        with_own_score(settings, both)

@@ -99,10 +99,11 @@ def test_a_card_reads_back_from_the_json_it_writes():
     written = card.to_dict()
     assert ModelCard.from_dict(json.loads(json.dumps(written)), Path("up.json")) == card
     # every field it held is written back as it was; it adds its method, the lane
-    # configuration it lacked (the paper's) and the rule's description
+    # configuration and the score it lacked (the paper's, the lane) and the rule's description
     rule = {"name": "spherical (eq. 5)", "decisions": ["sog_kn", "cog_deg", "dt_h"], **doc["rule"]}
     assert {k: written[k] for k in doc} == {**doc, "rule": rule}
-    assert set(written) - set(doc) == {"method", "lane_config"}
+    assert set(written) - set(doc) == {"method", "lane_config", "score"}
+    assert written["score"] == "lane"
 
 
 def test_an_unfinished_card_warns_and_a_bad_lane_configuration_is_one_line():

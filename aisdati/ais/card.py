@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from aisdati.ais import SCORES
 from aisdati.ais.card_fields import CardFields, is_number
 from aisdati.ais.space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, LaneConfig, state_width
 from aisdati.errors import UserError
@@ -245,6 +246,10 @@ class ModelCard:
     """The lane configuration (cards from before them: the paper's, `LaneConfig()`)."""
     preset: str | None = None
     """The name of the preset `lane_config` came from (with any overrides)."""
+    score: str = "lane"
+    """The score the model judges by where `--score` is not given: its preset's when it was
+    trained (`aisdati.ais.space.PRESET_SCORES`); cards from before this field: lane, the score
+    they were measured with."""
     created: str | None = None
     code_version: str | None = None
     training: TrainingReport = field(default_factory=TrainingReport)
@@ -266,7 +271,7 @@ class ModelCard:
         """The card as JSON-ready dicts and lists (what `<stem>.json` holds)."""
         doc = {"format": self.format, "method": self.method, "kind": KIND, "cluster": self.cluster,
                "created": self.created, "code_version": self.code_version, "seed": self.seed,
-               "data": self.data.to_dict(), "preset": self.preset,
+               "data": self.data.to_dict(), "preset": self.preset, "score": self.score,
                "region": self.region.to_dict(), "rule": self.rule.to_dict(),
                "lane_config": self.lane_config.to_dict(), "epsilon_m": self.epsilon_m,
                "epsilon_interpretation": self.epsilon_interpretation,
@@ -296,6 +301,7 @@ class ModelCard:
             lane_config=lane, networks=networks, data=_read_data(f),
             calibration=_read_calibration(f), calibrated_with=_read_calibrated_with(f),
             training=_read_training(f), preset=doc.get("preset"), created=doc.get("created"),
+            score=f.choice("score", SCORES) if doc.get("score") is not None else "lane",
             code_version=doc.get("code_version"), epsilon_m=doc.get("epsilon_m"),
             epsilon_interpretation=doc.get("epsilon_interpretation"),
         )  # fmt: skip

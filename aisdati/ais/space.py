@@ -149,14 +149,23 @@ LANES = LaneConfig(
 PRESETS: dict[str, LaneConfig] = {
     "paper": LaneConfig(),
     DEFAULT_PRESET: LANES,
-    AREA_PRESET: replace(LANES, crossfit=True),
+    AREA_PRESET: replace(LANES, crossfit=True, state="motion"),
 }
 """Named configurations: `paper` reproduces the paper's set-up; `lanes` is the default, the
 combination that measured best with `aisdati evaluate` on one route (docs/results); `area` is
-`lanes` with cross-fitted calibration, the model of a whole area (`--cluster all`, which trains
-it unless told otherwise). The goal lever (`goal=true`) measured worse than without on Kitimat,
-forward in time, so the area preset leaves it off (docs/results/forward.md). Their names are
+`lanes` with cross-fitted calibration and the agent's last move in its state, the model of a
+whole area (`--cluster all`, which trains it unless told otherwise): an area's lanes run both
+ways, and at a point of a two-way lane a policy that sees only the position cannot tell which
+way its vessel sails (its one-step errors on Kitimat fell from 2.4 km to 0.65 km with the
+motion state). The goal lever (`goal=true`) measured worse than without on Kitimat, forward in
+time, so the area preset leaves it off (docs/results/forward.md). Their names are
 `aisdati.ais.DEFAULT_PRESET` and `AREA_PRESET`."""
+PRESET_SCORES: dict[str, str] = {AREA_PRESET: "step"}
+"""The score a policy of a preset judges by unless `--score` says otherwise (`ModelCard.score`;
+every other preset, and `nearest`: lane). The area preset's one-step predictions ranked the
+anomalies a vessel could sail better than its lane on both areas, forward in time (Kitimat
+0.737 against 0.597, NY Harbor 0.786 against 0.674; docs/results/forward.md): one model of a
+whole area predicts the next report far better than it generates a whole track."""
 
 
 def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:

@@ -28,7 +28,7 @@ import math
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -66,7 +66,8 @@ class DetectSettings:
     """Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all."""
     track_ids: tuple[int, ...] = ()
     """Explicit test tracks (overrides the cluster and the start rule)."""
-    score: str = "lane"
+    score: str | None = None
+    """None: each judging model's own (`ModelCard.score`: lane; step for the area preset)."""
     rollouts: int = 10
     lane_rollouts: int = ScoreSettings().lane_rollouts
     lane_course_km: float = ScoreSettings().lane_course_km
@@ -274,8 +275,21 @@ def check_settings(settings: DetectSettings) -> None:
         )
     if not settings.near_km > 0:
         raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
-    if settings.score not in SCORES:
+    if settings.score is not None and settings.score not in SCORES:
         raise UserError(f"--score must be one of {', '.join(SCORES)}, got {settings.score!r}")
+
+
+def with_own_score(settings: DetectSettings, models: Sequence[Detector]) -> DetectSettings:
+    """`settings` with the score it judges by: `--score`'s, or else the judging models' own
+    (`ModelCard.score`), which must agree: scores of different kinds are not comparable."""
+    if settings.score is not None:
+        return settings
+    own = sorted({m.card.score for m in models})
+    if len(own) > 1:
+        names = {s: ", ".join(m.name for m in models if m.card.score == s) for s in own}
+        by = "; ".join(f"{s}: {n}" for s, n in names.items())
+        raise UserError(f"the judging models score differently ({by}): pass --score")
+    return replace(settings, score=own[0] if own else "lane")
 
 
 def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
@@ -298,6 +312,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
         )
     tracks = [t for t, o in zip(candidates, owners, strict=True) if o >= 0]
     owner = [int(o) for o in owners if o >= 0]
+    settings = with_own_score(settings, [models[m] for m in sorted(set(owner))])
     timings["load_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner, runner)

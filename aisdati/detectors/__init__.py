@@ -18,6 +18,7 @@ from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.nearest import NearestDetector
 
 # isort: on
+from aisdati.ais import SCORES
 from aisdati.ais.training import TrainSettings
 from aisdati.detectors.base import DEFAULT_CONTAMINATION, Detector
 from aisdati.detectors.registry import (
@@ -28,7 +29,7 @@ from aisdati.detectors.registry import (
     model_name,
     parse_detectors,
 )
-from aisdati.detectors.scoring import SCORES, Scores, ScoreSettings
+from aisdati.detectors.scoring import Scores, ScoreSettings
 
 __all__ = [
     "DEFAULT_CONTAMINATION",

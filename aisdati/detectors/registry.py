@@ -8,6 +8,7 @@ writing its module and importing it in `aisdati.detectors`, and nothing dispatch
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -51,6 +52,7 @@ def load_detector(stem: Path) -> Detector:
     path = stem.with_suffix(".json")
     card = read_card(path)  # size, types, ranges: one line naming the field
     det = detector_class(card.method).from_files(stem, card)
+    det.how = replace(det.how, score=card.score)  # `decision_function` judges by its own score
     det.loaded_from = path
     return det
 

@@ -11,7 +11,6 @@ import numpy as np
 
 from aisdati.ais.card import CalibratedWith
 
-SCORES = ("rollout", "step", "lane", "both", "area")
 SCORE_CHUNK = 64
 """Tracks one scoring task holds (`Detector.score`): chunks of the test set, in its order, so
 the scores are the same whatever runs the tasks. Each chunk regenerates the lane traffic (one
