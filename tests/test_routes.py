@@ -18,8 +18,10 @@ from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.routes import (
     RouteSettings,
     ShapeDistance,
+    TrackShapes,
     _hdbscan_knn,
     cluster_routes,
+    cluster_shapes,
     earth_xyz_km,
     lines_from_wkb,
     resample,
@@ -91,6 +93,28 @@ def test_kitimat_lanes_are_separate_routes_in_each_direction(kitimat):
     assert (np.diff(routes["n_tracks"]) <= 0).all()
     assert set(tracks["cluster"]) <= {"up", "down", "other"}
     assert (tracks["route"].value_counts().sort_index() > 0).all()
+
+
+def test_route_clustering_from_shapes_reads_only_its_medoids_reports(kitimat_lines):
+    """What ingest's command process does: the tracks' ends and shapes in, the reports of the
+    routes' medoid tracks fetched, not of every track; the routes those of the lines."""
+    tracks, lines = kitimat_lines
+    ids, km = tracks["track_id"].to_numpy(), tracks["length_km"].to_numpy()
+    asked: list[int] = []
+
+    def lines_of(rows):
+        asked.extend(rows.tolist())
+        return [lines[i] for i in rows]
+
+    shapes = TrackShapes.of(lines, RouteSettings().samples)
+    got = cluster_shapes(shapes, ids, km, lines_of)
+    want = cluster_routes(lines, ids, km)
+    assert list(got.labels) == list(want.labels)
+    pd.testing.assert_frame_equal(got.table, want.table)
+    assert sorted(asked) == sorted(ids[np.searchsorted(ids, got.table["medoid_track_id"])])
+    assert len(asked) == len(got.table) < len(lines) / 10
+    for a, b in zip(got.medoids, want.medoids, strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_route_clustering_is_deterministic_and_order_free(kitimat_lines):
