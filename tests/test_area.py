@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -15,7 +16,7 @@ import pytest
 
 from aisdati.ais.card import DataCard
 from aisdati.ais.space import PRESETS, AISSpace
-from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, crossfit_folds
+from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, Validator, crossfit_folds
 from aisdati.detection.outputs import report_dict
 from aisdati.detection.run import NOT_JUDGED_FAR, DetectSettings, detect, with_own_score
 from aisdati.detectors import ScoreSettings, load_detector
@@ -236,3 +237,23 @@ def test_an_area_model_judges_by_its_one_step_score_unless_told(area_dati, tmp_p
     assert with_own_score(replace(settings, score="lane"), both).score == "lane"
     with pytest.raises(UserError, match=r"score differently.*step: all.*pass --score"):
         with_own_score(settings, both)
+
+
+def test_validation_by_one_step_errors_scores_the_actor_as_the_step_score_does(
+    area_dati, lane_tracks
+):
+    """`validate_by=step`: the median over validation tracks of each one's mean best-of-R
+    one-step error, the errors the `step` score judges by (member 0 here)."""
+    space = AISSpace.from_card(area_dati.card, area_dati.corridor)
+    lane = replace(area_dati.card.lane_config, validate_by="step", validation_tracks=3)
+    check = Validator(space, area_dati.config, lane_tracks, lane, seed=5)
+    trainer = SimpleNamespace(candidate=area_dati.nets)
+    got = check(trainer, 0)
+    policy = area_dati.policy(0)
+    errors, _ = policy.step_errors(check.tracks, check.dts, lane.validation_rollouts, 5)
+    assert got == pytest.approx(float(np.median([e.mean() for e in errors])))
+    by_rollouts = replace(lane, validate_by="rollout")
+    rollouts = Validator(space, area_dati.config, lane_tracks, by_rollouts, 5)
+    assert got < rollouts(trainer, 0)  # one step errs far less than a whole rollout
+    with pytest.raises(UserError, match="validate_by"):
+        replace(lane, validate_by="loss")

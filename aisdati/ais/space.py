@@ -40,6 +40,9 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
   near its reference, so the pull pairs the reference's decisions with states near the
   reference's own. The paper starts from random actors. With validation the pretrained actor is
   a candidate for the kept one (episode 0), which an episode's actor must beat.
+- `validate_by="step"`: validation scores an actor by its mean one-step error on the
+  validation tracks (teacher-forced, as the `step` score) instead of its rollouts' DTW: the
+  actor kept is the one best at what a model judging by one-step errors is used for.
 - `goal=true`: the state adds where the track is bound, its last report (scaled like the
   position, with the same Fourier octaves, and the scaled offset from the agent to it), so one
   model of a whole area's multimodal traffic generates, from a track's start, tracks that go
@@ -101,6 +104,7 @@ class LaneConfig:
     pretrain: int = 0
     fourier: int = 0
     average: float = 0.0
+    validate_by: str = "rollout"
     goal: bool = False
     crossfit: bool = False
 
@@ -112,6 +116,7 @@ class LaneConfig:
             "ranges": ("max", "quantile"),
             "noise": ("gaussian", "ou"),
             "critic": ("decision", "state"),
+            "validate_by": ("rollout", "step"),
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:

@@ -202,7 +202,11 @@ def model_card(
     details = {
         **first,
         "patience": settings.patience,
-        "selected_by": "validation rollouts" if validation else "loss",
+        "selected_by": (
+            f"validation {'one-step errors' if space.config.validate_by == 'step' else 'rollouts'}"
+            if validation
+            else "loss"
+        ),
         "steps": steps,
         "steps_per_second": round(steps / wall, 2) if wall > 0 else None,
     }
@@ -292,7 +296,8 @@ def crossfit_folds(tracks: Sequence[Track], folds: int, seed: int) -> np.ndarray
 class Validator:
     """Scores a live DATI actor by its rollouts (best of R, from each validation track's first
     point) against `validation_tracks` of the given tracks (the training tracks, or with
-    cross-fitting the member's held-out fold): the median mean great-circle DTW in metres.
+    cross-fitting the member's held-out fold): the median mean great-circle DTW in metres
+    (`validate_by="step"`: the median of the tracks' mean one-step errors, best of R draws).
     Lower is better; the trainer keeps the best actor and stops on it."""
 
     def __init__(
@@ -306,11 +311,15 @@ class Validator:
         rng = np.random.default_rng([seed, 7])
         pick = rng.permutation(len(tracks))[: lane.validation_tracks]
         self.tracks = [tracks[i].positions for i in sorted(pick)]
-        self.space, self.config = space, config
+        self.dts = [tracks[i].dts for i in sorted(pick)]
+        self.space, self.config, self.by = space, config, lane.validate_by
         self.rollouts, self.seed = lane.validation_rollouts, seed
 
     def __call__(self, trainer: DATITrainer, k: int) -> float:
         policy = AISPolicy(self.space, dati_act(trainer.candidate, self.config, member=k))
+        if self.by == "step":  # `validate_by`: the mean one-step error of each track
+            errors = policy.step_errors(self.tracks, self.dts, self.rollouts, self.seed)[0]
+            return float(np.median([e.mean() for e in errors]))
         scores = policy.rollout_scores(self.tracks, self.rollouts, self.seed)[0]
         return float(np.median(scores))
 
