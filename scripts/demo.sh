@@ -4,9 +4,10 @@
 # 2 CPU cores:
 #
 #   1. ingest: clean, segment and cluster the reports of July and August 2018;
-#   2. evaluate --split time: train one model of the whole area (DATI bound for each track's
-#      destination, and the nearest-track baseline) on July, write detours, position jumps and
-#      loitering circles into 30 % of the August tracks, and judge every August track;
+#   2. evaluate --split time: train one model of the whole area (DATI with the area preset, which
+#      judges by its one-step predictions, and the nearest-track baseline) on July, write
+#      detours, position jumps and loitering circles into 30 % of the August tracks, and judge
+#      every August track;
 #   3. detect: judge August with the July model, flag what scores above the threshold calibrated
 #      on July tracks the model did not fit (--contamination 0.05) and every track with reports
 #      well inland, check the flags against the injected labels and draw the map.

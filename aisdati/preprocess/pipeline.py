@@ -200,7 +200,7 @@ def _run(
         labels_of, route_files, routes = _route_stage(parts, stage, settings, what, progress)
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)
-        rows = (with_routes(p.spilled(), labels_of(p)) for p in parts)
+        rows = (with_routes(shift_track_ids(p.spilled(), p.offset), labels_of(p)) for p in parts)
         staged.append(write_tracks(stage / "tracks.parquet", rows))
     if not counts.balanced():
         raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
@@ -277,9 +277,9 @@ class PartTracks:
     shapes: TrackShapes | None
 
     def spilled(self) -> pa.Table:
-        """The partition's rows of tracks.parquet, with their ids shifted past `offset`."""
+        """The partition's rows of tracks.parquet, numbered from 0 as the task wrote them."""
         with pa.OSFile(str(self.spill)) as f:
-            return shift_track_ids(pa.ipc.open_stream(f).read_all(), self.offset)
+            return pa.ipc.open_stream(f).read_all()
 
 
 def _write_points(
@@ -316,8 +316,7 @@ def _lines_of(parts: list[PartTracks]) -> Callable[[np.ndarray], list[np.ndarray
         owner = np.searchsorted(starts, rows, side="right") - 1
         for k in np.unique(owner):
             part = parts[k]
-            with pa.OSFile(str(part.spill)) as f:
-                wkb = pa.ipc.open_stream(f).read_all().column("geometry")
+            wkb = part.spilled().column("geometry")
             wanted = rows[owner == k]
             got = lines_from_wkb(wkb.take(pa.array(wanted - part.offset)).to_pylist())
             found.update(zip(wanted.tolist(), got, strict=True))

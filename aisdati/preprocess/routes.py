@@ -56,7 +56,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -126,11 +126,7 @@ class TrackShapes:
     def joined(cls, parts: list[TrackShapes], samples: int) -> TrackShapes:
         if not parts:
             return cls(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, samples, 2)))
-        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in cls.fields()))
-
-    @staticmethod
-    def fields() -> tuple[str, ...]:
-        return ("first", "last", "resampled")
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
 
     def take(self, rows: np.ndarray) -> TrackShapes:
         return TrackShapes(self.first[rows], self.last[rows], self.resampled[rows])
