@@ -67,6 +67,15 @@ def spherical_step(lon, lat, sog_kn, cog_deg, dt_h):
     return new_lon, new_lat
 
 
+def moved_m(lon, lat, bearing_deg, metres):
+    """Points moved `metres` along `bearing_deg` by a local flat-Earth step (fine at a few km;
+    arrays broadcast): where an injected anomaly puts a report, where the ashore check probes."""
+    b = np.radians(bearing_deg)
+    dlat = np.degrees(metres * np.cos(b) / EARTH_RADIUS_M)
+    coslat = np.maximum(np.cos(np.radians(lat)), 1e-6)
+    return lon + np.degrees(metres * np.sin(b) / EARTH_RADIUS_M) / coslat, lat + dlat
+
+
 def spherical_decision(lon, lat, next_lon, next_lat, dt_h):
     """Inverse of `spherical_step`: the SOG (knots) and COG (degrees) that map a point exactly
     onto the next one in `dt_h` hours. These are the paper's perfect decisions for AIS."""

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aisdati.errors import UserError
-from aisdati.geo import EARTH_RADIUS_M, courses_deg, haversine_m
+from aisdati.geo import courses_deg, haversine_m, moved_m
 from aisdati.options import parse_names
 
 Range = tuple[float, float]
@@ -95,10 +95,7 @@ def _stretch(rng: np.random.Generator, n: int, span: Range) -> tuple[int, int]:
 
 def _move(positions: np.ndarray, bearing_deg: np.ndarray, metres: np.ndarray) -> np.ndarray:
     """Points moved `metres` along `bearing_deg` (local flat-Earth step, fine at these scales)."""
-    b = np.radians(bearing_deg)
-    dlat = np.degrees(metres * np.cos(b) / EARTH_RADIUS_M)
-    dlon = np.degrees(metres * np.sin(b) / EARTH_RADIUS_M) / np.cos(np.radians(positions[:, 1]))
-    return positions + np.column_stack([dlon, dlat])
+    return np.column_stack(moved_m(positions[:, 0], positions[:, 1], bearing_deg, metres))
 
 
 def detour(p, t, rng, prm) -> Injected:

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aisdati.geo import EARTH_RADIUS_M, haversine_m
+from aisdati.geo import haversine_m, moved_m
 
 PROBES = 8
 """Points around each report (evenly spaced bearings) that must be on land too."""
@@ -75,12 +75,8 @@ class AshoreCheck:
         idx = np.flatnonzero(out)
         if idx.size == 0:
             return out
-        bearing = np.radians(np.arange(PROBES) * 360.0 / PROBES)
-        dlat = np.degrees(self.margin_m * np.cos(bearing) / EARTH_RADIUS_M)
-        dlon = np.degrees(self.margin_m * np.sin(bearing) / EARTH_RADIUS_M)
-        coslat = np.maximum(np.cos(np.radians(p[idx, 1])), 1e-6)
-        lon = p[idx, 0, None] + dlon[None, :] / coslat[:, None]
-        lat = p[idx, 1, None] + dlat[None, :]
+        bearing = np.arange(PROBES)[None, :] * 360.0 / PROBES
+        lon, lat = moved_m(p[idx, 0, None], p[idx, 1, None], bearing, self.margin_m)
         out[idx] = on_land(lon, lat).all(axis=1)
         if seen is not None and len(seen):
             idx = np.flatnonzero(out)
