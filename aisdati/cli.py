@@ -236,7 +236,12 @@ def train(
         help="Detector: dati (the paper's), bc (behavioural cloning) or nearest (no learning).",
     ),
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
-    out: Path = typer.Option(Path("models"), "--out", help="Model folder."),
+    out: str = typer.Option(
+        "models",
+        "--out",
+        help="Model folder, or a URL the models are copied to (s3://bucket/models with s3fs, "
+        "ftp://user:password@host/models, any fsspec URL): what a cluster's workers all reach.",
+    ),
     preset: str = PRESET_OPTION,
     lane: list[str] = LANE_OPTION,
     episodes: int = typer.Option(170, help="Maximum training episodes, one track each (paper)."),
@@ -325,11 +330,11 @@ def evaluate(
         "(redrawn with new parameters, else the track stays normal and is counted): what a vessel "
         "could sail, which the ashore rule cannot see.",
     ),
-    models: Path | None = typer.Option(
+    models: str | None = typer.Option(
         None,
         "--models",
-        help="Use the models trained on this cluster in this folder (and their training "
-        "tracks) instead of training new ones.",
+        help="Use the models trained on this cluster in this folder or URL (and their "
+        "training tracks) instead of training new ones.",
     ),
     preset: str = PRESET_OPTION,
     lane: list[str] = LANE_OPTION,
@@ -366,7 +371,9 @@ def evaluate(
 @user_errors
 def detect(
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
-    models_dir: Path = typer.Option(Path("models"), "--models", help="Model folder."),
+    models_dir: str = typer.Option(
+        "models", "--models", help="Model folder, or the URL `train --out` copied them to."
+    ),
     model: list[str] = typer.Option(
         None, "--model", "-m", help="Model name in --models (repeatable); default: all."
     ),

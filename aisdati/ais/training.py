@@ -89,6 +89,9 @@ class TrainSettings:
     device: str = "cpu"
     """Where DATI's networks train and calibrate (`aisdati.execution.device`); not part of
     the model: a checkpoint resumes on any device."""
+    publish_to: str | None = None
+    """A URL (`aisdati.storage`) the model is copied to once written: the task that trains
+    it writes into a local folder of its own instead of `out_dir`."""
 
 
 def check_settings(settings: TrainSettings) -> None:

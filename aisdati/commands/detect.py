@@ -4,6 +4,7 @@ flagged tracks (and, with hand labels, how well they were found)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
@@ -18,12 +19,13 @@ from aisdati.detectors import parse_detectors
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import staged_outputs
+from aisdati.storage import fetched_models
 from aisdati.tracks.ashore import AshoreCheck
 
 
 def run(
     data: Path,
-    models_dir: Path,
+    models_dir: str,
     model: list[str] | None,
     method: str,
     score: str | None,
@@ -60,7 +62,7 @@ def run(
     )
     settings = DetectSettings(
         data_dir=data,
-        models_dir=models_dir,
+        models_dir=Path(models_dir),
         out_dir=out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
         models=tuple(model or ()),
         method=parse_detectors(method)[0],
@@ -83,10 +85,12 @@ def run(
     check_settings(settings)
     execution = Execution(workers=workers, scheduler=scheduler)
     with (
+        fetched_models(models_dir, settings.models, "--models") as local,
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
         open_runner(execution) as runner,
     ):
-        for message in unfinished_models(models_dir, settings.models, settings.method):
+        settings = replace(settings, models_dir=local)  # a URL's models: a local copy
+        for message in unfinished_models(local, settings.models, settings.method):
             warn(message)
         where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"
         with spinner(err_console if as_json else console, where, show=not quiet):

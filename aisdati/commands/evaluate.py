@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import glob
 import json
+from contextlib import nullcontext
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -38,6 +40,7 @@ from aisdati.execution import Execution, Runner, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import OutputSet, staged_outputs
 from aisdati.progress import EpisodeProgress, TrainingProgress
+from aisdati.storage import fetched_models
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
 
 
@@ -54,7 +57,7 @@ def run(
     altered: float,
     strength: float,
     at_sea: bool,
-    models: Path | None,
+    models: str | None,
     preset: str | None,
     lane: list[str] | None,
     episodes: int,
@@ -101,7 +104,7 @@ def run(
         ashore=ashore,
         near_km=near_km,
         contamination=contamination,
-        models_dir=models,
+        models_dir=None,
         split=split.strip().lower(),
         before=None if before is None else pd.Timestamp(before, tz="UTC"),
         altered=altered,
@@ -110,10 +113,19 @@ def run(
         device=resolve_device(device),
         **lane_settings(preset, lane, cluster),
     )
-    check(settings)
+    with fetched_models(models, (), "--models") if models else nullcontext(None) as local:
+        settings = replace(settings, models_dir=local)  # a URL's models: a local copy
+        check(settings)
+        evaluate_with(settings, Execution(workers=workers, scheduler=scheduler), quiet, as_json)
+
+
+def evaluate_with(
+    settings: EvaluateSettings, execution: Execution, quiet: bool, as_json: bool
+) -> None:
+    """Evaluate with the settings checked, models (if any) in a local folder."""
     with (
         staged_outputs(settings.out_dir, owned_outputs(settings), REPORT) as outputs,
-        open_runner(Execution(workers=workers, scheduler=scheduler)) as runner,
+        open_runner(execution) as runner,
     ):
         outputs.retire_earlier()  # the data and models it describes are about to change
         shown = Display(settings, runner, show=not (quiet or as_json))

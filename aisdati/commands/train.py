@@ -25,11 +25,13 @@ from aisdati.commands.tables import dati_model_table, route_models_table
 from aisdati.detectors import model_name, parse_detectors
 from aisdati.detectors.registry import detector_class
 from aisdati.detectors.train import Trained, train_detector, train_routes
+from aisdati.errors import UserError
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.interrupts import Terminated
 from aisdati.options import check_options
 from aisdati.outdir import prepare_output_dir
 from aisdati.progress import EpisodeProgress, TrainingProgress
+from aisdati.storage import RemoteFolder, is_url
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
 
 MODEL_SUFFIXES = (".pt", ".json", ".npz", ".corridor.npz", ".log.jsonl", ".ckpt")
@@ -40,7 +42,7 @@ def run(
     cluster: str,
     method: str,
     data: Path,
-    out: Path,
+    out: str,
     preset: str | None,
     lane: list[str] | None,
     episodes: int,
@@ -61,18 +63,20 @@ def run(
     execution = Execution(workers=workers, scheduler=scheduler)
     device = resolve_device(device)
     if cluster.strip().lower() == "routes":
-        settings = route_settings(data, out, preset, lane, episodes, seed, patience, max_tracks)
-        settings = [replace(s, device=device) for s in settings]
+        local, url = model_folder(out, resume)
+        settings = route_settings(data, local, preset, lane, episodes, seed, patience, max_tracks)
+        settings = [replace(s, device=device, publish_to=url) for s in settings]
         return train_every_route(method, settings, execution, routes_per_task, quiet)
     if execution.distributed:
         warn("one model trains in this process: --workers and --scheduler spread --cluster routes")
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
     stem = model_name(cluster.strip().lower(), method)
-    prepare_output_dir(out, "--out", [stem + x for x in MODEL_SUFFIXES])
+    local, url = model_folder(out, resume, [stem + x for x in MODEL_SUFFIXES])
     settings = TrainSettings(
         data_dir=data,
         cluster=cluster.strip().lower(),
-        out_dir=out,
+        out_dir=local,
+        publish_to=url,
         **lane_settings(preset, lane, cluster),
         episodes=episodes,
         seed=seed,
@@ -81,7 +85,7 @@ def run(
         resume=resume,
         device=device,
     )
-    resuming = resume and (out / f"{stem}.ckpt").is_file()
+    resuming = resume and local is not None and (local / f"{stem}.ckpt").is_file()
     result = train_with_bars(method, settings, resuming, disable=quiet or as_json)
     if as_json:
         print(json.dumps({"model": str(result.model), "card": result.card}, default=str))
@@ -111,7 +115,7 @@ def train_with_bars(method: str, settings: TrainSettings, resuming: bool, disabl
             return train_detector(method, settings, on_step=show_steps(bar, episodes_done))
         except KeyboardInterrupt as exc:
             saved = bool(episodes_done[0]) or resuming
-            message = interrupted_message(method, saved, settings.out_dir)
+            message = interrupted_message(method, saved, settings)
             kind = "terminated" if isinstance(exc, Terminated) else "interrupted"
             err_console.print(f"[yellow]{kind}:[/] {escape(message)}", highlight=False)
             code = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
@@ -134,8 +138,28 @@ def show_steps(bar: TrainingProgress, episodes_done: list[int]) -> Callable[[Any
     return on_step
 
 
-def interrupted_message(method: str, saved: bool, out: Path) -> str:
-    """What a stopped training leaves behind: DATI saves the best model after every episode."""
+def model_folder(
+    out: str, resume: bool, outputs: list[str] | None = None
+) -> tuple[Path | None, str | None]:
+    """--out as (a local folder, checked and made; None) or (None; a URL, checked writable:
+    `aisdati.storage`)."""
+    if not is_url(out):
+        return prepare_output_dir(Path(out), "--out", outputs or []), None
+    if resume:
+        raise UserError("--resume needs a local --out folder: checkpoints are not copied to a URL")
+    RemoteFolder(out, "--out").check_writable()
+    return None, out
+
+
+def interrupted_message(method: str, saved: bool, settings: TrainSettings) -> str:
+    """What a stopped training leaves behind: DATI saves the best model after every episode
+    (into --out, or for a URL into a staging folder that is removed: nothing was copied)."""
+    out = settings.out_dir
+    if settings.publish_to is not None:
+        return (
+            "stopped before the model was copied to "
+            f"{RemoteFolder(settings.publish_to).shown}; run the same command again"
+        )
     if method != "dati":
         return "stopped before the model was saved; run the same command again"
     if saved:
@@ -151,7 +175,7 @@ def interrupted_message(method: str, saved: bool, out: Path) -> str:
 
 def route_settings(
     data: Path,
-    out: Path,
+    out: Path | None,
     preset: str | None,
     lane: list[str] | None,
     episodes: int,
@@ -161,7 +185,6 @@ def route_settings(
 ) -> list[TrainSettings]:
     """`train --cluster routes`: the settings of every route with enough tracks."""
     routes = routes_with(data, "train")
-    prepare_output_dir(out, "--out")
     return [
         TrainSettings(
             data_dir=data,

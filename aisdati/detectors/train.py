@@ -4,6 +4,9 @@ Many routes are trained as tasks (`aisdati.execution`): `route_tasks` cuts the r
 groups of `routes_per_task` in route order, and each group is one batched ensemble (DATI) on one
 worker. The cut depends on the routes alone, so the models are the same whatever runs the
 tasks; fewer routes per task spread wider over workers, more batch better in one process.
+Models bound for a URL (`TrainSettings.publish_to`) are written into a local folder on the
+machine that trains them and copied there (`aisdati.storage`), so that tasks on other machines
+need no shared disk.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.model.trainer import Callback
+from aisdati.storage import RemoteFolder, staging_folder
 from aisdati.tracks.store import read_track_table, select_cluster
 
 ROUTES_PER_TASK = 1
@@ -31,7 +35,8 @@ ROUTES_PER_TASK = 1
 
 @dataclass
 class Trained:
-    model: Path
+    model: Path | str
+    """The model's file, or its URL where it was published (`TrainSettings.publish_to`)."""
     card: dict[str, Any]
     """The card as written beside the model (`ModelCard.to_dict`)."""
     wall_seconds: float
@@ -63,7 +68,7 @@ def train_routes(
     settings = [replace(s, stem=s.stem or cls.model_name(s.cluster)) for s in settings]
     for s in settings:
         check_settings(s)  # before reading any data
-        if s.out_dir is None:
+        if s.out_dir is None and s.publish_to is None:
             raise UserError("training from an ingest folder needs an output folder (--out)")
     runner = runner or InProcess()
     counts = [cls.members(s) for s in settings]
@@ -127,7 +132,37 @@ def train_group(
     first_member: int = 0,
 ) -> list[Trained]:
     """The routes of `settings` fitted together (`Detector.fit_routes`: DATI as one batched
-    ensemble, the others one after the other), each calibrated and saved."""
+    ensemble, the others one after the other), each calibrated and saved; those bound for a
+    URL are trained in a local staging folder and copied there (module docstring)."""
+    if not any(s.publish_to for s in settings):
+        return fit_and_save(method, how, on_step, settings, first_member)
+    with staging_folder() as local:
+        staged = [replace(s, out_dir=local) if s.publish_to else s for s in settings]
+        trained = fit_and_save(method, how, on_step, staged, first_member)
+        return [published(t, s) for t, s in zip(trained, staged, strict=True)]
+
+
+def published(trained: Trained, settings: TrainSettings) -> Trained:
+    """Copy a model trained in a staging folder to its URL (not its checkpoint, which serves
+    only `--resume` in a local folder); the `Trained` then names the URL."""
+    if settings.publish_to is None:
+        return trained
+    stem = model_stem(settings)
+    assert stem is not None  # staged: out_dir is the staging folder
+    files = [f for f in sorted(stem.parent.glob(stem.name + ".*")) if f.suffix != ".ckpt"]
+    folder = RemoteFolder(settings.publish_to)
+    folder.publish(files)
+    return replace(trained, model=folder.join(Path(trained.model).name))
+
+
+def fit_and_save(
+    method: str,
+    how: ScoreSettings | None,
+    on_step: Callback | None,
+    settings: Sequence[TrainSettings],
+    first_member: int,
+) -> list[Trained]:
+    """`train_group` for models written where their settings' `out_dir` says."""
     cls = detector_class(method)
     t0 = time.perf_counter()
     sets = [training_set(s) for s in settings]
