@@ -189,7 +189,10 @@ def _run(
             shutil.rmtree(read.folder)
         for vessel in vessels:
             counts.merge(vessel.counts)
-        parts = _write_points(runner, tasks, vessels, points.tmp.absolute(), progress)
+        parts, shapes = _write_points(
+            runner, tasks, vessels, points.tmp.absolute(), settings, progress
+        )
+        del vessels  # their shapes are joined: one copy, not two, through route clustering
         if not parts:
             raise UserError(no_tracks_message(counts))
         stage_seconds["vessel_segment_cluster"] = (
@@ -197,7 +200,9 @@ def _run(
         )
         routed_at = time.perf_counter()
         what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
-        labels_of, route_files, routes = _route_stage(parts, stage, settings, what, progress)
+        labels_of, route_files, routes = _route_stage(
+            parts, shapes, stage, settings, what, progress
+        )
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)
         rows = (with_routes(shift_track_ids(p.spilled(), p.offset), labels_of(p)) for p in parts)
@@ -274,7 +279,6 @@ class PartTracks:
     offset: int
     table: pa.Table
     spill: Path
-    shapes: TrackShapes | None
 
     def spilled(self) -> pa.Table:
         """The partition's rows of tracks.parquet, numbered from 0 as the task wrote them."""
@@ -287,23 +291,28 @@ def _write_points(
     tasks: list[VesselTask],
     vessels: list[VesselResult],
     folder: Path,
+    settings: IngestSettings,
     progress: Progress | None,
-) -> list[PartTracks]:
+) -> tuple[list[PartTracks], TrackShapes | None]:
     """Each partition's track ids shifted past the tracks of the partitions before it, in
     its track table and (one `write_points` task per partition with tracks, into the dataset
-    folder `folder`) its points; the partitions with tracks, in partition order."""
+    folder `folder`) its points: the partitions with tracks, in partition order, and all
+    their tracks' shapes in that order (None with `--clusters direction`)."""
     parts, writes, offset = [], [], 0
     for task, vessel in zip(tasks, vessels, strict=True):
         if vessel.tracks.num_rows:
             table = shift_track_ids(vessel.tracks, offset)
-            parts.append(PartTracks(offset, table, task.tracks, vessel.shapes))
+            parts.append(PartTracks(offset, table, task.tracks))
             writes.append(PointsTask(task.points, folder, task.part, offset))
             offset += vessel.tracks.num_rows
     written = sum(_map(runner, write_points, writes, progress, "write points"))
     kept = sum(vessel.counts.kept_points for vessel in vessels)
     if written != kept:
         raise RuntimeError(f"wrote {written} points of the {kept} kept")
-    return parts
+    if settings.clusters != "routes":
+        return parts, None
+    shapes = [v.shapes for v in vessels if v.tracks.num_rows and v.shapes is not None]
+    return parts, TrackShapes.joined(shapes, route_settings(settings).samples)
 
 
 def _lines_of(parts: list[PartTracks]) -> Callable[[np.ndarray], list[np.ndarray]]:
@@ -358,6 +367,7 @@ def _output_key(path: Path) -> str:
 
 def _route_stage(
     parts: list[PartTracks],
+    shapes: TrackShapes | None,
     out_dir: Path,
     settings: IngestSettings,
     what: str,
@@ -365,12 +375,11 @@ def _route_stage(
 ) -> tuple[Callable[[PartTracks], np.ndarray], list[StagedFile], dict[str, Any] | None]:
     """Route clusters when `settings.clusters` is 'routes', from the tracks' shapes alone:
     each partition's route labels, the staged route files and their summary."""
-    if settings.clusters == "direction":
+    if shapes is None:  # --clusters direction
         return lambda p: np.full(p.table.num_rows, None, dtype=object), [], None
     task = progress.add_task("route clusters", total=None) if progress else None
     how = route_settings(settings)
     table = pa.concat_tables([p.table for p in parts])
-    shapes = TrackShapes.joined([p.shapes for p in parts if p.shapes is not None], how.samples)
     routes = cluster_shapes(
         shapes,
         table.column("track_id").to_numpy(),

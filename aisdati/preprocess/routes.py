@@ -506,9 +506,9 @@ def cluster_shapes(
         clock = now
 
     first, last = tracks.first, tracks.last
-    shapes = ShapeDistance(tracks.resampled)
     groups = endpoint_groups(first, last, settings)
     lap("endpoints")
+    shapes = ShapeDistance(tracks.resampled)  # after: the density clustering's peak without it
     rng = np.random.default_rng(settings.seed)
 
     paths: list[tuple[np.ndarray, int, float]] = []
