@@ -150,6 +150,12 @@ def first_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
+def shown_folder(folder: str | Path) -> str | None:
+    """How messages name a model folder given as `folder`: a URL without its password; None
+    for a local path (named as it is)."""
+    return RemoteFolder(str(folder)).shown if is_url(str(folder)) else None
+
+
 @contextmanager
 def fetched_models(folder: str | Path, names: Sequence[str], option: str) -> Iterator[Path]:
     """The local folder holding the models of `folder`: itself for a path; for a URL, a

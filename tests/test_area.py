@@ -257,3 +257,32 @@ def test_validation_by_one_step_errors_scores_the_actor_as_the_step_score_does(
     assert got < rollouts(trainer, 0)  # one step errs far less than a whole rollout
     with pytest.raises(UserError, match="validate_by"):
         replace(lane, validate_by="loss")
+
+
+def test_steplane_adds_the_step_and_lane_scores_over_their_training_medians(
+    area_dati, months, tmp_path
+):
+    """`--score steplane`: step / median training step + lane / median training lane; its
+    threshold is calibrated as the others are, and a card calibrated before it refuses it in
+    one line."""
+    august = months[1][:6]
+    how = replace(HOW, score="steplane")
+    got = area_dati.score_tracks(august, how, ("step", "lane"))
+    cal = area_dati.card.calibration
+    expected = got.parts["step"] / np.median(cal["step"]) + got.parts["lane"] / np.median(
+        cal["lane"]
+    )
+    np.testing.assert_allclose(got.score_m, expected)
+    np.testing.assert_allclose(
+        cal["steplane"],
+        np.asarray(cal["step"]) / np.median(cal["step"])
+        + np.asarray(cal["lane"]) / np.median(cal["lane"]),
+        atol=1e-4,
+    )
+    assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["steplane"], 0.95))
+    area_dati.save(tmp_path / "all")
+    card = json.loads((tmp_path / "all.json").read_text())
+    card["calibration"].pop("steplane")
+    (tmp_path / "all.json").write_text(json.dumps(card))
+    with pytest.raises(UserError, match="no calibration scores for --score steplane"):
+        load_detector(tmp_path / "all").threshold(how, 0.05)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import logging
+import re
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -156,6 +157,19 @@ def test_a_missing_model_at_a_url_is_one_line(kitimat, ftp, tmp_path):
     )  # fmt: skip
     assert "s3cret" not in result.output
     one_line_error(result, "no model 'no-such' at ftp://analyst:\\*\\*\\*@")
+    # models there, but none of what was asked: named by the URL, not the local copy
+    result = run(
+        "detect", "--data", kitimat, "--models", f"{url}/nearest", "--method", "dati",
+        "--out", tmp_path / "r",
+    )  # fmt: skip
+    one_line_error(result, r"no dati models in ftp://analyst:\*\*\*@127\.0\.0\.1:\d+/nearest")
+    result = run(
+        "evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest",
+        "--models", f"{url}/nearest", "--out", tmp_path / "e",
+    )  # fmt: skip
+    assert result.exit_code == 2 and "Traceback" not in result.output  # after its progress line
+    assert re.search(r"^error: .* for nearest in ftp://analyst:\*\*\*@127\.0\.0\.1:\d+/nearest$",
+                     result.stderr.strip().splitlines()[-1]), result.stderr  # fmt: skip
 
 
 def test_a_url_that_cannot_be_written_is_one_line_before_training(kitimat, ftp, tmp_path):

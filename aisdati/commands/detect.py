@@ -19,7 +19,7 @@ from aisdati.detectors import parse_detectors
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import staged_outputs
-from aisdati.storage import fetched_models
+from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.ashore import AshoreCheck
 
 
@@ -89,7 +89,8 @@ def run(
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
         open_runner(execution) as runner,
     ):
-        settings = replace(settings, models_dir=local)  # a URL's models: a local copy
+        # a URL's models: a local copy, named by the URL in messages
+        settings = replace(settings, models_dir=local, models_shown=shown_folder(models_dir))
         for message in unfinished_models(local, settings.models, settings.method):
             warn(message)
         where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"

@@ -40,7 +40,7 @@ from aisdati.execution import Execution, Runner, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import OutputSet, staged_outputs
 from aisdati.progress import EpisodeProgress, TrainingProgress
-from aisdati.storage import fetched_models
+from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
 
 
@@ -114,7 +114,8 @@ def run(
         **lane_settings(preset, lane, cluster),
     )
     with fetched_models(models, (), "--models") if models else nullcontext(None) as local:
-        settings = replace(settings, models_dir=local)  # a URL's models: a local copy
+        # a URL's models: a local copy, named by the URL in messages
+        settings = replace(settings, models_dir=local, models_shown=shown_folder(models or ""))
         check(settings)
         evaluate_with(settings, Execution(workers=workers, scheduler=scheduler), quiet, as_json)
 

@@ -13,6 +13,7 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
+from aisdati.ais import RATIO_SCORES
 from aisdati.preprocess.report import REASONS, IngestCounts
 
 if TYPE_CHECKING:
@@ -227,7 +228,7 @@ def pooled_table(rev: RoutesEvaluation, width: int = 120) -> Table:
 def _distance(value: float | None, score: str, ratio: bool = False) -> str:
     if value is None or value != value:
         return "-"
-    return f"{value:.2f}" if ratio or score == "both" else f"{value / 1000:.2f}"
+    return f"{value:.2f}" if ratio or score in RATIO_SCORES else f"{value / 1000:.2f}"
 
 
 def _figure(v: float | None, digits: int = 3) -> str:

@@ -62,6 +62,7 @@ SCORE_DEFINITIONS = {
     "near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
     "distance d and course difference dcourse (m)",
     "both": "rollout / median training rollout score + step / median training step score",
+    "steplane": "step / median training step score + lane / median training lane score",
     "area": "lane + the track's origin-destination distance to the nearest training track "
     "(the larger of the starts' and the ends' distances) beyond the 95th percentile of the "
     "training tracks' own (m)",

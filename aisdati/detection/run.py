@@ -61,6 +61,9 @@ class DetectSettings:
     out_dir: Path
     models: tuple[str, ...] = ()
     """Model names (<models_dir>/<name>.json); empty: every model of `method` in the folder."""
+    models_shown: str | None = None
+    """How messages name the model folder: the URL its models were copied from
+    (`aisdati.storage.fetched_models`); None: `models_dir`."""
     method: str = "dati"
     cluster: str = "other"
     """Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all."""
@@ -93,6 +96,7 @@ class DetectSettings:
 EVIDENCE = {
     "rollout": "best rollout",
     "both": "best rollout",
+    "steplane": "one-step predictions",
     "lane": "best rollout",
     "area": "best rollout",
     "step": "one-step predictions",
@@ -156,8 +160,9 @@ def load_models(settings: DetectSettings) -> list[Detector]:
     if not settings.models:
         models = [m for m in models if m.method == settings.method]
         if not models:
+            folder = settings.models_shown or settings.models_dir
             raise UserError(
-                f"no {settings.method} models in {settings.models_dir}: run "
+                f"no {settings.method} models in {folder}: run "
                 f"`aisdati train --method {settings.method} --cluster ...` first"
             )
     for model in models:

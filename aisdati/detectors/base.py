@@ -23,6 +23,7 @@ from typing import ClassVar, TypeVar
 
 import numpy as np
 
+from aisdati.ais import LANE_SCORES
 from aisdati.ais.card import CalibratedWith, DataCard, ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.training import TrainSettings, check_settings
@@ -178,7 +179,7 @@ class Detector(ABC):
                 "retrain it, or flag with --threshold / --top-percent"
             )
         recorded = self.card.calibrated_with or CalibratedWith()
-        for name in self.lane_settings if key == "lane" else ():
+        for name in self.lane_settings if key in LANE_SCORES else ():
             was, now = getattr(recorded, name), getattr(how, name)
             if not math.isclose(float(was), float(now)):
                 raise UserError(

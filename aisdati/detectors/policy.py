@@ -2,9 +2,8 @@
 
 Both score the same ways (`aisdati.ais.policy`): free rollouts (`rollout`, the paper's),
 teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
-`both`: the rollout and step scores, each divided by the median of the training tracks' own
-scores of that kind, summed, so neither dominates by its unit of scale (a track as typical as
-the median training track scores 2). The step profile stands for `both` on maps. Models whose
+`both` and `steplane` (`RATIO_SCORES`): two of those, each divided by the median of the training
+tracks' own scores of that kind, summed. The step profile stands for both on maps. Models whose
 cards record where their training tracks end also score `od` and `area` (`aisdati.detectors.od`):
 the lane score plus how much rarer the track's (start, end) pair is than the training tracks'.
 
@@ -22,13 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
+from aisdati.ais import RATIO_SCORES
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
 from aisdati.detectors.od import area_scores, od_distances, od_pairs_m
-from aisdati.detectors.scoring import Scores, ScoreSettings, tail_mean
+from aisdati.detectors.scoring import Scores, ScoreSettings, ratio_sum, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
 from aisdati.geo import lane_distances
@@ -63,8 +63,8 @@ class PolicyDetector(Detector):
         """`score_tracks` with a given policy (one member of the ensemble, for calibration)."""
         positions = [t.positions for t in tracks]
         wanted = {how.score, *also}
-        if "both" in wanted:
-            wanted |= {"rollout", "step"}
+        for name in wanted & RATIO_SCORES.keys():
+            wanted |= set(RATIO_SCORES[name])
         if wanted & {"area", "od"}:
             wanted |= {"lane", "od"}
         parts: dict[str, np.ndarray] = {}
@@ -104,12 +104,12 @@ class PolicyDetector(Detector):
         if "area" in wanted:
             parts["area"] = area_scores(parts["lane"], parts["od"], self.calibration_of("od"))
             profiles["area"], evidence["area"] = profiles["lane"], evidence["lane"]
-        if "both" in wanted:
-            cal = self.card.calibration
-            if not cal.get("rollout") or not cal.get("step"):
-                raise UserError(f"model {self.name} has no calibration scores: retrain it")
-            parts["both"] = sum(parts[k] / float(np.median(cal[k])) for k in ("rollout", "step"))
-            profiles["both"], evidence["both"] = profiles["step"], evidence["rollout"]
+        for name in sorted(wanted & RATIO_SCORES.keys()):
+            first, second = RATIO_SCORES[name]
+            medians_of = {k: self.calibration_of(k) for k in (first, second)}
+            parts[name] = ratio_sum(parts, medians_of, name)
+            profiles[name] = profiles["step"]
+            evidence[name] = evidence["rollout" if name == "both" else "step"]
         return Scores(
             np.asarray(parts[how.score], np.float64),
             profiles[how.score],
@@ -178,8 +178,8 @@ class PolicyDetector(Detector):
                 for k in kinds:
                     parts[k][rows] = got.parts[k]
         cal = {k: [round(float(v), 2) for v in parts[k]] for k in kinds}
-        both = sum(np.asarray(cal[k]) / np.median(cal[k]) for k in ("rollout", "step"))
-        cal["both"] = [round(float(v), 4) for v in both]
+        for name in RATIO_SCORES:
+            cal[name] = [round(float(v), 4) for v in ratio_sum(cal, cal, name)]
         if self.end_points is not None:
             ends = np.array([t.positions[-1] for t in tracks])
             starts = np.array([t.positions[0] for t in tracks])

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from aisdati.ais import RATIO_SCORES
 from aisdati.ais.card import CalibratedWith
 
 SCORE_CHUNK = 64
@@ -34,8 +36,9 @@ def tail_mean(values: np.ndarray, fraction: float) -> float:
 @dataclass(frozen=True, kw_only=True)
 class ScoreSettings:
     score: str = "lane"
-    """lane, rollout (the paper's), step (teacher-forced), both, or area (lane plus the
-    origin-destination term, `aisdati.detectors.od`); see `aisdati.ais.policy`."""
+    """lane, rollout (the paper's), step (teacher-forced), both (rollout + step), steplane
+    (step + lane) or area (lane plus the origin-destination term, `aisdati.detectors.od`); see
+    `aisdati.ais.policy` and `RATIO_SCORES`."""
     rollouts: int = 10
     """K: free rollouts per track (the rollout score is the best of K), and one-step draws
     per report."""
@@ -78,6 +81,15 @@ class ScoreSettings:
         """What a card records of the settings its calibration scores were computed with:
         `Detector.threshold` refuses to flag with others."""
         return CalibratedWith(lane_course_km=self.lane_course_km, lane_traffic=self.lane_traffic)
+
+
+def ratio_sum(parts: dict[str, Any], medians_of: dict[str, Any], name: str) -> np.ndarray:
+    """`RATIO_SCORES[name]` of the scores in `parts`, each over the median of its kind in
+    `medians_of` (the training tracks' own scores)."""
+    first, second = RATIO_SCORES[name]
+    return sum(
+        np.asarray(parts[k], np.float64) / float(np.median(medians_of[k])) for k in (first, second)
+    )
 
 
 @dataclass

@@ -65,6 +65,9 @@ class EvaluateSettings:
     near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
+    models_shown: str | None = None
+    """How messages name the model folder: the URL its models were copied from
+    (`aisdati.storage.fetched_models`); None: `models_dir`."""
     preset: str = DEFAULT_PRESET
     lane: LaneConfig = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
     split: str = "vessel"
@@ -139,7 +142,7 @@ def _existing(settings: EvaluateSettings) -> dict[str, Detector]:
     if not found:
         raise UserError(
             f"no model of cluster {settings.cluster!r} for {', '.join(settings.detectors)} in "
-            f"{settings.models_dir}"
+            f"{settings.models_shown or settings.models_dir}"
         )
     return found
 
@@ -153,7 +156,8 @@ def _same_region(settings: EvaluateSettings, models: dict[str, Detector]) -> Non
         if not det.contains(starts).any():
             lo, hi = det.bounds
             raise UserError(
-                f"the {method} model in {settings.models_dir} was trained on another region "
+                f"the {method} model in {settings.models_shown or settings.models_dir} was "
+                "trained on another region "
                 f"(lon {lo[0]:.2f}..{hi[0]:.2f}, lat {lo[1]:.2f}..{hi[1]:.2f}): no track of "
                 f"{settings.cluster!r} starts there"
             )
@@ -298,11 +302,14 @@ def _score(
 
 def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
-    four, and `od` and `area` where its card records where its training tracks end."""
+    four, `steplane` where its card was calibrated with it (cards from before that score
+    are not), and `od` and `area`
+    where its card records where its training tracks end."""
     if det.method == "nearest":
         return ["nearest", "lane"]
+    steplane = ["steplane"] if det.card.calibration.get("steplane") else []
     od = ["od", "area"] if det.end_points is not None else []
-    return ["rollout", "step", "lane", "both", *od]
+    return ["rollout", "step", "lane", "both", *steplane, *od]
 
 
 ALL_ROUTES = "routes"
