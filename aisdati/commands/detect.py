@@ -85,11 +85,10 @@ def run(
     check_settings(settings)
     execution = Execution(workers=workers, scheduler=scheduler)
     with (
-        fetched_models(models_dir, settings.models, "--models") as local,
+        fetched_models(models_dir, settings.models, "--models") as local,  # a URL: a copy
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
         open_runner(execution) as runner,
     ):
-        # a URL's models: a local copy, named by the URL in messages
         settings = replace(settings, models_dir=local, models_shown=shown_folder(models_dir))
         for message in unfinished_models(local, settings.models, settings.method):
             warn(message)
