@@ -103,17 +103,26 @@ def untimed(card: Path) -> dict:
     return doc
 
 
-def test_train_and_detect_by_url_judge_as_a_local_folder(kitimat, ftp, tmp_path):
+def train_nearest_routes(data: Path, out: str | Path) -> None:
+    trained = run(
+        "train", "--cluster", "routes", "--method", "nearest", "--data", data, "--out", out,
+        "--quiet",
+    )  # fmt: skip
+    assert trained.exit_code == 0, trained.output
+
+
+@pytest.fixture(scope="module")
+def nearest_url(kitimat, ftp) -> str:
+    """The URL of a folder of nearest route models trained with `train --out URL`."""
+    train_nearest_routes(kitimat, f"{ftp[0]}/nearest")
+    return f"{ftp[0]}/nearest"
+
+
+def test_train_and_detect_by_url_judge_as_a_local_folder(kitimat, ftp, nearest_url, tmp_path):
     """`train --out URL` then `detect --models URL` (every model, and one named) write the
     scores that the same commands give with a local folder."""
-    url, root = ftp
-    models = f"{url}/nearest"
-    for out in (models, tmp_path / "models"):
-        trained = run(
-            "train", "--cluster", "routes", "--method", "nearest", "--data", kitimat,
-            "--out", out, "--quiet",
-        )  # fmt: skip
-        assert trained.exit_code == 0, trained.output
+    models, root = nearest_url, ftp[1]
+    train_nearest_routes(kitimat, tmp_path / "models")
     assert sorted(p.name for p in (root / "nearest").glob("*.json")) == sorted(
         p.name for p in (tmp_path / "models").glob("*.json")
     )
@@ -145,27 +154,27 @@ def test_one_model_trained_to_a_url_is_named_by_it(kitimat, ftp):
     assert not [p for p in (root / "single").iterdir() if p.name.endswith(".tmp")]
 
 
-def test_a_missing_model_at_a_url_is_one_line(kitimat, ftp, tmp_path):
+def test_a_missing_model_at_a_url_is_one_line(kitimat, ftp, nearest_url, tmp_path):
     url, _ = ftp
     result = run(
         "detect", "--data", kitimat, "--models", f"{url}/nothing-here", "--out", tmp_path / "r"
     )
     one_line_error(result, r"--models ftp://analyst:\*\*\*@127\.0\.0\.1:\d+/nothing-here")
     result = run(
-        "detect", "--data", kitimat, "--models", f"{url}/nearest", "--model", "no-such",
+        "detect", "--data", kitimat, "--models", nearest_url, "--model", "no-such",
         "--out", tmp_path / "r",
     )  # fmt: skip
     assert "s3cret" not in result.output
     one_line_error(result, "no model 'no-such' at ftp://analyst:\\*\\*\\*@")
     # models there, but none of what was asked: named by the URL, not the local copy
     result = run(
-        "detect", "--data", kitimat, "--models", f"{url}/nearest", "--method", "dati",
+        "detect", "--data", kitimat, "--models", nearest_url, "--method", "dati",
         "--out", tmp_path / "r",
     )  # fmt: skip
     one_line_error(result, r"no dati models in ftp://analyst:\*\*\*@127\.0\.0\.1:\d+/nearest")
     result = run(
         "evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest",
-        "--models", f"{url}/nearest", "--out", tmp_path / "e",
+        "--models", nearest_url, "--out", tmp_path / "e",
     )  # fmt: skip
     assert result.exit_code == 2 and "Traceback" not in result.output  # after its progress line
     assert re.search(r"^error: .* for nearest in ftp://analyst:\*\*\*@127\.0\.0\.1:\d+/nearest$",
