@@ -31,8 +31,9 @@ from aisdati.errors import UserError
 
 URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*://")
 CARD_SUFFIX = ".json"
-SKIPPED_ON_FETCH = (".ckpt",)
-"""Files of a model folder that judging does not need (checkpoints: only `--resume` reads them)."""
+NOT_COPIED = (".ckpt",)
+"""Files of a model that are neither published nor fetched (checkpoints: only `--resume` reads
+them, in a local folder)."""
 
 
 def is_url(text: str | os.PathLike[str]) -> bool:
@@ -91,8 +92,9 @@ class RemoteFolder:
             fs.rm_file(probe)
 
     def publish(self, files: Sequence[Path]) -> None:
-        """Copy one model's local files here: its old card removed first, its new card last
-        and renamed into place (module docstring)."""
+        """Copy one model's local files here (but its checkpoint, `NOT_COPIED`): its old card
+        removed first, its new card last and renamed into place (module docstring)."""
+        files = [f for f in files if not f.name.endswith(NOT_COPIED)]
         cards = [f for f in files if f.name.endswith(CARD_SUFFIX)]
         rest = [f for f in files if not f.name.endswith(CARD_SUFFIX)]
         fs, root = self.filesystem()
@@ -122,7 +124,7 @@ class RemoteFolder:
                 raise UserError(f"no model {stem!r} at {self.shown} (no {stem}{CARD_SUFFIX})")
         wanted = [
             n for n in files
-            if any(n.startswith(s + ".") for s in stems) and not n.endswith(SKIPPED_ON_FETCH)
+            if any(n.startswith(s + ".") for s in stems) and not n.endswith(NOT_COPIED)
         ]  # fmt: skip
         with self.errors("cannot read it"):
             for name in wanted:
@@ -150,10 +152,10 @@ def first_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
-def shown_folder(folder: str | Path) -> str | None:
+def shown_folder(folder: str | Path | None) -> str | None:
     """How messages name a model folder given as `folder`: a URL without its password; None
-    for a local path (named as it is)."""
-    return RemoteFolder(str(folder)).shown if is_url(str(folder)) else None
+    for a local path (named as it is) or no folder."""
+    return RemoteFolder(str(folder)).shown if folder and is_url(str(folder)) else None
 
 
 @contextmanager

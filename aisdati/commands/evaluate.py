@@ -115,7 +115,7 @@ def run(
     )
     with fetched_models(models, (), "--models") if models else nullcontext(None) as local:
         # a URL's models: a local copy, named by the URL in messages
-        settings = replace(settings, models_dir=local, models_shown=shown_folder(models or ""))
+        settings = replace(settings, models_dir=local, models_shown=shown_folder(models))
         check(settings)
         evaluate_with(settings, Execution(workers=workers, scheduler=scheduler), quiet, as_json)
 

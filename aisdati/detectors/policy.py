@@ -104,9 +104,8 @@ class PolicyDetector(Detector):
         if "area" in wanted:
             parts["area"] = area_scores(parts["lane"], parts["od"], self.calibration_of("od"))
             profiles["area"], evidence["area"] = profiles["lane"], evidence["lane"]
-        for name in sorted(wanted & RATIO_SCORES.keys()):
-            first, second = RATIO_SCORES[name]
-            medians_of = {k: self.calibration_of(k) for k in (first, second)}
+        for name in wanted & RATIO_SCORES.keys():
+            medians_of = {k: self.calibration_of(k) for k in RATIO_SCORES[name]}
             parts[name] = ratio_sum(parts, medians_of, name)
             profiles[name] = profiles["step"]
             evidence[name] = evidence["rollout" if name == "both" else "step"]

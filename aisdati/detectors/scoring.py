@@ -86,9 +86,9 @@ class ScoreSettings:
 def ratio_sum(parts: dict[str, Any], medians_of: dict[str, Any], name: str) -> np.ndarray:
     """`RATIO_SCORES[name]` of the scores in `parts`, each over the median of its kind in
     `medians_of` (the training tracks' own scores)."""
-    first, second = RATIO_SCORES[name]
     return sum(
-        np.asarray(parts[k], np.float64) / float(np.median(medians_of[k])) for k in (first, second)
+        np.asarray(parts[k], np.float64) / float(np.median(medians_of[k]))
+        for k in RATIO_SCORES[name]
     )
 
 

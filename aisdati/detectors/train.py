@@ -143,15 +143,14 @@ def train_group(
 
 
 def published(trained: Trained, settings: TrainSettings) -> Trained:
-    """Copy a model trained in a staging folder to its URL (not its checkpoint, which serves
-    only `--resume` in a local folder); the `Trained` then names the URL."""
+    """Copy a model trained in a staging folder to its URL (`RemoteFolder.publish`); the
+    `Trained` then names the URL."""
     if settings.publish_to is None:
         return trained
     stem = model_stem(settings)
     assert stem is not None  # staged: out_dir is the staging folder
-    files = [f for f in sorted(stem.parent.glob(stem.name + ".*")) if f.suffix != ".ckpt"]
     folder = RemoteFolder(settings.publish_to)
-    folder.publish(files)
+    folder.publish(sorted(stem.parent.glob(stem.name + ".*")))
     return replace(trained, model=folder.join(Path(trained.model).name))
 
 

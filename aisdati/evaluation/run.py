@@ -302,9 +302,8 @@ def _score(
 
 def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
-    four, `steplane` where its card was calibrated with it (cards from before that score
-    are not), and `od` and `area`
-    where its card records where its training tracks end."""
+    four, `steplane` where its card was calibrated with it (cards from before that score are
+    not), and `od` and `area` where its card records where its training tracks end."""
     if det.method == "nearest":
         return ["nearest", "lane"]
     steplane = ["steplane"] if det.card.calibration.get("steplane") else []
