@@ -219,7 +219,7 @@ def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
     card_path.write_text(json.dumps(card))
     out = tmp_path / "ev"
     r = cli("evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest",
-            "--models", models, "--out", out, "-q")
+            "--models", models, "--out", out)  # not quiet: no progress line before the error
     assert r.exit_code == 2, r.output
     assert "another region" in r.output and len(r.output.strip().splitlines()) == 1
     assert not (out / "evaluation.json").exists()

@@ -89,6 +89,11 @@ class DetectSettings:
     False scores the paper's way, by the model alone."""
 
     @property
+    def models_named(self) -> str | Path | None:
+        """The model folder as messages name it (`models_shown`)."""
+        return self.models_shown or self.models_dir
+
+    @property
     def how(self) -> ScoreSettings:
         return score_settings(self)
 
@@ -160,7 +165,7 @@ def load_models(settings: DetectSettings) -> list[Detector]:
     if not settings.models:
         models = [m for m in models if m.method == settings.method]
         if not models:
-            folder = settings.models_shown or settings.models_dir
+            folder = settings.models_named
             raise UserError(
                 f"no {settings.method} models in {folder}: run "
                 f"`aisdati train --method {settings.method} --cluster ...` first"

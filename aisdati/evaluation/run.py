@@ -87,6 +87,11 @@ class EvaluateSettings:
     (`aisdati.evaluation.dataset`): what a vessel could sail, which the ashore rule cannot see."""
 
     @property
+    def models_named(self) -> str | Path | None:
+        """The model folder as messages name it (`models_shown`)."""
+        return self.models_shown or self.models_dir
+
+    @property
     def anomaly_params(self) -> dict[str, Any]:
         return with_strength(self.params or parse_params(None), self.strength)
 
@@ -142,7 +147,7 @@ def _existing(settings: EvaluateSettings) -> dict[str, Detector]:
     if not found:
         raise UserError(
             f"no model of cluster {settings.cluster!r} for {', '.join(settings.detectors)} in "
-            f"{settings.models_shown or settings.models_dir}"
+            f"{settings.models_named}"
         )
     return found
 
@@ -156,7 +161,7 @@ def _same_region(settings: EvaluateSettings, models: dict[str, Detector]) -> Non
         if not det.contains(starts).any():
             lo, hi = det.bounds
             raise UserError(
-                f"the {method} model in {settings.models_shown or settings.models_dir} was "
+                f"the {method} model in {settings.models_named} was "
                 "trained on another region "
                 f"(lon {lo[0]:.2f}..{hi[0]:.2f}, lat {lo[1]:.2f}..{hi[1]:.2f}): no track of "
                 f"{settings.cluster!r} starts there"
@@ -197,14 +202,21 @@ def _how(settings: EvaluateSettings) -> ScoreSettings:
     return score_settings(settings, score="both")
 
 
-def _prepare(settings: EvaluateSettings) -> _Prepared:
+def _checked_models(settings: EvaluateSettings) -> dict[str, Detector]:
+    """The models given with --models, checked (region, calibration) before any work, so a
+    folder found wanting is one line before the first progress line."""
     existing = _existing(settings)
+    if existing:
+        _same_region(settings, existing)
+        for det in existing.values():  # calibrated as this run scores
+            det.threshold(replace(_how(settings), score="lane"), settings.contamination)
+    return existing
+
+
+def _prepare(settings: EvaluateSettings, existing: dict[str, Detector]) -> _Prepared:
     train_ids = None
     if existing:
         train_ids = [int(i) for i in next(iter(existing.values())).card.data.track_ids]
-        _same_region(settings, existing)
-        for det in existing.values():  # calibrated as this run scores, before any work
-            det.threshold(replace(_how(settings), score="lane"), settings.contamination)
     split = dataset.build(
         settings.data_dir,
         settings.cluster,
@@ -235,8 +247,9 @@ def evaluate(
     check(settings)
     train = train_detector or plain_train
     say = on_stage or (lambda _: None)
+    existing = _checked_models(settings)
     say("splitting and injecting")
-    prepared = _prepare(settings)
+    prepared = _prepare(settings, existing)
     detectors: dict[str, Detector] = {}
     train_s: dict[str, float] = {}
     for method in settings.detectors:
@@ -359,7 +372,7 @@ def evaluate_routes(
     for route in routes:
         sub = replace(settings, cluster=route, out_dir=settings.out_dir / route)
         try:
-            prepared.append(_prepare(sub))
+            prepared.append(_prepare(sub, _checked_models(sub)))
         except UserError as exc:
             skipped[route] = str(exc)
     if not prepared:
