@@ -152,7 +152,7 @@ class AISPolicy:
         return dists[np.arange(len(tracks)), best], chosen, every
 
     # ------------------------------------------------------------- one-step errors
-    def step_errors(
+    def step_draws(
         self,
         tracks: Sequence[np.ndarray],
         dts: Sequence[np.ndarray],
@@ -160,9 +160,9 @@ class AISPolicy:
         seed: int = 0,
         chunk: int = 200_000,
     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Per track, the best-of-K one-step prediction error (metres) at each report after the
-        first ([n - 1] for n reports), the real time step standing in for the decided dt; and
-        the best predicted positions [n - 1, 2]."""
+        """Per track, every draw's one-step prediction error (metres) at each report after the
+        first ([n - 1, K] for n reports and K `draws`), the real time step standing in for the
+        decided dt; and the predicted positions [n - 1, K, 2]."""
         obs = np.concatenate(
             [
                 self.observe(
@@ -191,10 +191,25 @@ class AISPolicy:
                 p = self.rule.step(here[sl], decision)
                 pred[sl] = p
                 err[sl] = haversine_m(p[:, 0], p[:, 1], there[sl, 0], there[sl, 1])
-        pick = err.reshape(-1, draws).argmin(axis=1)
-        rows = np.arange(len(pick)) * draws + pick
         cuts = np.cumsum([len(p) - 1 for p in tracks])[:-1]
-        return np.split(err[rows], cuts), np.split(pred[rows], cuts)
+        return np.split(err.reshape(-1, draws), cuts), np.split(pred.reshape(-1, draws, 2), cuts)
+
+    def step_errors(
+        self,
+        tracks: Sequence[np.ndarray],
+        dts: Sequence[np.ndarray],
+        draws: int,
+        seed: int = 0,
+    ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Per track, the best-of-K one-step prediction error (metres) at each report after the
+        first ([n - 1] for n reports; `step_draws`), and the best predicted positions
+        [n - 1, 2]."""
+        errors, predicted = self.step_draws(tracks, dts, draws, seed)
+        best = [e.argmin(axis=1) for e in errors]
+        return (
+            [e[np.arange(len(b)), b] for e, b in zip(errors, best, strict=True)],
+            [q[np.arange(len(b)), b] for q, b in zip(predicted, best, strict=True)],
+        )
 
 
 def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) -> MakeAct:
