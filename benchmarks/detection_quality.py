@@ -27,7 +27,9 @@ threshold (--contamination 0.05), the AUC per kind, and the training time.
 Not part of the test suite: DATI's training dominates (4-6 minutes per seed for the two Kitimat
 routes on 2 cores). A seed whose `<out>/<data>/seed<k>/evaluation.json` exists is read, not
 rerun, so an interrupted run goes on where it stopped (delete the folder to rerun a seed); the
-forward grid's cells likewise (`<out>/<area>/forward-.../train<t>-seed<s>`).
+forward grid's cells likewise (`<out>/<area>/forward-.../train<t>-seed<s>`). `--models-from
+forward-s1-at-sea` judges another tier (all anomalies, `--strength 0.3`) with that grid's
+trainings instead of training the same models again (training is deterministic on one machine).
 """
 
 from __future__ import annotations
@@ -101,11 +103,17 @@ def run_forward(area: str, train_seed: int, seed: int, args: argparse.Namespace)
     grid = args.out / area / f"forward-s{args.strength:g}{ashore}"
     out = grid / f"train{train_seed}-seed{seed}"
     if not (out / "evaluation.json").is_file():
-        trained = grid / f"train{train_seed}-seed{train_seed}"
-        if seed != train_seed:
+        trained = grid / f"train{train_seed}-seed{train_seed}" / "models"
+        if args.models_from:
+            trained = args.out / area / args.models_from / f"train{train_seed}-seed{train_seed}"
+            trained /= "models"
+            if not trained.is_dir():
+                sys.exit(f"--models-from: no trained models in {trained}")
+        elif seed != train_seed:
             run_forward(area, train_seed, train_seed, args)
         lanes = [x for kv in args.lane for x in ("--lane", kv)]
-        models = [] if seed == train_seed else ["--models", str(trained / "models")]
+        reuse = args.models_from or seed != train_seed
+        models = ["--models", str(trained)] if reuse else []
         aisdati("evaluate", "--data", str(data), "--cluster", "all", "--split", "time",
                 "--before", before, "--altered", "0.3", "--strength", str(args.strength),
                 "--detectors", args.detectors, "--kinds", args.kinds,
@@ -160,7 +168,8 @@ def forward(args: argparse.Namespace) -> None:
             cells += [summary(grid, det, score, f) for f in FORWARD_FIELDS[1:]]
             cells += [summary(grid, det, score, "roc_auc", k) for k in kinds]
             trained = [run_forward(area, t, t, args) for t in trainings]
-            cells.append(f"{np.mean([d['timings_s'][det]['train_s'] for d in trained]):.0f}")
+            seconds = [d["timings_s"][det]["train_s"] for d in trained]
+            cells.append("(reused)" if args.models_from else f"{np.mean(seconds):.0f}")
             name = "dtw" if score == "nearest" else score
             print(f"| {area} | {det} | {name} | " + " | ".join(cells) + " |")
 
@@ -174,6 +183,9 @@ def main() -> None:
     ap.add_argument("--seeds", default="0,1,2", help="comma-separated seeds")
     ap.add_argument("--train-seeds", default="0",
                     help="--forward: training seeds, each judged at every seed")  # fmt: skip
+    ap.add_argument("--models-from", metavar="GRID",
+                    help="--forward: judge with the trainings of another grid of the same --out "
+                    "(its folder name, e.g. forward-s1-at-sea) instead of training")  # fmt: skip
     ap.add_argument("--data", default="kitimat", choices=[*sorted(SETS), "both"])
     ap.add_argument("--forward", action="store_true", help="the forward-in-time protocol")
     ap.add_argument("--strength", type=float, default=1.0, help="--forward: anomaly strength")

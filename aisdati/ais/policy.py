@@ -158,40 +158,57 @@ class AISPolicy:
         dts: Sequence[np.ndarray],
         draws: int,
         seed: int = 0,
+        ahead: int = 1,
         chunk: int = 200_000,
     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Per track, every draw's one-step prediction error (metres) at each report after the
-        first ([n - 1, K] for n reports and K `draws`), the real time step standing in for the
-        decided dt; and the predicted positions [n - 1, K, 2]."""
-        obs = np.concatenate(
-            [
-                self.observe(
-                    p[:-1],
-                    np.vstack([p[:1], p[:-2]]),
-                    np.r_[0.0, d[:-1]],
-                    np.arange(len(p) - 1),
-                    np.full(len(p) - 1, len(p) - 1),
-                    np.broadcast_to(p[-1], (len(p) - 1, 2)),
-                )
-                for p, d in zip(tracks, dts, strict=True)
-            ]
-        ).repeat(draws, axis=0)
-        here = np.concatenate([p[:-1] for p in tracks]).repeat(draws, axis=0)
-        there = np.concatenate([p[1:] for p in tracks]).repeat(draws, axis=0)
-        dt = np.concatenate(list(dts)).repeat(draws)
-        err = np.empty(len(obs))
-        pred = np.empty((len(obs), 2))
+        """Per track, every draw's prediction error (metres) `ahead` reports on from each real
+        report that has one ([n - h, K] for n reports, h = min(ahead, n - 1), K `draws`): the
+        policy moved h times from the real report, each move over the real time step, its own
+        moves feeding its state; and the predicted positions [n - h, K, 2]. Row i predicts
+        report i + h. With `ahead` 1 these are the one-step errors."""
+        spans = [min(ahead, len(p) - 1) for p in tracks]
+        here, prev, last, there, step_dt, t0, horizon, goal = ([] for _ in range(8))
+        for p, d, h in zip(tracks, dts, spans, strict=True):
+            m = len(p) - h  # anchors 0 .. n - h - 1
+            here.append(p[:m])
+            prev.append(np.vstack([p[:1], p[: m - 1]]))
+            last.append(np.r_[0.0, d[: m - 1]])
+            there.append(p[h:])
+            step_dt.append(np.stack([d[k : k + m] for k in range(h)], axis=1))
+            t0.append(np.arange(m))
+            horizon.append(np.full(m, len(p) - 1))
+            goal.append(np.broadcast_to(p[-1], (m, 2)))
+        h_max = max(spans, default=1)
+        rows = [
+            np.concatenate(x).repeat(draws, axis=0)
+            for x in (here, prev, last, there, t0, horizon, goal)
+        ]
+        pos, before, last_dt, target, t, limit, bound = rows
+        dt = np.concatenate([np.pad(x, ((0, 0), (0, h_max - x.shape[1]))) for x in step_dt])
+        dt = dt.repeat(draws, axis=0)
+        moves = np.concatenate([np.full(len(x), h) for x, h in zip(here, spans, strict=True)])
+        moves = moves.repeat(draws)
+        err = np.empty(len(pos))
+        pred = np.empty((len(pos), 2))
         chunk = max(draws, chunk - chunk % draws)  # draw d of each report: same member
         with one_thread():
-            for lo in range(0, len(obs), chunk):
+            for lo in range(0, len(pos), chunk):
                 sl = slice(lo, lo + chunk)
-                act = self.make_act(len(obs[sl]), seed + lo, False)
-                decision = self.rule.decision_scaler.unscale(np.clip(act(obs[sl]), -1.0, 1.0))
-                decision[:, 2] = dt[sl]
-                p = self.rule.step(here[sl], decision)
+                act = self.make_act(len(pos[sl]), seed + lo, False)
+                p, q, w = pos[sl], before[sl], last_dt[sl]
+                for k in range(int(moves[sl].max(initial=0))):
+                    obs = self.observe(p, q, w, t[sl] + k, limit[sl], bound[sl])
+                    decision = self.rule.decision_scaler.unscale(np.clip(act(obs), -1.0, 1.0))
+                    decision[:, 2] = dt[sl, k]
+                    live = (k < moves[sl])[:, None]
+                    p, q, w = (
+                        np.where(live, self.rule.step(p, decision), p),
+                        np.where(live, p, q),
+                        decision[:, 2],
+                    )
                 pred[sl] = p
-                err[sl] = haversine_m(p[:, 0], p[:, 1], there[sl, 0], there[sl, 1])
-        cuts = np.cumsum([len(p) - 1 for p in tracks])[:-1]
+                err[sl] = haversine_m(p[:, 0], p[:, 1], target[sl, 0], target[sl, 1])
+        cuts = np.cumsum([len(p) - h for p, h in zip(tracks, spans, strict=True)])[:-1]
         return np.split(err.reshape(-1, draws), cuts), np.split(pred.reshape(-1, draws, 2), cuts)
 
     def step_errors(

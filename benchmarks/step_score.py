@@ -1,0 +1,110 @@
+"""Variants of the one-step score, rescored on evaluate runs (not a test).
+
+The step score (`aisdati.ais.policy`) draws K decisions at every real report, moves each over
+the real time step and keeps the best draw's error (best-of-K, as the paper's rollout score
+keeps the best of K rollouts). Two questions, each answered without retraining:
+
+- `--aggregate`: does another statistic of a report's K errors rank the altered tracks better?
+  The median (the typical draw: a model unsure where a vessel goes spreads its draws, and the
+  best of a wide spread lands near anything) or the mean.
+- `--ahead`: does predicting h reports ahead (the policy moved h times from the real report,
+  over the real time steps, its own moves feeding its state) see more than one step? A loiter
+  comes back to where it was while the policy sails on, and a detour bends away from where the
+  policy goes for several reports; one step sees each as a small turn.
+
+It reads the cells of `benchmarks/detection_quality.py --forward` (or any `aisdati evaluate`
+folders), rescores their judged tracks with the DATI model that judged them (one scoring chunk
+per 64 tracks with the evaluation's seed, so `best h=1` reproduces the evaluation's own step
+AUC, printed beside it), aggregates each track's per-report values by the score's tail mean,
+and prints ROC AUC per variant: per cell, and the mean over each grid's cells.
+
+Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
+     [--ahead 1,2,3,5] [--aggregate best,median,mean]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from sklearn.metrics import roc_auc_score
+
+from aisdati.detectors import load_detector
+from aisdati.detectors.scoring import SCORE_CHUNK, ScoreSettings, score_chunks, tail_mean
+from aisdati.tracks.store import load_tracks
+
+AGGREGATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "best": lambda e: e.min(axis=1),
+    "median": lambda e: np.median(e, axis=1),
+    "mean": lambda e: e.mean(axis=1),
+}
+"""Statistics of a report's K draw errors ([n, K] -> [n])."""
+
+
+def cell_aucs(cell: Path, ahead: list[int], aggregate: list[str]) -> dict[str, float]:
+    """ROC AUC of each variant on one evaluate folder, and the evaluation's own step AUC."""
+    doc = json.loads((cell / "evaluation.json").read_text())
+    settings = doc["settings"]
+    models = Path(settings["models_dir"] or cell / "models")
+    detector = load_detector(models / "all")
+    labels = pd.read_csv(cell / "data" / "labels.csv")
+    tracks = load_tracks(cell / "data", labels["track_id"].tolist())
+    tail = ScoreSettings().tail
+    scores: dict[str, list[float]] = {}
+    policy = detector.policy()
+    for h in ahead:
+        for chunk in score_chunks(len(tracks)):
+            part = tracks[chunk.start : chunk.stop]
+            errors, _ = policy.step_draws(
+                [t.positions for t in part], [t.dts for t in part], settings["rollouts"],
+                settings["seed"], ahead=h,
+            )  # fmt: skip
+            for name in aggregate:
+                per_report = [AGGREGATIONS[name](e) for e in errors]
+                scores.setdefault(f"{name} h={h}", []).extend(
+                    tail_mean(v, tail) for v in per_report
+                )
+    y = labels["label"].to_numpy()
+    out = {name: float(roc_auc_score(y, s)) for name, s in scores.items()}
+    own = next(
+        r["roc_auc"]
+        for r in doc["results"]
+        if (r["detector"], r["score"], r["kind"]) == ("dati", "step", "all")
+    )
+    out["evaluation"] = float(own)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("grids", nargs="+", type=Path, help="folders of evaluate runs (cells)")
+    ap.add_argument("--ahead", default="1", help="comma-separated h: reports predicted ahead")
+    ap.add_argument("--aggregate", default="best,median,mean", help="statistics of the K draws")
+    args = ap.parse_args()
+    ahead = [int(h) for h in args.ahead.split(",")]
+    aggregate = args.aggregate.split(",")
+    unknown = set(aggregate) - AGGREGATIONS.keys()
+    if unknown or min(ahead) < 1:
+        ap.error(f"--aggregate takes {', '.join(AGGREGATIONS)}; --ahead positive integers")
+    columns = [f"{a} h={h}" for h in ahead for a in aggregate] + ["evaluation"]
+    tail = ScoreSettings().tail
+    print(f"ROC AUC of the one-step score's variants (tail mean of the largest {tail:g}; "
+          f"scoring chunks of {SCORE_CHUNK})")  # fmt: skip
+    print("| cell | " + " | ".join(columns) + " |")
+    print("|---" * (1 + len(columns)) + "|")
+    for grid in args.grids:
+        cells = sorted(p.parent for p in grid.glob("*/evaluation.json"))
+        rows = [cell_aucs(c, ahead, aggregate) for c in cells]
+        for cell, row in zip(cells, rows, strict=True):
+            values = " | ".join(f"{row[c]:.3f}" for c in columns)
+            print(f"| {grid.name}/{cell.name} | {values} |")
+        means = [f"**{np.mean([r[c] for r in rows]):.3f}**" for c in columns]
+        print(f"| {grid} ({len(rows)} cells) | " + " | ".join(means) + " |")
+
+
+if __name__ == "__main__":
+    main()
