@@ -23,6 +23,7 @@ from aisdati.detectors.nearest import NearestDetector
 from aisdati.dtw import dtw_path_length, nearest_mean_dtw_m
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import inject
+from aisdati.geo import moved_m
 from aisdati.tracks.store import load_tracks, read_track_table
 
 
@@ -59,8 +60,10 @@ def test_nearest_calibration_leaves_each_vessel_out(tracks):
 def _perfect_policy(space, tracks, draws):
     """A policy that takes every track's own perfect decisions: it reproduces them exactly."""
     scaled = np.concatenate(
-        [space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
-         for t in tracks]
+        [
+            space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
+            for t in tracks
+        ]
     ).repeat(draws, axis=0)
 
     def make(n, seed, temporal):
@@ -108,6 +111,31 @@ def test_a_position_jump_gives_the_largest_step_error(tracks):
     # at the jump itself, or the report after it (dead reckoning carries the jump one step on)
     assert min(abs(peak - i), abs(peak - j)) <= 1, (peak, i, j)
     assert errors.max() > 2500
+
+
+def test_predictions_ahead_see_a_loiter_that_one_step_sees_as_turns(tracks):
+    # a vessel sailing straight at 400 m a minute from a real Kitimat start, circles written in
+    n = 60
+    lon, lat = moved_m(*tracks[3].positions[0], 45.0, np.arange(n) * 400.0)
+    line, times = np.column_stack([lon, lat]), np.arange(n) * 60.0
+    got = inject("loiter", line, times, np.random.default_rng(0))
+    i, j = got.stretch
+    dts = [np.diff(got.times_s) / 3600.0]
+    space = build_source(tracks, LaneConfig(state="motion")).space
+    policy = AISPolicy(space, _dead_reckoning(space))
+    (one,), _ = policy.step_draws([got.positions], dts, 2)
+    (three,), (predicted,) = policy.step_draws([got.positions], dts, 2, ahead=3)
+    m = len(got.positions)
+    assert (
+        one.shape == (m - 1, 2) and three.shape == (m - 3, 2) and predicted.shape == (m - 3, 2, 2)
+    )
+    best_one, best_three = one.min(axis=1), three.min(axis=1)  # row k predicts report k + h
+    np.testing.assert_array_equal(best_one, policy.step_errors([got.positions], dts, 2)[0][0])
+    # from the first report the motion is not known (no move yet): row 0 stays out
+    assert best_three[1 : i - 4].max() < 50.0  # dead reckoning is right where the line is straight
+    peak = int(np.argmax(best_three[1:])) + 1 + 3
+    assert i <= peak <= j + 3, (peak, i, j)  # in the circles, or as the track leaves them
+    assert best_three[1:].max() > 1.5 * best_one[1:].max()  # three moves on from a turn: far off
 
 
 def test_corridor_refuses_steps_out_of_it_and_onto_land(tracks):
@@ -276,8 +304,13 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     # one member: the cards below stand for cards from before lane configurations (one seed)
     lane = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1, members=1)
     settings = TrainSettings(
-        data_dir=kitimat, cluster="other", out_dir=tmp_path, episodes=1, track_ids=ids,
-        preset="lanes", lane=lane,
+        data_dir=kitimat,
+        cluster="other",
+        out_dir=tmp_path,
+        episodes=1,
+        track_ids=ids,
+        preset="lanes",
+        lane=lane,
     )
     trained = train_detector("dati", settings, ScoreSettings(rollouts=2))
     card = json.loads(trained.model.with_suffix(".json").read_text())
@@ -367,9 +400,26 @@ def test_gym_space_of_the_paper_state_is_unchanged(tracks):
 
 def test_train_every_route_as_one_ensemble(cli, kitimat, tmp_path):
     data, models = kitimat, tmp_path / "models"
-    r = cli("train", "--cluster", "routes", "--data", data, "--out", models, "--episodes", "1",
-            "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
-            "validation_rollouts=1", "--routes-per-task", "0", "-q")
+    r = cli(
+        "train",
+        "--cluster",
+        "routes",
+        "--data",
+        data,
+        "--out",
+        models,
+        "--episodes",
+        "1",
+        "--max-tracks",
+        "4",
+        "--lane",
+        "validation_tracks=2",
+        "--lane",
+        "validation_rollouts=1",
+        "--routes-per-task",
+        "0",
+        "-q",
+    )
     assert r.exit_code == 0, r.output
     routes = read_track_table(data)["route"].dropna().value_counts()
     trained = sorted(p.stem for p in models.glob("route-*.pt"))
