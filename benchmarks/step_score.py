@@ -16,7 +16,8 @@ It reads the cells of `benchmarks/detection_quality.py --forward` (or any `aisda
 folders), rescores their judged tracks with the DATI model that judged them (one scoring chunk
 per 64 tracks with the evaluation's seed, so `best h=1` reproduces the evaluation's own step
 AUC, printed beside it), aggregates each track's per-report values by the score's tail mean,
-and prints ROC AUC per variant: per cell, and the mean over each grid's cells.
+ranks the tracks the ashore rule flagged in the evaluation first (as it did), and prints ROC AUC
+per variant: per cell, and the mean over each grid's cells.
 
 Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
      [--ahead 1,2,3,5] [--aggregate best,median,mean]
@@ -35,7 +36,11 @@ from sklearn.metrics import roc_auc_score
 
 from aisdati.detectors import load_detector
 from aisdati.detectors.scoring import SCORE_CHUNK, ScoreSettings, score_chunks, tail_mean
+from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import load_tracks
+
+RULE = AshoreCheck()
+"""Tracks the ashore rule flags rank first, as in the evaluation (`AshoreCheck.ranked`)."""
 
 AGGREGATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "best": lambda e: e.min(axis=1),
@@ -69,7 +74,14 @@ def cell_aucs(cell: Path, ahead: list[int], aggregate: list[str]) -> dict[str, f
                     tail_mean(v, tail) for v in per_report
                 )
     y = labels["label"].to_numpy()
-    out = {name: float(roc_auc_score(y, s)) for name, s in scores.items()}
+    judged = pd.read_parquet(cell / "scores.parquet")  # the ashore rule's counts, as evaluated
+    judged = judged[(judged["detector"] == "dati") & (judged["score"] == "step")]
+    judged = judged.set_index("track_id").loc[labels["track_id"]]
+    ashore = judged["ashore_reports"].to_numpy()  # zero where the evaluation ran --no-ashore
+    out = {
+        name: float(roc_auc_score(y, RULE.ranked(np.asarray(s), ashore, judged["n_points"])))
+        for name, s in scores.items()
+    }
     own = next(
         r["roc_auc"]
         for r in doc["results"]
@@ -101,7 +113,7 @@ def main() -> None:
         rows = [cell_aucs(c, ahead, aggregate) for c in cells]
         for cell, row in zip(cells, rows, strict=True):
             values = " | ".join(f"{row[c]:.3f}" for c in columns)
-            print(f"| {grid.name}/{cell.name} | {values} |")
+            print(f"| {grid.parent.name}/{cell.name} | {values} |")
         means = [f"**{np.mean([r[c] for r in rows]):.3f}**" for c in columns]
         print(f"| {grid} ({len(rows)} cells) | " + " | ".join(means) + " |")
 
