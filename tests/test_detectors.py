@@ -60,10 +60,8 @@ def test_nearest_calibration_leaves_each_vessel_out(tracks):
 def _perfect_policy(space, tracks, draws):
     """A policy that takes every track's own perfect decisions: it reproduces them exactly."""
     scaled = np.concatenate(
-        [
-            space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
-            for t in tracks
-        ]
+        [space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
+         for t in tracks]
     ).repeat(draws, axis=0)
 
     def make(n, seed, temporal):
@@ -304,13 +302,8 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     # one member: the cards below stand for cards from before lane configurations (one seed)
     lane = replace(PRESETS["lanes"], validation_tracks=2, validation_rollouts=1, members=1)
     settings = TrainSettings(
-        data_dir=kitimat,
-        cluster="other",
-        out_dir=tmp_path,
-        episodes=1,
-        track_ids=ids,
-        preset="lanes",
-        lane=lane,
+        data_dir=kitimat, cluster="other", out_dir=tmp_path, episodes=1, track_ids=ids,
+        preset="lanes", lane=lane,
     )
     trained = train_detector("dati", settings, ScoreSettings(rollouts=2))
     card = json.loads(trained.model.with_suffix(".json").read_text())
@@ -400,26 +393,9 @@ def test_gym_space_of_the_paper_state_is_unchanged(tracks):
 
 def test_train_every_route_as_one_ensemble(cli, kitimat, tmp_path):
     data, models = kitimat, tmp_path / "models"
-    r = cli(
-        "train",
-        "--cluster",
-        "routes",
-        "--data",
-        data,
-        "--out",
-        models,
-        "--episodes",
-        "1",
-        "--max-tracks",
-        "4",
-        "--lane",
-        "validation_tracks=2",
-        "--lane",
-        "validation_rollouts=1",
-        "--routes-per-task",
-        "0",
-        "-q",
-    )
+    r = cli("train", "--cluster", "routes", "--data", data, "--out", models, "--episodes", "1",
+            "--max-tracks", "4", "--lane", "validation_tracks=2", "--lane",
+            "validation_rollouts=1", "--routes-per-task", "0", "-q")
     assert r.exit_code == 0, r.output
     routes = read_track_table(data)["route"].dropna().value_counts()
     trained = sorted(p.stem for p in models.glob("route-*.pt"))
