@@ -166,6 +166,7 @@ def forward(args: argparse.Namespace) -> None:
         grid = [[run_forward(area, t, s, args) for s in seeds] for t in trainings]
         first = grid[0][0]
         keys = [(r["detector"], r["score"]) for r in first["results"] if r["kind"] == "all"]
+        trained = [run_forward(area, t, t, args) for t in trainings]
         for det, score in keys:
             cells = [summary(grid, det, score, "roc_auc")]
             cells.append(" / ".join(
@@ -174,7 +175,6 @@ def forward(args: argparse.Namespace) -> None:
             ))  # fmt: skip
             cells += [summary(grid, det, score, f) for f in FORWARD_FIELDS[1:]]
             cells += [summary(grid, det, score, "roc_auc", k) for k in kinds]
-            trained = [run_forward(area, t, t, args) for t in trainings]
             seconds = [d["timings_s"][det]["train_s"] for d in trained]
             cells.append("(reused)" if args.models_from else f"{np.mean(seconds):.0f}")
             name = "dtw" if score == "nearest" else score

@@ -184,6 +184,9 @@ class AISPolicy:
             for x in (here, prev, last, there, t0, horizon, goal)
         ]
         pos, before, last_dt, target, t, limit, bound = rows
+        # the first move's observations are the same for every draw: computed once per report
+        first = self.observe(*(np.concatenate(x) for x in (here, prev, last, t0, horizon, goal)))
+        first = first.repeat(draws, axis=0)
         dt = np.concatenate([np.pad(x, ((0, 0), (0, h_max - x.shape[1]))) for x in step_dt])
         dt = dt.repeat(draws, axis=0)
         moves = np.concatenate([np.full(len(x), h) for x, h in zip(here, spans, strict=True)])
@@ -197,7 +200,11 @@ class AISPolicy:
                 act = self.make_act(len(pos[sl]), seed + lo, False)
                 p, q, w = pos[sl], before[sl], last_dt[sl]
                 for k in range(int(moves[sl].max(initial=0))):
-                    obs = self.observe(p, q, w, t[sl] + k, limit[sl], bound[sl])
+                    obs = (
+                        first[sl]
+                        if k == 0
+                        else self.observe(p, q, w, t[sl] + k, limit[sl], bound[sl])
+                    )
                     decision = self.rule.decision_scaler.unscale(np.clip(act(obs), -1.0, 1.0))
                     decision[:, 2] = dt[sl, k]
                     live = (k < moves[sl])[:, None]
