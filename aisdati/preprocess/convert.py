@@ -6,6 +6,7 @@ row, not the file."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 import pandas as pd
@@ -254,3 +255,11 @@ def to_canonical(
         schema=PARTITION_SCHEMA,
     )
     return table, codes
+
+
+def canonical_tables(
+    batches: Iterable[pa.RecordBatch], columns: dict[str, str], src: int, time_format: str | None
+) -> Iterator[tuple[pa.Table, np.ndarray]]:
+    """`to_canonical` of each batch: the rows of a reader that has no faster way."""
+    for batch in batches:
+        yield to_canonical(batch, columns, src, time_format)

@@ -25,12 +25,14 @@ import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+import numpy as np
 import pyarrow as pa
 from pyais.exceptions import AISBaseException, UnknownMessageException
 from pyais.messages import AISSentence, GatehouseSentence, NMEASentence, NMEASentenceFactory
 
 from aisdati.errors import UserError
 from aisdati.preprocess.clean import SENTINEL_COG, SENTINEL_SOG
+from aisdati.preprocess.convert import canonical_tables
 from aisdati.preprocess.inputs import (
     AIS_SENTENCE,
     SNIFF_BYTES,
@@ -280,6 +282,9 @@ class NmeaReader:
     @property
     def skipped(self) -> dict[str, list[str | None]]:
         return self._skipped.by_reason
+
+    def tables(self, src: int) -> Iterator[tuple[pa.Table, np.ndarray]]:
+        return canonical_tables(self.batches(), self.columns, src, self.time_format)
 
     def batches(self) -> Iterator[pa.RecordBatch]:
         stream, self._counter = self.source.open()

@@ -5,21 +5,27 @@
 reader offers the same few things to the pipeline (`TableReader`): the resolved columns, the
 layout's time format, record batches, progress, and the lines it had to skip, by reason. Only the
 six columns the pipeline needs are read, as strings for CSV, so one bad value costs one counted
-row, not the file (`convert.to_canonical` does the typing).
+row, not the file (`convert.to_canonical` does the typing). `TableReader.tables` gives the rows
+typed: a CSV's plain rows parsed by the fast path (`fastcsv`), the rest the usual way.
 """
 
 from __future__ import annotations
 
 import csv
+import os
+from collections import deque
 from collections.abc import Iterator
-from typing import Protocol
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import NamedTuple, Protocol
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
 from aisdati.errors import UserError
-from aisdati.preprocess.convert import is_time_type
+from aisdati.preprocess.convert import canonical_tables, is_time_type, to_canonical
+from aisdati.preprocess.fastcsv import ColumnSlots, ParsedBlock, parse_block, typed_batch
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.layouts import layout_of, resolve_columns
 from aisdati.preprocess.lineguard import BLOCK_SIZE, HeaderLine, LineGuard, shorten
@@ -35,6 +41,21 @@ from aisdati.preprocess.streams import (
 
 MAX_HEADER_BYTES = 1 << 20
 """The header line must end within this many bytes."""
+PARSE_THREADS = min(2, os.cpu_count() or 1)
+"""Threads parsing CSV blocks on the fast path (`fastcsv` releases the GIL); this one reads and
+inflates meanwhile."""
+READ_AHEAD = 2
+"""Blocks asked of the guarded stream ahead of the one being parsed."""
+ROW_KEY = "\x00row"
+"""The column that numbers the rows read the usual way on the fast path (no header names it)."""
+
+
+class PlainRows(NamedTuple):
+    """A block as the fast path parsed it, and its rows made canonical."""
+
+    parsed: ParsedBlock
+    table: pa.Table
+    codes: np.ndarray
 
 
 class TableReader(Protocol):
@@ -59,6 +80,11 @@ class TableReader(Protocol):
         ...
 
     def batches(self) -> Iterator[pa.RecordBatch]: ...
+
+    def tables(self, src: int) -> Iterator[tuple[pa.Table, np.ndarray]]:
+        """The rows as canonical tables with a rejection code per row (`convert.to_canonical`),
+        `src` their source number."""
+        ...
 
 
 def open_reader(source: Source) -> TableReader:
@@ -175,12 +201,30 @@ class SourceReader:
                 self._rows += batch.num_rows
                 yield batch
             return
+        for guard, names, columns in self._segments():
+            yield from self._csv_batches(guard, names, columns)
+
+    def tables(self, src: int) -> Iterator[tuple[pa.Table, np.ndarray]]:
+        if self.source.kind == "parquet" or self.time_format is not None:
+            yield from canonical_tables(self.batches(), self.columns, src, self.time_format)
+            return
+        for guard, names, columns in self._segments():
+            slots = ColumnSlots.of(names, columns)
+            if slots is None:
+                batches = self._csv_batches(guard, names, columns)
+                yield from canonical_tables(batches, self.columns, src, None)
+            else:
+                yield from self._fast_tables(guard, names, columns, slots, src)
+
+    def _segments(self) -> Iterator[tuple[LineGuard, list[str], dict[str, str]]]:
+        """The CSV's stretches under each header line: the guarded stream, positioned at the
+        stretch's first row, with the stretch's column names and resolved columns."""
         raw, self._counter = self._open()
         guard = LineGuard(raw, self.malformed.append, self._header_lines, self._header_of)
         try:
             names, columns = self.names, self.columns
             while True:
-                yield from self._csv_batches(guard, names, columns)
+                yield guard, names, columns
                 header = guard.next_header()
                 if header is None:
                     return
@@ -238,6 +282,88 @@ class SourceReader:
 
     def _on_malformed(self, row: pcsv.InvalidRow) -> str:
         self.malformed.append(shorten(row.text))
+        return "skip"
+
+    def _fast_tables(
+        self,
+        guard: LineGuard,
+        names: list[str],
+        columns: dict[str, str],
+        slots: ColumnSlots,
+        src: int,
+    ) -> Iterator[tuple[pa.Table, np.ndarray]]:
+        """The stretch's blocks read (inflated, guarded) on one thread and parsed on others
+        (`fastcsv` releases the GIL) while this one passes them on, in order; each block's
+        other rows read the usual way and put back in their places."""
+        with (
+            ThreadPoolExecutor(1) as reader,
+            ThreadPoolExecutor(PARSE_THREADS) as parser,
+        ):
+            reads = deque(reader.submit(guard.read, BLOCK_SIZE) for _ in range(READ_AHEAD))
+            parsed: deque[tuple[bytes | memoryview, Future[PlainRows]]] = deque()
+            while True:
+                block = reads.popleft().result()
+                if not len(block):  # the end, or a header line: later reads give nothing too
+                    break
+                reads.append(reader.submit(guard.read, BLOCK_SIZE))
+                parsed.append((block, parser.submit(self._plain_rows, block, slots, src)))
+                if len(parsed) > PARSE_THREADS:
+                    yield self._block_table(*parsed.popleft(), names, columns, src)
+            for rest in reads:
+                rest.result()
+            while parsed:
+                yield self._block_table(*parsed.popleft(), names, columns, src)
+
+    def _plain_rows(self, block: bytes | memoryview, slots: ColumnSlots, src: int) -> PlainRows:
+        """A block parsed by the fast path, its rows canonical (those it could not parse are
+        placeholders, `ParsedBlock.slow`)."""
+        parsed = parse_block(block, slots)
+        table, codes = to_canonical(typed_batch(parsed, self.columns), self.columns, src)
+        return PlainRows(parsed, table, codes)
+
+    def _block_table(
+        self,
+        block: bytes | memoryview,
+        plain: Future[PlainRows],
+        names: list[str],
+        columns: dict[str, str],
+        src: int,
+    ) -> tuple[pa.Table, np.ndarray]:
+        """One block's canonical rows in the block's order: its plain rows from the fast path,
+        the others (`ParsedBlock.slow`) read the usual way, each numbered by its row."""
+        parsed, table, codes = plain.result()
+        slow = np.flatnonzero(parsed.slow)
+        if not len(slow):
+            return table, codes
+        view = memoryview(block)
+        text = b"".join(
+            b"%d,%b\n" % (k, view[parsed.line_start[k] : parsed.line_end[k]]) for k in slow
+        )
+        wanted = [columns[c] for c in self.columns]
+        usual = pcsv.read_csv(
+            pa.py_buffer(text),
+            read_options=pcsv.ReadOptions(column_names=[ROW_KEY, *names], use_threads=False),
+            parse_options=pcsv.ParseOptions(invalid_row_handler=self._on_numbered_malformed),
+            convert_options=pcsv.ConvertOptions(
+                include_columns=[ROW_KEY, *wanted],
+                column_types={ROW_KEY: pa.int64()} | {name: pa.string() for name in wanted},
+                strings_can_be_null=True,
+                quoted_strings_can_be_null=True,
+            ),
+        ).combine_chunks()
+        batch = pa.record_batch(
+            [usual.column(name).combine_chunks() for name in wanted],
+            names=list(self.columns.values()),
+        )
+        slow_table, slow_codes = to_canonical(batch, self.columns, src)
+        kept = np.flatnonzero(~parsed.slow)
+        order = np.argsort(np.concatenate([kept, usual.column(ROW_KEY).to_numpy()]), kind="stable")
+        merged = pa.concat_tables([table.take(kept), slow_table]).take(order)
+        return merged, np.concatenate([codes[kept], slow_codes])[order]
+
+    def _on_numbered_malformed(self, row: pcsv.InvalidRow) -> str:
+        """A malformed row read the usual way on the fast path: its text without its number."""
+        self.malformed.append(shorten(row.text.split(",", 1)[1]))
         return "skip"
 
 

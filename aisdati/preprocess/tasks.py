@@ -32,7 +32,7 @@ import pyarrow.compute as pc
 from rich.progress import Progress
 
 from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
-from aisdati.preprocess.convert import PARTITION_SCHEMA, to_canonical
+from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.output import PartWriter, build_tracks
 from aisdati.preprocess.partition import VesselPartitions, partition_tables
@@ -86,8 +86,7 @@ def read_source(task: ReadTask, progress: Progress | None = None) -> ReadResult:
     with contextlib.ExitStack() as stack:
         rejects = _rejects_part(stack, task.rejects, task.src)
         try:
-            for batch in reader.batches():
-                table, codes = to_canonical(batch, reader.columns, task.src, reader.time_format)
+            for table, codes in reader.tables(task.src):
                 table = check_values(table, codes)
                 filter_area_speed(table, codes, task.roi, task.settings)
                 rows += len(codes)

@@ -1,0 +1,263 @@
+"""The fast path of CSV reading: the needed columns of plain rows parsed straight into numbers.
+
+pyarrow's CSV reader tokenises every column of a MarineCadastre row (17 of them) and hands the six
+we need on as text, which `convert.to_canonical` then parses again: about 5 s of one core for 10
+million rows. Nearly every real row is plain: no quotes, the header's number of fields, the MMSI
+digits, the time `YYYY-MM-DDTHH:MM:SS` (or with a space), the numbers `-?digits[.digits]`. Those
+are parsed here in one compiled pass over the block (`scan_block`, which releases the GIL, so
+blocks are parsed on threads); every other row (a blank or odd value, a quote, a wrong number
+of fields) is marked and read the usual way (`read.SourceReader`), so it is counted and rejected,
+or read, exactly as before.
+
+The values are those the usual way gives, bit for bit: a number of at most 15 digits is its
+digits as an integer (exact in a float64) divided by a power of ten (exact up to 10^22), and IEEE
+division rounds that exact quotient correctly, as Arrow's parser rounds the text.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import pyarrow as pa
+
+MMSI, TIME = 0, 1
+"""Output slots of the MMSI and time columns; slots 2.. are the number columns."""
+NUMBERS = ("lat", "lon", "sog", "cog")
+MAX_DIGITS = 15
+"""Digits of a number parsed here (below 2**53, so exact as a float64); longer ones go the usual
+way."""
+MAX_MMSI_DIGITS = 18
+"""As `convert.MAX_MMSI_DIGITS`: longer MMSIs are rejected the usual way."""
+POW10 = np.array([10.0**k for k in range(MAX_DIGITS + 1)])
+DELIMITER = np.zeros(256, np.uint8)
+"""What ends a field's scan: 1 a comma, 2 a line end, 3 a quote."""
+DELIMITER[44], DELIMITER[10], DELIMITER[34] = 1, 2, 3
+MONTH_DAYS = np.array([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31], np.int64)
+
+
+@dataclass(frozen=True)
+class ColumnSlots:
+    """Which field of a row goes where: `slots[i]` is the output slot of field i (-1: not read),
+    for a header of `len(slots)` fields."""
+
+    slots: np.ndarray
+    numbers: tuple[str, ...]
+    """The number columns present (canonical names), in slot order from 2."""
+
+    @classmethod
+    def of(cls, names: list[str], columns: dict[str, str]) -> ColumnSlots | None:
+        """The slots of a header, or None where the header names a needed column twice (the
+        usual way decides which)."""
+        numbers = tuple(c for c in NUMBERS if c in columns)
+        wanted = {"mmsi": MMSI, "time": TIME} | {c: 2 + i for i, c in enumerate(numbers)}
+        slots = np.full(len(names), -1, np.int64)
+        for canonical, slot in wanted.items():
+            at = [i for i, name in enumerate(names) if name == columns[canonical]]
+            if len(at) != 1:
+                return None
+            slots[at[0]] = slot
+        return cls(slots, numbers)
+
+
+@dataclass(frozen=True)
+class ParsedBlock:
+    """The rows of one block: values of the plain ones; the others marked `slow`, with their
+    lines' spans in the block (`line_start`, `line_end`, the newline excluded)."""
+
+    mmsi: np.ndarray
+    time_us: np.ndarray
+    numbers: np.ndarray
+    """[len(ColumnSlots.numbers), rows] float64."""
+    slow: np.ndarray
+    line_start: np.ndarray
+    line_end: np.ndarray
+
+    @property
+    def rows(self) -> int:
+        return len(self.slow)
+
+
+def parse_block(block: bytes | memoryview, slots: ColumnSlots) -> ParsedBlock:
+    """Parse whole lines (the last one may lack its line end); blank lines are no rows."""
+    if len(block) and block[-1] != 10:  # the file's last line, unended: the scan needs an end
+        block = bytes(block) + b"\n"
+    buf = np.frombuffer(block, np.uint8)
+    cap = len(buf) // 2 + 1  # a row takes two bytes or more (untouched pages cost nothing)
+    ints = np.empty((2, cap), np.int64)
+    numbers = np.empty((len(slots.numbers), cap), np.float64)
+    slow = np.empty(cap, np.bool_)
+    spans = np.empty((2, cap), np.int64)
+    rows = scan_block(buf, slots.slots, ints, numbers, slow, spans)
+    return ParsedBlock(
+        ints[MMSI, :rows],
+        ints[TIME, :rows],
+        numbers[:, :rows],
+        slow[:rows],
+        spans[0, :rows],
+        spans[1, :rows],
+    )
+
+
+def typed_batch(parsed: ParsedBlock, names: dict[str, str]) -> pa.RecordBatch:
+    """The block's rows as a record batch of typed columns under the source's names (`names`:
+    canonical -> name), which `convert.to_canonical` reads like a typed parquet's."""
+    columns = {
+        names["mmsi"]: pa.array(parsed.mmsi),
+        names["time"]: pa.array(parsed.time_us).view(pa.timestamp("us")),
+    }
+    for i, canonical in enumerate(c for c in NUMBERS if c in names):
+        columns[names[canonical]] = pa.array(parsed.numbers[i])
+    return pa.record_batch(list(columns.values()), names=list(columns))
+
+
+@numba.njit(nogil=True, cache=True)
+def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - compiled
+    """Rows of `buf` into the outputs (see `parse_block`); returns how many rows there were."""
+    n = buf.shape[0]
+    n_fields = slots.shape[0]
+    row = 0
+    i = 0
+    date_at, date_days = -1, np.int64(0)  # the last date parsed: most rows share it
+    while i < n:
+        if buf[i] == 10:  # a blank line: no row (as pyarrow skips it)
+            i += 1
+            continue
+        line = i
+        field = 0
+        bad = False
+        while True:
+            start = i
+            kind = DELIMITER[buf[i]]
+            while True:
+                while kind == 0:  # (the block ends with a line end)
+                    i += 1
+                    kind = DELIMITER[buf[i]]
+                if kind != 3:
+                    break
+                bad = True  # a quote: the usual parser's dialect decides
+                i += 1
+                kind = DELIMITER[buf[i]]
+            if field < n_fields:
+                slot = slots[field]
+                if slot == 0:
+                    value = _digits(buf, start, i)
+                    bad |= value <= 0
+                    ints[0, row] = value
+                elif slot == 1:
+                    if date_at < 0 or i - start != 19 or not _same(buf, date_at, start, 11):
+                        date_days = _days(buf, start, i)
+                        date_at = start if date_days != _NO_TIME else -1
+                    value = _clock_us(buf, start, date_days) if date_at >= 0 else _NO_TIME
+                    bad |= value == _NO_TIME
+                    ints[1, row] = value
+                elif slot >= 2:
+                    number = _number(buf, start, i)
+                    bad |= np.isnan(number)
+                    numbers[slot - 2, row] = number
+            field += 1
+            if kind == 2:
+                break
+            i += 1
+        slow[row] = bad or field != n_fields
+        spans[0, row] = line
+        spans[1, row] = i
+        row += 1
+        i += 1
+    return row
+
+
+_NO_TIME = np.int64(-(2**62))
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _digits(buf, a, b):  # pragma: no cover - compiled
+    """The MMSI written as 1-18 digits, else 0 (the usual way decides)."""
+    if b <= a or b - a > MAX_MMSI_DIGITS:
+        return np.int64(0)
+    value = np.int64(0)
+    for k in range(a, b):
+        d = np.int64(buf[k]) - 48
+        if d < 0 or d > 9:
+            return np.int64(0)
+        value = value * 10 + d
+    return value
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _number(buf, a, b):  # pragma: no cover - compiled
+    """`-?digits(.digits)?` of at most `MAX_DIGITS` digits, else NaN (the usual way decides)."""
+    negative = a < b and buf[a] == 45
+    if negative:
+        a += 1
+    mantissa = np.int64(0)
+    digits = 0
+    decimals = -1  # digits after the point; -1: no point yet
+    for k in range(a, b):
+        c = buf[k]
+        if c == 46 and decimals < 0 and digits > 0:
+            decimals = 0
+            continue
+        d = np.int64(c) - 48
+        if d < 0 or d > 9:
+            return np.nan
+        mantissa = mantissa * 10 + d
+        digits += 1
+        if decimals >= 0:
+            decimals += 1
+    if digits == 0 or decimals == 0 or digits > MAX_DIGITS:
+        return np.nan
+    value = np.float64(mantissa) / POW10[max(decimals, 0)]
+    return -value if negative else value
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _two(buf, k):  # pragma: no cover - compiled
+    hi, lo = np.int64(buf[k]) - 48, np.int64(buf[k + 1]) - 48
+    return -1 if hi < 0 or hi > 9 or lo < 0 or lo > 9 else hi * 10 + lo
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _same(buf, a, b, length):  # pragma: no cover - compiled
+    for k in range(length):  # noqa: SIM110 - numba compiles loops, not generators
+        if buf[a + k] != buf[b + k]:
+            return False
+    return True
+
+
+@numba.njit(nogil=True, cache=True)
+def _days(buf, a, b):  # pragma: no cover - compiled
+    """The days since 1970 of a time `YYYY-MM-DDTHH:MM:SS` (or a space for the T), else
+    `_NO_TIME` (the usual way decides)."""
+    if b - a != 19 or buf[a + 4] != 45 or buf[a + 7] != 45 or buf[a + 13] != 58:
+        return _NO_TIME
+    if buf[a + 16] != 58 or (buf[a + 10] != 84 and buf[a + 10] != 32):
+        return _NO_TIME
+    century, yy = _two(buf, a), _two(buf, a + 2)
+    month, day = _two(buf, a + 5), _two(buf, a + 8)
+    if century < 0 or yy < 0 or month < 1 or month > 12 or day < 1:
+        return _NO_TIME
+    year = century * 100 + yy
+    leap = year % 4 == 0 and (year % 100 != 0 or year % 400 == 0)
+    if day > MONTH_DAYS[month] + (1 if month == 2 and leap else 0):
+        return _NO_TIME
+    # Howard Hinnant's days_from_civil
+    y = year - (1 if month <= 2 else 0)
+    era = y // 400
+    yoe = y - era * 400
+    doy = (153 * (month + (-3 if month > 2 else 9)) + 2) // 5 + day - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    return np.int64(era * 146097 + doe - 719468)
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _clock_us(buf, a, days):  # pragma: no cover - compiled
+    """Microseconds since 1970 of the time at `a` whose date (and form) `_days` checked, else
+    `_NO_TIME`."""
+    if buf[a + 13] != 58 or buf[a + 16] != 58:
+        return _NO_TIME
+    hour, minute, second = _two(buf, a + 11), _two(buf, a + 14), _two(buf, a + 17)
+    if hour < 0 or hour > 23 or minute < 0 or minute > 59 or second < 0 or second > 59:
+        return _NO_TIME
+    return np.int64(((days * 24 + hour) * 60 + minute) * 60 + second) * 1_000_000
