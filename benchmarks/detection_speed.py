@@ -36,11 +36,15 @@ from aisdati.ais.source import build_source
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.scoring import ScoreSettings, tail_mean
+from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import batch_mean_dtw_m
 from aisdati.geo import EARTH_RADIUS_M, courses_deg, lane_distances, unit_vectors
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
 from aisdati.tracks.store import Track
+
+ROUTE = "up"
+"""The tracks' cluster: a route's, so candidates start within near_km of the track's start."""
 
 
 def lanes(rng: np.random.Generator, n_tracks: int, points: int, heads: np.ndarray) -> list[Track]:
@@ -93,7 +97,7 @@ def bench_step(tracks: list[Track], draws: int) -> float:
 
 def bench_nearest(train: list[Track], test: list[Track]) -> tuple[float, float]:
     det = NearestDetector()  # the search alone: the tracks, without fitting (calibration)
-    det.tracks, det.mmsi = [t.positions for t in train], np.array([t.mmsi for t in train])
+    det.training_tracks = Traffic.of(train, ROUTE)
     det.search([t.positions for t in test[:2]], 10.0)  # compile
     t0 = time.perf_counter()
     dist, _ = det.search([t.positions for t in test], ScoreSettings().near_km)
@@ -102,25 +106,24 @@ def bench_nearest(train: list[Track], test: list[Track]) -> tuple[float, float]:
 
 def brute_nearest(train: list[Track], test: list[Track]) -> float:
     """Every candidate's full DTW (the plain per-pair kernel, no bounds or abandoning)."""
-    det = NearestDetector()
-    det.tracks = [t.positions for t in train]
-    cands = det._candidates([t.positions for t in test], ScoreSettings().near_km, None)
-    batch_mean_dtw_m(test[0].positions[None], [2], det.tracks[:1], [0])  # compile
+    traffic = Traffic.of(train, ROUTE)
+    cands = traffic.candidates([t.positions for t in test], ScoreSettings().near_km)
+    batch_mean_dtw_m(test[0].positions[None], [2], traffic.tracks[:1], [0])  # compile
     t0 = time.perf_counter()
     for t, c in zip(test, cands, strict=True):
         p = t.positions
-        batch_mean_dtw_m(np.repeat(p[None], len(c), 0), np.full(len(c), len(p)), det.tracks, c)
+        n = np.full(len(c), len(p))
+        batch_mean_dtw_m(np.repeat(p[None], len(c), 0), n, traffic.tracks, c)
     return time.perf_counter() - t0
 
 
 def brute_lane(train: list[Track], test: list[Track], course_m: float) -> float:
     """A fresh k-d tree of every candidate point per test track, queried for the nearest."""
-    det = NearestDetector()
-    det.tracks = [t.positions for t in train]
-    cands = det._candidates([t.positions for t in test], ScoreSettings().near_km, None)
+    traffic = Traffic.of(train, ROUTE)
+    cands = traffic.candidates([t.positions for t in test], ScoreSettings().near_km)
     t0 = time.perf_counter()
     for t, c in zip(test, cands, strict=True):
-        lane = [det.tracks[j] for j in c]
+        lane = [traffic.tracks[j] for j in c]
         cKDTree(keys(lane, course_m)).query(keys([t.positions], course_m))
     return time.perf_counter() - t0
 
@@ -136,14 +139,14 @@ def bench_scale(train: list[Track], test: list[Track], before: int) -> None:
     """The "Scoring at scale" table: both searches of all test tracks, after and before."""
     how = ScoreSettings(score="lane")
     det = NearestDetector()
-    det.tracks, det.mmsi = [t.positions for t in train], np.array([t.mmsi for t in train])
+    det.training_tracks = Traffic.of(train, ROUTE)
     positions = [t.positions for t in test]
     det.search(positions[:2], how.near_km)  # compile
     t0 = time.perf_counter()
     det.search(positions, how.near_km)
     near_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    det.lane_scores(positions, how)
+    det.training_tracks.lane_scores(positions, how)
     lane_s = time.perf_counter() - t0
     scale = len(test) / before
     old_near = brute_nearest(train, test[:before]) * scale

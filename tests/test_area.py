@@ -226,7 +226,7 @@ def test_an_area_model_judges_by_its_one_step_score_unless_told(area_dati, tmp_p
         else:
             card["score"] = value
         (tmp_path / f"{name}.json").write_text(json.dumps(card))
-        for suffix in (".pt", ".corridor.npz"):
+        for suffix in (".pt", ".corridor.npz", ".npz"):
             (tmp_path / f"{name}{suffix}").write_bytes((tmp_path / f"all{suffix}").read_bytes())
     assert load_detector(tmp_path / "old").how.score == "lane"
     with pytest.raises(UserError, match="score must be one of"):
@@ -286,3 +286,32 @@ def test_steplane_adds_the_step_and_lane_scores_over_their_training_medians(
     (tmp_path / "all.json").write_text(json.dumps(card))
     with pytest.raises(UserError, match="no calibration scores for --score steplane"):
         load_detector(tmp_path / "all").threshold(how, 0.05)
+
+
+def test_steptraffic_adds_the_step_score_and_the_distance_to_the_training_tracks(
+    area_dati, lane_tracks, months, tmp_path
+):
+    """`--score steptraffic`: step / median training step + the distance to the training tracks
+    themselves (nearest's lane score of an area model: the model keeps its tracks) / its median
+    over the training tracks, leave-one-vessel-out as nearest calibrates; the tracks are saved
+    beside the model, and a model saved without them refuses the score in one line."""
+    august = months[1][:6]
+    how = replace(HOW, score="steptraffic")
+    got = area_dati.score_tracks(august, how, ("step",))
+    nearest = NearestDetector(TrainSettings(cluster="all", preset="area"), how).fit(lane_tracks)
+    traffic = nearest.score_tracks(august, replace(how, score="lane"), ()).score_m
+    cal = area_dati.card.calibration
+    assert cal["traffic"] == nearest.card.calibration["lane"]
+    expected = got.parts["step"] / np.median(cal["step"]) + traffic / np.median(cal["traffic"])
+    np.testing.assert_allclose(got.score_m, expected)
+    assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["steptraffic"], 0.95))
+    area_dati.save(tmp_path / "all")
+    loaded = load_detector(tmp_path / "all")
+    np.testing.assert_allclose(loaded.score_tracks(august, how, ()).score_m, got.score_m)
+    (tmp_path / "all.npz").unlink()
+    card = json.loads((tmp_path / "all.json").read_text())
+    for key in ("traffic", "steptraffic"):
+        card["calibration"].pop(key)
+    (tmp_path / "all.json").write_text(json.dumps(card))
+    with pytest.raises(UserError, match=r"does not keep its training tracks.*retrain"):
+        load_detector(tmp_path / "all").score_tracks(august, how, ())

@@ -493,9 +493,9 @@ def test_the_tail_fraction_runs_from_the_largest_deviation_to_the_mean(tracks):
     times = np.r_[0.0, np.cumsum(tracks[0].dts)] * 3600.0
     jumped = inject("jump", tracks[0].positions, times, np.random.default_rng(1))
     how = ScoreSettings(score="lane")
-    profile = det.lane_scores([jumped.positions], how)[1][0]
+    profile = det.training_tracks.lane_scores([jumped.positions], how)[1][0]
     by_tail = {
-        f: det.lane_scores([jumped.positions], replace(how, tail=f))[0][0]
+        f: det.training_tracks.lane_scores([jumped.positions], replace(how, tail=f))[0][0]
         for f in (1e-9, 0.1, 0.5, 1.0)
     }
     assert by_tail[1e-9] == pytest.approx(profile.max())  # at least one report: the worst

@@ -63,6 +63,8 @@ SCORE_DEFINITIONS = {
     "distance d and course difference dcourse (m)",
     "both": "rollout / median training rollout score + step / median training step score",
     "steplane": "step / median training step score + lane / median training lane score",
+    "steptraffic": "step / median training step score + distance to the training tracks "
+    "(their lane, as nearest's) / its median over the training tracks",
     "area": "lane + the track's origin-destination distance to the nearest training track "
     "(the larger of the starts' and the ends' distances) beyond the 95th percentile of the "
     "training tracks' own (m)",

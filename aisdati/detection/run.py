@@ -102,6 +102,7 @@ EVIDENCE = {
     "rollout": "best rollout",
     "both": "best rollout",
     "steplane": "one-step predictions",
+    "steptraffic": "one-step predictions",
     "lane": "best rollout",
     "area": "best rollout",
     "step": "one-step predictions",

@@ -17,7 +17,7 @@ from aisdati.ais.policy import Act
 from aisdati.ais.source import build_source, make_env
 from aisdati.ais.space import AISSpace
 from aisdati.ais.training import TrainSettings, base_card
-from aisdati.detectors.policy import PolicyDetector, saved_corridor
+from aisdati.detectors.policy import PolicyDetector, save_traffic, saved_corridor, saved_traffic
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.model.bc import BCConfig, BCPolicy, BCTrainer, sample_decisions
@@ -89,6 +89,7 @@ class BCDetector(PolicyDetector):
         atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
         self.save_card(stem)
         self.save_corridor(stem)
+        save_traffic(stem, self.training_tracks)
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> BCDetector:
@@ -101,4 +102,5 @@ class BCDetector(PolicyDetector):
         load_weights(policy, stem.with_suffix(".pt"))
         det = cls(name=stem.name)
         det.card, det.bc, det.corridor = card, policy, saved_corridor(stem, card)
+        det.training_tracks = saved_traffic(stem, card)
         return det

@@ -17,7 +17,7 @@ from aisdati.ais.training import (
     train_lanes,
 )
 from aisdati.detectors.base import Detector
-from aisdati.detectors.policy import PolicyDetector, saved_corridor
+from aisdati.detectors.policy import PolicyDetector, save_traffic, saved_corridor, saved_traffic
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig
@@ -109,6 +109,7 @@ class DATIDetector(PolicyDetector):
     def save(self, stem: Path) -> None:
         save_networks(stem, self.trained(), self.config, self.card.to_dict())
         self.save_corridor(stem)
+        save_traffic(stem, self.training_tracks)
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> DATIDetector:
@@ -119,4 +120,5 @@ class DATIDetector(PolicyDetector):
         det = cls(name=stem.name)
         det.card, det.nets, det.config = card, nets, config
         det.corridor = saved_corridor(stem, card)
+        det.training_tracks = saved_traffic(stem, card)
         return det

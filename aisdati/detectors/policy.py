@@ -2,10 +2,12 @@
 
 Both score the same ways (`aisdati.ais.policy`): free rollouts (`rollout`, the paper's),
 teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
-`both` and `steplane` (`RATIO_SCORES`): two of those, each divided by the median of the training
-tracks' own scores of that kind, summed. The step profile stands for both on maps. Models whose
-cards record where their training tracks end also score `od` and `area` (`aisdati.detectors.od`):
-the lane score plus how much rarer the track's (start, end) pair is than the training tracks'.
+`both`, `steplane` and `steptraffic` (`RATIO_SCORES`): two of those, each divided by the median
+of the training tracks' own scores of that kind, summed; `traffic` is the distance to the
+training tracks themselves, which a policy keeps beside its networks (`aisdati.detectors.traffic`,
+as `nearest` keeps them). The step profile stands for the sums on maps. Models whose cards record
+where their training tracks end also score `od` and `area` (`aisdati.detectors.od`): the lane
+score plus how much rarer the track's (start, end) pair is than the training tracks'.
 
 A goal-conditioned model's lane traffic (`ScoreSettings.lane_traffic`) is that of the training
 tracks bound the same way: starting and ending within `near_km` of the track's own start and end.
@@ -29,9 +31,11 @@ from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
 from aisdati.detectors.od import area_scores, od_distances, od_pairs_m
 from aisdati.detectors.scoring import Scores, ScoreSettings, ratio_sum, tail_mean
+from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
 from aisdati.geo import lane_distances
+from aisdati.outdir import atomic_write_bytes
 from aisdati.tracks.store import Track
 
 
@@ -39,6 +43,8 @@ class PolicyDetector(Detector):
     """A detector built on an `AISPolicy`; subclasses say how the policy acts."""
 
     lane_settings = ("lane_course_km", "lane_traffic")
+    training_tracks: Traffic | None = None
+    """The training tracks (`calibrate` keeps them; None for a card from before they were)."""
 
     def policy(self, member: int | None = None) -> AISPolicy:
         """The learnt policy (with `member`, that member of an ensemble alone)."""
@@ -98,6 +104,9 @@ class PolicyDetector(Detector):
             evidence["step"] = [
                 np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
             ]
+        if "traffic" in wanted:
+            kept = self.kept_training_tracks()
+            parts["traffic"], profiles["traffic"] = kept.lane_scores(positions, how)
         if "od" in wanted:
             parts["od"] = self.od_scores(positions)
             profiles["od"], evidence["od"] = profiles["lane"], evidence["lane"]
@@ -140,6 +149,15 @@ class PolicyDetector(Detector):
         bound = od_pairs_m(starts, ends, self.start_points, self.end_points)
         return [np.nonzero(row <= how.near_km * 1000.0)[0] for row in bound]
 
+    def kept_training_tracks(self) -> Traffic:
+        """The training tracks; refused for a model from before policies kept them."""
+        if self.training_tracks is None:
+            raise UserError(
+                f"model {self.name} does not keep its training tracks (trained before "
+                "--score steptraffic existed): retrain it for that score"
+            )
+        return self.training_tracks
+
     def od_scores(self, positions: Sequence[np.ndarray]) -> np.ndarray:
         """Each track's origin-destination distance to the training tracks (`Detector.od_m`);
         refused for a card that does not record where its tracks end."""
@@ -164,7 +182,8 @@ class PolicyDetector(Detector):
     ) -> None:
         """Score the training tracks every way; `threshold`, `both` and `area` read these.
         With `folds` (cross-fitting), the tracks of fold m are scored by member m alone, which
-        did not train on them; without, by the whole model that did."""
+        did not train on them; without, by the whole model that did. The tracks are kept as
+        the model's traffic, their traffic scores leave-one-vessel-out."""
         how = replace(how or self.how, score="rollout")
         kinds = ("rollout", "step", "lane")
         if folds is None:
@@ -177,6 +196,8 @@ class PolicyDetector(Detector):
                 for k in kinds:
                     parts[k][rows] = got.parts[k]
         cal = {k: [round(float(v), 2) for v in parts[k]] for k in kinds}
+        self.training_tracks = Traffic.of(tracks, self.card.cluster)
+        cal["traffic"] = [round(float(v), 2) for v in self.training_tracks.calibration(how)]
         for name in RATIO_SCORES:
             cal[name] = [round(float(v), 4) for v in ratio_sum(cal, cal, name)]
         if self.end_points is not None:
@@ -188,6 +209,18 @@ class PolicyDetector(Detector):
             cal["area"] = [round(float(v), 2) for v in area]
         self.card.calibration = cal
         self.card.calibrated_with = how.calibrated_with()
+
+
+def saved_traffic(stem: Path, card: ModelCard) -> Traffic | None:
+    """The training tracks saved beside a model calibrated with them (`<stem>.npz`)."""
+    if "traffic" not in card.calibration:
+        return None
+    return Traffic.read(stem.with_suffix(".npz"), card)
+
+
+def save_traffic(stem: Path, traffic: Traffic | None) -> None:
+    if traffic is not None:
+        atomic_write_bytes(stem.with_suffix(".npz"), traffic.to_bytes())
 
 
 def saved_corridor(stem: Path, card: ModelCard) -> Corridor | None:

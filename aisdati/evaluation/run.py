@@ -315,13 +315,14 @@ def _score(
 
 def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
-    four, `steplane` where its card was calibrated with it (cards from before that score are
-    not), and `od` and `area` where its card records where its training tracks end."""
+    four, `steplane` and `steptraffic` where its card was calibrated with them (cards from
+    before those scores are not), and `od` and `area` where its card records where its
+    training tracks end."""
     if det.method == "nearest":
         return ["nearest", "lane"]
-    steplane = ["steplane"] if det.card.calibration.get("steplane") else []
+    ratios = [k for k in ("steplane", "steptraffic") if det.card.calibration.get(k)]
     od = ["od", "area"] if det.end_points is not None else []
-    return ["rollout", "step", "lane", "both", *steplane, *od]
+    return ["rollout", "step", "lane", "both", *ratios, *od]
 
 
 ALL_ROUTES = "routes"
