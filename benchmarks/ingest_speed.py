@@ -106,6 +106,12 @@ def _ingest_command() -> list[str]:
     return ["ingest"] if hasattr(typer.main.get_command(app), "commands") else []
 
 
+def _ingest(source: Path, out: Path, roi: str, workers: int) -> list[str]:
+    cmd = [sys.executable, "-c", AISDATI, *_ingest_command(), "--input", str(source)]
+    cmd += ["--out", str(out), "--roi", roi, "--min-points", "5", "--json", "--quiet"]
+    return [*cmd, "--workers", str(workers)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=10_000_000)
@@ -115,17 +121,16 @@ def main() -> None:
     big_zip, big_csv, n = build(args.rows, args.work_dir)
     print(f"input: {big_zip} ({n:,} rows, {big_zip.stat().st_size / 2**20:.0f} MiB zipped)")
     results = []
-    for roi in ("florida-straits", "none"):
-        out = args.work_dir / f"out-{roi}"
-        cmd = [sys.executable, "-c", AISDATI, *_ingest_command(), "--input", str(big_zip)]
-        cmd += ["--out", str(out), "--roi", roi, "--min-points", "5", "--json", "--quiet"]
-        cmd += ["--workers", str(args.workers)]
-        seconds, rss, stdout = measure(cmd)
+    measure(_ingest(SEED, args.work_dir / "warm-up", "none", 1))  # numba's caches, once
+    runs = [(big_zip, "florida-straits"), (big_zip, "none"), (big_csv, "none")]
+    for source, roi in runs:
+        out = args.work_dir / f"out-{roi}-{source.suffix[1:]}"
+        seconds, rss, stdout = measure(_ingest(source, out, roi, args.workers))
         report = json.loads(stdout)
         stage = report["stage_seconds"]["read_clean_filter"]
         results.append(
             (
-                f"aisdati ingest --roi {roi} --workers {args.workers}",
+                f"aisdati ingest --roi {roi} --workers {args.workers} ({source.suffix[1:]})",
                 seconds,
                 n / stage,
                 n / seconds,
