@@ -386,8 +386,10 @@ def detect(
         help="How a policy judges a track: lane (distance to where its K free rollouts go; "
         "for nearest: to where the training tracks go), step (teacher-forced one-step "
         "errors), rollout (the best free rollout's DTW, the paper's), both (rollout + step), "
-        "steplane (step + lane) or area (lane + how much rarer the track's start-end pair is "
-        "than the training tracks'; models trained since 0.2.0). Default: the model's own, "
+        "steplane (step + lane), steptraffic (step + the distance to the training tracks "
+        "themselves; models trained since it exists) or area (lane + how much rarer the "
+        "track's start-end pair is than the training tracks'; models trained since 0.2.0). "
+        "Default: the model's own, "
         "recorded when it was trained: step for a model of a whole area (the area preset), "
         "else lane.",
     ),

@@ -1,0 +1,106 @@
+"""`--score steptraffic` measured on forward grids trained before the score existed (not a test).
+
+steptraffic = step / median(training step scores) + traffic / median(training traffic scores),
+where traffic is the distance to the training tracks themselves: for a model of an area, exactly
+`nearest`'s lane score over the area, and its training scores nearest's leave-one-vessel-out
+calibration (`aisdati.detectors.traffic`; tests/test_area.py checks that a model's own
+steptraffic is this sum). So each cell of `benchmarks/detection_quality.py --forward
+--detectors dati,nearest` holds every term already: DATI's step scores and cross-fitted
+calibration, nearest's lane scores and calibration. This script sums them per cell, ranks the
+tracks the ashore rule flagged first (as the evaluation does), and prints per grid the nine-cell
+mean ROC AUC of step, nearest's lane and steptraffic, and at `--contamination 0.05` (the 0.95
+quantile of the training tracks' own sums) the share of normal and of altered tracks flagged.
+
+Run: python benchmarks/step_traffic.py runs/grid/kitimat/forward-s1-at-sea [more grid folders]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from sklearn.metrics import roc_auc_score
+
+from aisdati.tracks.ashore import AshoreCheck
+
+RULE = AshoreCheck()
+CONTAMINATION = 0.05
+
+
+TIE_BREAK = 1e-6
+"""The rank sum's tie-break: tracks beyond every training score of both terms rank by the
+median-ratio sum."""
+
+
+def ranks(values: np.ndarray, calibration: np.ndarray) -> np.ndarray:
+    """Each value's share of the training tracks' own scores at or below it (0-1)."""
+    cal = np.sort(calibration)
+    return np.searchsorted(cal, np.asarray(values, np.float64), side="right") / len(cal)
+
+
+def calibration(card: Path, key: str) -> np.ndarray:
+    return np.asarray(json.loads(card.read_text())["calibration"][key], np.float64)
+
+
+def cell_result(cell: Path) -> dict[str, float]:
+    """ROC AUC of each score, and (FA, recall) of step and steptraffic, on one evaluate folder."""
+    scores = pd.read_parquet(cell / "scores.parquet")
+    models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
+    models = Path(models) if models else cell / "models"
+    pick = lambda det, kind: scores[(scores.detector == det) & (scores.score == kind)]  # noqa: E731
+    step = pick("dati", "step").set_index("track_id")
+    lane = pick("nearest", "lane").set_index("track_id").loc[step.index]
+    cal_step = calibration(models / "all.json", "step")
+    cal_lane = calibration(models / "all-nearest.json", "lane")
+    if len(cal_step) != len(cal_lane):
+        raise SystemExit(f"{cell}: the two models were calibrated on different tracks")
+    med_step, med_lane = np.median(cal_step), np.median(cal_lane)
+    ratio = step.value.to_numpy() / med_step + lane.value.to_numpy() / med_lane
+    cal_ratio = cal_step / med_step + cal_lane / med_lane
+    values = {
+        "step": step.value.to_numpy(),
+        "lane": lane.value.to_numpy(),
+        "steptraffic": ratio,
+        "ranks": ranks(step.value, cal_step) + ranks(lane.value, cal_lane) + TIE_BREAK * ratio,
+    }
+    cal_ranks = ranks(cal_step, cal_step) + ranks(cal_lane, cal_lane) + TIE_BREAK * cal_ratio
+    thresholds = {
+        "step": np.quantile(cal_step, 1 - CONTAMINATION),
+        "steptraffic": np.quantile(cal_ratio, 1 - CONTAMINATION),
+        "ranks": np.quantile(cal_ranks, 1 - CONTAMINATION),
+    }
+    counts, lengths = step.ashore_reports.to_numpy(), step.n_points.to_numpy()
+    label = step.label.to_numpy()
+    out = {k: roc_auc_score(label, RULE.ranked(v, counts, lengths)) for k, v in values.items()}
+    for k, threshold in thresholds.items():
+        flagged = (values[k] > threshold) | RULE.flags(counts)
+        out[f"{k} FA"], out[f"{k} recall"] = flagged[label == 0].mean(), flagged[label == 1].mean()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("grids", type=Path, nargs="+", help="grid folders (<out>/<area>/<tier>)")
+    args = parser.parse_args()
+    print("| grid | cells | step | nearest lane | steptraffic | ranks | step FA / recall | "
+          "steptraffic FA / recall | ranks FA / recall |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|")
+    for grid in args.grids:
+        cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
+        if not cells:
+            raise SystemExit(f"{grid}: no evaluated cells")
+        mean = pd.DataFrame([cell_result(c) for c in cells]).mean()
+        print(
+            f"| {grid} | {len(cells)} | {mean['step']:.3f} | {mean['lane']:.3f} | "
+            f"{mean['steptraffic']:.3f} | {mean['ranks']:.3f} | "
+            f"{mean['step FA']:.3f} / {mean['step recall']:.2f} | "
+            f"{mean['steptraffic FA']:.3f} / {mean['steptraffic recall']:.2f} | "
+            f"{mean['ranks FA']:.3f} / {mean['ranks recall']:.2f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
