@@ -87,9 +87,9 @@ class BCDetector(PolicyDetector):
         buf = io.BytesIO()
         torch.save(self.trained().state_dict(), buf)
         atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
+        save_traffic(stem, self.training_tracks)  # before the card that names them
         self.save_card(stem)
         self.save_corridor(stem)
-        save_traffic(stem, self.training_tracks)
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> BCDetector:

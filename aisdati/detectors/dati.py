@@ -107,9 +107,9 @@ class DATIDetector(PolicyDetector):
         return self.nets
 
     def save(self, stem: Path) -> None:
+        save_traffic(stem, self.training_tracks)  # before the card that names them
         save_networks(stem, self.trained(), self.config, self.card.to_dict())
         self.save_corridor(stem)
-        save_traffic(stem, self.training_tracks)
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> DATIDetector:
