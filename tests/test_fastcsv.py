@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.csv as pcsv
 import pytest
 
 from aisdati.preprocess.convert import canonical_tables
@@ -49,6 +50,11 @@ ODD_ROWS = [
     "367000026,2022-01-03T00:00:60,40.5,-74.1,10.2,90.0,511,LEAP SECOND",
     "367000027,2022-01-03T00:00:23,40.5,-74.1,10.2,90.0,511,PLAIN",
     "367000028,2022-01-03T00:00:24,40.5,- 74.1,10.2,90.0,511,SPACED SIGN",
+    '"367000029","2022-01-03T00:00:25","40.5","-74.1","10.2","90.0","511","ALL QUOTED"',
+    '367000030,"",40.5,-74.1,10.2,90.0,511,EMPTY QUOTED TIME',
+    '367000031,2022-01-03T00:00:27,"40.5"1,-74.1,10.2,90.0,511,TEXT AFTER THE QUOTES',
+    '367000032,2022-01-03T00:00:28,"40""5",-74.1,10.2,90.0,511,ESCAPED QUOTE',
+    '367000033,2022-01-03T00:00:29,40.5,-74.1,10.2,90.0,511,"UNENDED',
 ]
 
 
@@ -104,10 +110,31 @@ def test_odd_rows_read_the_same_both_ways_between_plain_ones(data, tmp_path):
     path = tmp_path / "odd.csv"
     path.write_text("\r\n".join(lines))  # CRLF, and the last line without its end
     rows = sum(1 for row in lines[1:] if row.strip())
-    assert assert_same(path) == rows - 2  # a row of too few fields, one of too many
+    assert assert_same(path) == rows - 3  # too few fields, too many, a quote never closed
     with gzip.open(tmp_path / "odd.csv.gz", "wt") as out:
         out.write("\n".join([*lines, "MMSI,LAT,LON,BaseDateTime,SOG,COG", *lines[1:3]]))
     assert_same(tmp_path / "odd.csv.gz")  # a header mid-file, another column order
+
+
+def test_quoted_fields_take_the_fast_path_and_a_mostly_odd_file_reads_the_same(data, tmp_path):
+    """pyarrow's and pandas' writers quote text: such rows are plain to the fast path. A file
+    whose rows the fast path mostly cannot parse (fields with quotes inside) reads the same."""
+    table = SourceReader(Source(data / "AIS_2018_07-08_Kitimat.csv.gz")).batches()
+    rows = pa.Table.from_batches(list(table))
+    quoted = tmp_path / "quoted.csv"
+    pcsv.write_csv(rows, quoted)  # every text field quoted
+    assert b'"' in quoted.read_bytes()[:200]
+    names = rows.column_names
+    slots = ColumnSlots.of(names, dict(zip(["mmsi", "time", "lat", "lon", "sog", "cog"],
+                                           names, strict=True)))  # fmt: skip
+    body = quoted.read_bytes().split(b"\n", 1)[1]
+    assert not parse_block(body, slots).slow.any()
+    assert assert_same(quoted) == rows.num_rows
+    odd = tmp_path / "odd-quotes.csv"
+    lines = quoted.read_text().splitlines()
+    odd.write_text("\n".join([lines[0], *(line.replace('"', '""', 2) + '"' if k % 2 else line
+                                            for k, line in enumerate(lines[1:2000]))]))  # fmt: skip
+    assert_same(odd)
 
 
 def test_numbers_are_the_correctly_rounded_floats_of_their_text():
@@ -126,3 +153,22 @@ def test_numbers_are_the_correctly_rounded_floats_of_their_text():
     assert not parsed.slow.any()
     want = np.array([float(t) for t in texts])
     assert np.array_equal(parsed.numbers[0].view(np.int64), want.view(np.int64))
+
+
+def test_full_float_reprs_are_exact_where_their_digits_are_and_else_go_the_usual_way():
+    """A shifted coordinate written as its shortest repr has 15-17 digits (-73.43350000000001):
+    below 2**53 as an integer, it is parsed here, bit for bit; above, the usual way reads it."""
+    rng = np.random.default_rng(3)
+    values = rng.uniform(-180, 180, 5000) + 0.3
+    texts = [repr(float(v)) for v in values]
+    block = "".join(f"1,2022-01-03T00:00:00,{t},0,0,0\n" for t in texts).encode()
+    names = ["MMSI", "BaseDateTime", "LAT", "LON", "SOG", "COG"]
+    canonical = ["mmsi", "time", "lat", "lon", "sog", "cog"]
+    parsed = parse_block(block, ColumnSlots.of(names, dict(zip(canonical, names, strict=True))))
+    digits = np.array([sum(c.isdigit() for c in t) for t in texts])
+    exact = np.array([int("".join(c for c in t if c.isdigit())) <= 2**53 for t in texts])
+    fast = ~parsed.slow
+    assert np.array_equal(fast, exact) and fast[digits <= 15].all()
+    assert 0.2 < fast[digits == 16].mean() < 1.0 and fast[digits == 17].mean() < 0.2
+    want = np.array([float(t) for t in texts])
+    assert np.array_equal(parsed.numbers[0][fast].view(np.int64), want[fast].view(np.int64))

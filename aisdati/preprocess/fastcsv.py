@@ -2,16 +2,18 @@
 
 pyarrow's CSV reader tokenises every column of a MarineCadastre row (17 of them) and hands the six
 we need on as text, which `convert.to_canonical` then parses again: about 5 s of one core for 10
-million rows. Nearly every real row is plain: no quotes, the header's number of fields, the MMSI
-digits, the time `YYYY-MM-DDTHH:MM:SS` (or with a space), the numbers `-?digits[.digits]`. Those
+million rows. Nearly every real row is plain: the header's number of fields, no quote but around a
+whole field (`"..."`, as pyarrow's and pandas' writers quote text), the MMSI digits, the time
+`YYYY-MM-DDTHH:MM:SS` (or with a space), the numbers `-?digits[.digits]`. Those
 are parsed here in one compiled pass over the block (`scan_block`, which releases the GIL, so
 blocks are parsed on threads); every other row (a blank or odd value, a quote, a wrong number
 of fields) is marked and read the usual way (`read.SourceReader`), so it is counted and rejected,
 or read, exactly as before.
 
-The values are those the usual way gives, bit for bit: a number of at most 15 digits is its
-digits as an integer (exact in a float64) divided by a power of ten (exact up to 10^22), and IEEE
-division rounds that exact quotient correctly, as Arrow's parser rounds the text.
+The values are those the usual way gives, bit for bit: a number whose digits make an integer below
+2**53 (15 digits always, 16 mostly: a float's full repr often has them) is that integer (exact in
+a float64) divided by a power of ten (exact up to 10^22), and IEEE division rounds that exact
+quotient correctly, as Arrow's parser rounds the text.
 """
 
 from __future__ import annotations
@@ -25,9 +27,10 @@ import pyarrow as pa
 MMSI, TIME = 0, 1
 """Output slots of the MMSI and time columns; slots 2.. are the number columns."""
 NUMBERS = ("lat", "lon", "sog", "cog")
-MAX_DIGITS = 15
-"""Digits of a number parsed here (below 2**53, so exact as a float64); longer ones go the usual
-way."""
+MAX_DIGITS = 18
+"""Digits of a number read here (an int64 holds them); its digits as an integer must also be at
+most `EXACT` (below 2**53: exact as a float64), or it goes the usual way."""
+EXACT = 2**53
 MAX_MMSI_DIGITS = 18
 """As `convert.MAX_MMSI_DIGITS`: longer MMSIs are rejected the usual way."""
 POW10 = np.array([10.0**k for k in range(MAX_DIGITS + 1)])
@@ -129,31 +132,41 @@ def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - co
         bad = False
         while True:
             start = i
+            end = -1
             kind = DELIMITER[buf[i]]
+            if kind == 3:  # a quoted field: its text, where no quote is inside it
+                j = i + 1
+                while buf[j] != 34 and buf[j] != 10:  # (commas are text here)
+                    j += 1
+                after = DELIMITER[buf[j + 1]] if buf[j] == 34 else 0
+                if after == 1 or after == 2:
+                    start, end, i, kind = i + 1, j, j + 1, after
             while True:
                 while kind == 0:  # (the block ends with a line end)
                     i += 1
                     kind = DELIMITER[buf[i]]
                 if kind != 3:
                     break
-                bad = True  # a quote: the usual parser's dialect decides
+                bad = True  # a quote inside a field: the usual parser's dialect decides
                 i += 1
                 kind = DELIMITER[buf[i]]
+            if end < 0:
+                end = i
             if field < n_fields:
                 slot = slots[field]
                 if slot == 0:
-                    value = _digits(buf, start, i)
+                    value = _digits(buf, start, end)
                     bad |= value <= 0
                     ints[0, row] = value
                 elif slot == 1:
-                    if date_at < 0 or i - start != 19 or not _same(buf, date_at, start, 11):
-                        date_days = _days(buf, start, i)
+                    if date_at < 0 or end - start != 19 or not _same(buf, date_at, start, 11):
+                        date_days = _days(buf, start, end)
                         date_at = start if date_days != _NO_TIME else -1
                     value = _clock_us(buf, start, date_days) if date_at >= 0 else _NO_TIME
                     bad |= value == _NO_TIME
                     ints[1, row] = value
                 elif slot >= 2:
-                    number = _number(buf, start, i)
+                    number = _number(buf, start, end)
                     bad |= np.isnan(number)
                     numbers[slot - 2, row] = number
             field += 1
@@ -187,7 +200,8 @@ def _digits(buf, a, b):  # pragma: no cover - compiled
 
 @numba.njit(nogil=True, cache=True, inline="always")
 def _number(buf, a, b):  # pragma: no cover - compiled
-    """`-?digits(.digits)?` of at most `MAX_DIGITS` digits, else NaN (the usual way decides)."""
+    """`-?digits(.digits)?` whose digits make an integer of at most `EXACT`, else NaN (the usual
+    way decides)."""
     negative = a < b and buf[a] == 45
     if negative:
         a += 1
@@ -206,7 +220,7 @@ def _number(buf, a, b):  # pragma: no cover - compiled
         digits += 1
         if decimals >= 0:
             decimals += 1
-    if digits == 0 or decimals == 0 or digits > MAX_DIGITS:
+    if digits == 0 or decimals == 0 or digits > MAX_DIGITS or mantissa > EXACT:
         return np.nan
     value = np.float64(mantissa) / POW10[max(decimals, 0)]
     return -value if negative else value

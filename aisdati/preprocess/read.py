@@ -46,6 +46,9 @@ PARSE_THREADS = min(2, os.cpu_count() or 1)
 inflates meanwhile."""
 READ_AHEAD = 2
 """Blocks asked of the guarded stream ahead of the one being parsed."""
+MOSTLY_SLOW = 8
+"""A block with more than one row in this many that the fast path cannot parse (a file that
+quotes fields with commas in them, say) is read the usual way whole."""
 ROW_KEY = "\x00row"
 """The column that numbers the rows read the usual way on the fast path (no header names it)."""
 
@@ -330,36 +333,49 @@ class SourceReader:
         src: int,
     ) -> tuple[pa.Table, np.ndarray]:
         """One block's canonical rows in the block's order: its plain rows from the fast path,
-        the others (`ParsedBlock.slow`) read the usual way, each numbered by its row."""
+        the others (`ParsedBlock.slow`) read the usual way, each numbered by its row; a block
+        of mostly other rows read the usual way whole."""
         parsed, table, codes = plain.result()
         slow = np.flatnonzero(parsed.slow)
         if not len(slow):
             return table, codes
+        if len(slow) * MOSTLY_SLOW > parsed.rows:
+            usual = self._read_usual(pa.py_buffer(block), names, columns, numbered=False)
+            return to_canonical(usual, self.columns, src)
         view = memoryview(block)
         text = b"".join(
             b"%d,%b\n" % (k, view[parsed.line_start[k] : parsed.line_end[k]]) for k in slow
         )
-        wanted = [columns[c] for c in self.columns]
-        usual = pcsv.read_csv(
-            pa.py_buffer(text),
-            read_options=pcsv.ReadOptions(column_names=[ROW_KEY, *names], use_threads=False),
-            parse_options=pcsv.ParseOptions(invalid_row_handler=self._on_numbered_malformed),
-            convert_options=pcsv.ConvertOptions(
-                include_columns=[ROW_KEY, *wanted],
-                column_types={ROW_KEY: pa.int64()} | {name: pa.string() for name in wanted},
-                strings_can_be_null=True,
-                quoted_strings_can_be_null=True,
-            ),
-        ).combine_chunks()
-        batch = pa.record_batch(
-            [usual.column(name).combine_chunks() for name in wanted],
-            names=list(self.columns.values()),
-        )
-        slow_table, slow_codes = to_canonical(batch, self.columns, src)
+        usual = self._read_usual(pa.py_buffer(text), names, columns, numbered=True)
+        slow_table, slow_codes = to_canonical(usual, self.columns, src)
         kept = np.flatnonzero(~parsed.slow)
         order = np.argsort(np.concatenate([kept, usual.column(ROW_KEY).to_numpy()]), kind="stable")
         merged = pa.concat_tables([table.take(kept), slow_table]).take(order)
         return merged, np.concatenate([codes[kept], slow_codes])[order]
+
+    def _read_usual(
+        self, text: pa.Buffer, names: list[str], columns: dict[str, str], numbered: bool
+    ) -> pa.RecordBatch:
+        """Whole lines read by pyarrow's parser as `_csv_batches` reads them, the needed columns
+        under the first header's names; `numbered`: each line starts with its row in the block
+        (`ROW_KEY`, kept as a column), which a malformed line's reported text leaves out."""
+        wanted = [columns[c] for c in self.columns]
+        key = [ROW_KEY] if numbered else []
+        table = pcsv.read_csv(
+            text,
+            read_options=pcsv.ReadOptions(column_names=[*key, *names], use_threads=False),
+            parse_options=pcsv.ParseOptions(
+                invalid_row_handler=self._on_numbered_malformed if numbered else self._on_malformed
+            ),
+            convert_options=pcsv.ConvertOptions(
+                include_columns=[*key, *wanted],
+                column_types={k: pa.int64() for k in key} | {n: pa.string() for n in wanted},
+                strings_can_be_null=True,
+                quoted_strings_can_be_null=True,
+            ),
+        ).combine_chunks()
+        arrays = [table.column(name).combine_chunks() for name in [*key, *wanted]]
+        return pa.record_batch(arrays, names=[*key, *self.columns.values()])
 
     def _on_numbered_malformed(self, row: pcsv.InvalidRow) -> str:
         """A malformed row read the usual way on the fast path: its text without its number."""
