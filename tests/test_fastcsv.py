@@ -14,7 +14,7 @@ import pyarrow.csv as pcsv
 import pytest
 
 from aisdati.preprocess.convert import canonical_tables
-from aisdati.preprocess.fastcsv import ColumnSlots, parse_block
+from aisdati.preprocess.fastcsv import TYPICAL_ROW_BYTES, ColumnSlots, parse_block
 from aisdati.preprocess.inputs import Source
 from aisdati.preprocess.read import SourceReader
 
@@ -172,3 +172,16 @@ def test_full_float_reprs_are_exact_where_their_digits_are_and_else_go_the_usual
     assert 0.2 < fast[digits == 16].mean() < 1.0 and fast[digits == 17].mean() < 0.2
     want = np.array([float(t) for t in texts])
     assert np.array_equal(parsed.numbers[0][fast].view(np.int64), want[fast].view(np.int64))
+
+
+def test_a_block_of_rows_shorter_than_the_outputs_expect_is_parsed_whole():
+    """The kernel's outputs are first sized for rows of `TYPICAL_ROW_BYTES`; a block of shorter
+    rows (here 14 bytes: malformed ones, as the usual way will find) is scanned again into
+    outputs sized for them."""
+    names = ["MMSI", "BaseDateTime", "LAT", "LON"]
+    slots = ColumnSlots.of(names, dict(zip(["mmsi", "time", "lat", "lon"], names, strict=True)))
+    block = b"".join(b"%09d,x,1,2\n" % k for k in range(1, 5001))
+    assert len(block) // 5000 < TYPICAL_ROW_BYTES
+    parsed = parse_block(block, slots)
+    assert parsed.rows == 5000 and parsed.slow.all()
+    assert parsed.mmsi.tolist() == list(range(1, 5001))
