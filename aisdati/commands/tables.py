@@ -13,7 +13,6 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from aisdati.ais import RATIO_SCORES
 from aisdati.preprocess.report import REASONS, IngestCounts
 
 if TYPE_CHECKING:
@@ -202,9 +201,9 @@ def results_table(ev: Evaluation, width: int = 120) -> Table:
     caption = (
         "AUC (ROC) and AP (average precision) rank altered against normal held-out tracks; "
         "P/R/F1 at each detector's calibrated threshold; normal/altered: median scores in km "
-        "('both' is unitless)"
+        "(both, steplane and steptraffic: multiples of the training tracks' medians)"
     )
-    return _evaluation_table(ev.table, title, caption, width, ratio=False)
+    return _evaluation_table(ev.table, title, caption, width)
 
 
 def pooled_table(rev: RoutesEvaluation, width: int = 120) -> Table:
@@ -222,22 +221,21 @@ def pooled_table(rev: RoutesEvaluation, width: int = 120) -> Table:
     )
     if rev.skipped:
         caption += f"; skipped (too few tracks to split): {escape(', '.join(rev.skipped))}"
-    return _evaluation_table(rev.table, title, caption, width, ratio=True)
+    return _evaluation_table(rev.table, title, caption, width)
 
 
-def _distance(value: float | None, score: str, ratio: bool = False) -> str:
+def _distance(value: float | None, unit: str) -> str:
+    """A median of the table: km for metres, else the ratio itself."""
     if value is None or value != value:
         return "-"
-    return f"{value:.2f}" if ratio or score in RATIO_SCORES else f"{value / 1000:.2f}"
+    return f"{value / 1000:.2f}" if unit == "m" else f"{value:.2f}"
 
 
 def _figure(v: float | None, digits: int = 3) -> str:
     return "-" if v is None or v != v else f"{v:.{digits}f}"
 
 
-def _evaluation_table(
-    frame: pd.DataFrame, title: str, caption: str, width: int, ratio: bool
-) -> Table:
+def _evaluation_table(frame: pd.DataFrame, title: str, caption: str, width: int) -> Table:
     t = Table(title=title, box=box.SIMPLE_HEAD)
     cols = ["detector", "score", "kind", "n", "AUC", "AP", "P", "R", "F1", "normal", "altered"]
     narrow = width < 100
@@ -265,8 +263,8 @@ def _evaluation_table(
             "P": _figure(r.precision, 2),
             "R": _figure(r.recall, 2),
             "F1": _figure(r.f1, 2),
-            "normal": _distance(r.median_normal_m, r.score, ratio),
-            "altered": _distance(r.median_anomalous_m, r.score, ratio),
+            "normal": _distance(r.median_normal, r.unit),
+            "altered": _distance(r.median_anomalous, r.unit),
         }
         t.add_row(*(cells[c] for c in cols))
     t.caption = caption

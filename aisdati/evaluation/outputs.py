@@ -31,7 +31,7 @@ def lane_fidelity(ev: Evaluation) -> dict[str, float]:
     out = {}
     rows = ev.table[(ev.table["kind"] == "all") & ev.table["score"].isin(["rollout", "nearest"])]
     for r in rows.itertuples():
-        out[r.detector] = float(r.median_normal_m)
+        out[r.detector] = float(r.median_normal)
     return out
 
 

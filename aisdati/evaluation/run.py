@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais import DEFAULT_PRESET, RATIO_SCORES
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
 from aisdati.detection.run import ashore_counts, score_settings
@@ -304,7 +304,10 @@ def _score(
             result.evidence[key] = scored.evidence
             for tid, v, f in zip(split.heldout_ids, values, flagged, strict=True):
                 score_rows.append((method, kind, tid, float(v), float(threshold), bool(f)))
-            rows += _rows(method, kind, labels, values, ranked, flagged, threshold, settings.kinds)
+            unit = value_unit(kind)
+            rows += _rows(
+                method, kind, labels, values, ranked, flagged, threshold, settings.kinds, unit
+            )
     result.table = pd.DataFrame(rows)
     columns = ["detector", "score", "track_id", "value", "threshold", "flagged"]
     scores = pd.DataFrame(score_rows, columns=columns)
@@ -411,8 +414,19 @@ def evaluate_routes(
         values = g["ratio"].to_numpy()
         ranked = rule.ranked(values, g["ashore_reports"], g["n_points"])
         flagged = g["flagged"].to_numpy()
-        rows += _rows(method, kind, labels, values, ranked, flagged, 1.0, settings.kinds)
+        unit = POOLED_UNIT
+        rows += _rows(method, kind, labels, values, ranked, flagged, 1.0, settings.kinds, unit)
     return RoutesEvaluation(settings, evaluations, skipped, pd.DataFrame(rows), scores)
+
+
+POOLED_UNIT = "x threshold"
+"""The unit of the pooled routes' values: each track's score over its own model's threshold."""
+
+
+def value_unit(score: str) -> str:
+    """The unit of a score's values: metres, or (a sum of ratios, `RATIO_SCORES`) multiples of
+    the training tracks' medians."""
+    return "x median" if score in RATIO_SCORES else "m"
 
 
 def _rows(
@@ -424,10 +438,11 @@ def _rows(
     flagged: np.ndarray,
     threshold: float,
     kinds: tuple[str, ...],
+    unit: str,
 ) -> list[dict[str, Any]]:
     """The table's rows of one detector and score: per anomaly kind (and pooled), how `ranked`
     orders and `flagged` flags the altered tracks against the normal ones, and the median
-    `values` of each."""
+    `values` of each, in `unit` (`value_unit`)."""
     y = labels["label"].to_numpy()
     kind = labels["kind"].to_numpy()
     normal = y == 0
@@ -447,9 +462,10 @@ def _rows(
             "normal": int(normal.sum()),
             **ranking(y[keep], ranked[keep]),
             **flagging(y[keep], flagged[keep]),
-            "threshold_m": float(threshold),
-            "median_normal_m": float(np.median(values[normal])),
-            "median_anomalous_m": float(np.median(values[anomalous])) if anomalous.any() else None,
+            "threshold": float(threshold),
+            "median_normal": float(np.median(values[normal])),
+            "median_anomalous": float(np.median(values[anomalous])) if anomalous.any() else None,
+            "unit": unit,
         }
         out.append(row)
     return out
