@@ -296,15 +296,23 @@ def _ends_in_quotes(line: bytes) -> bool:
     return state == 2
 
 
-def _scan_unterminated(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
+def _found(
+    kernel: Callable[[np.ndarray, np.ndarray], int], buf: bytes | memoryview, a: int, b: int
+) -> np.ndarray:
+    """Every offset into buf[a:b] that a compiled `kernel(bytes, out) -> how many` finds, however
+    many there are (it fills `out` as far as it reaches)."""
     view = np.frombuffer(buf, np.uint8, count=b - a, offset=a)
-    starts = np.empty(64, np.int64)
-    found = _unterminated_lines(view, starts)
-    if found > len(starts):
-        starts = np.empty(found, np.int64)
-        _unterminated_lines(view, starts)
+    out = np.empty(64, np.int64)
+    found = kernel(view, out)
+    if found > len(out):
+        out = np.empty(found, np.int64)
+        kernel(view, out)
+    return out[:found]
+
+
+def _scan_unterminated(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
     spans = []
-    for s in starts[:found]:
+    for s in _found(_unterminated_lines, buf, a, b):
         end = buf.find(b"\n", a + int(s), b)
         spans.append((a + int(s), b if end < 0 else end + 1))
     return spans
@@ -358,13 +366,7 @@ def _unterminated_lines(buf: np.ndarray, out: np.ndarray) -> int:  # pragma: no 
 
 def _mark_offsets(buf: bytes | memoryview, a: int, b: int) -> list[int]:
     """Where `HEADER_MARK` starts in buf[a:b], in any case."""
-    view = np.frombuffer(buf, np.uint8, count=b - a, offset=a)
-    found = np.empty(16, np.int64)
-    count = _marks(view, found)
-    if count > len(found):
-        found = np.empty(count, np.int64)
-        _marks(view, found)
-    return [a + int(k) for k in found[:count]]
+    return [a + int(k) for k in _found(_marks, buf, a, b)]
 
 
 @numba.njit(nogil=True, cache=True)
