@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import roc_auc_score
 
+from aisdati.detectors.scoring import ratio_sum
 from aisdati.tracks.ashore import AshoreCheck
 
 RULE = AshoreCheck()
@@ -57,9 +58,10 @@ def cell_result(cell: Path) -> dict[str, float]:
     cal_lane = calibration(models / "all-nearest.json", "lane")
     if len(cal_step) != len(cal_lane):
         raise SystemExit(f"{cell}: the two models were calibrated on different tracks")
-    med_step, med_lane = np.median(cal_step), np.median(cal_lane)
-    ratio = step.value.to_numpy() / med_step + lane.value.to_numpy() / med_lane
-    cal_ratio = cal_step / med_step + cal_lane / med_lane
+    medians = {"step": cal_step, "traffic": cal_lane}
+    parts = {"step": step.value.to_numpy(), "traffic": lane.value.to_numpy()}
+    ratio = ratio_sum(parts, medians, "steptraffic")  # what the score computes
+    cal_ratio = ratio_sum(medians, medians, "steptraffic")
     values = {
         "step": step.value.to_numpy(),
         "lane": lane.value.to_numpy(),

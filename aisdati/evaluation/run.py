@@ -414,8 +414,9 @@ def evaluate_routes(
         values = g["ratio"].to_numpy()
         ranked = rule.ranked(values, g["ashore_reports"], g["n_points"])
         flagged = g["flagged"].to_numpy()
-        unit = POOLED_UNIT
-        rows += _rows(method, kind, labels, values, ranked, flagged, 1.0, settings.kinds, unit)
+        rows += _rows(
+            method, kind, labels, values, ranked, flagged, 1.0, settings.kinds, POOLED_UNIT
+        )
     return RoutesEvaluation(settings, evaluations, skipped, pd.DataFrame(rows), scores)
 
 

@@ -24,8 +24,9 @@ import numba
 import numpy as np
 import pyarrow as pa
 
-MMSI, TIME = 0, 1
-"""Output slots of the MMSI and time columns; slots 2.. are the number columns."""
+MMSI, TIME, FIRST_NUMBER = 0, 1, 2
+"""Output slots of the MMSI and time columns; slots from `FIRST_NUMBER` on are the number
+columns."""
 NUMBERS = ("lat", "lon", "sog", "cog")
 MAX_DIGITS = 18
 """Digits of a number read here (an int64 holds them); its digits as an integer must also be at
@@ -58,7 +59,7 @@ class ColumnSlots:
         """The slots of a header, or None where the header names a needed column twice (the
         usual way decides which)."""
         numbers = tuple(c for c in NUMBERS if c in columns)
-        wanted = {"mmsi": MMSI, "time": TIME} | {c: 2 + i for i, c in enumerate(numbers)}
+        wanted = {"mmsi": MMSI, "time": TIME} | {c: FIRST_NUMBER + i for i, c in enumerate(numbers)}
         slots = np.full(len(names), -1, np.int64)
         for canonical, slot in wanted.items():
             at = [i for i, name in enumerate(names) if name == columns[canonical]]
@@ -164,21 +165,21 @@ def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - co
                 end = i
             if field < n_fields:
                 slot = slots[field]
-                if slot == 0:
+                if slot == MMSI:
                     value = _digits(buf, start, end)
                     bad |= value <= 0
-                    ints[0, row] = value
-                elif slot == 1:
+                    ints[MMSI, row] = value
+                elif slot == TIME:
                     if date_at < 0 or end - start != 19 or not _same(buf, date_at, start, 11):
                         date_days = _days(buf, start, end)
                         date_at = start if date_days != _NO_TIME else -1
                     value = _clock_us(buf, start, date_days) if date_at >= 0 else _NO_TIME
                     bad |= value == _NO_TIME
-                    ints[1, row] = value
-                elif slot >= 2:
+                    ints[TIME, row] = value
+                elif slot >= FIRST_NUMBER:
                     number = _number(buf, start, end)
                     bad |= np.isnan(number)
-                    numbers[slot - 2, row] = number
+                    numbers[slot - FIRST_NUMBER, row] = number
             field += 1
             if kind == 2:
                 break

@@ -42,8 +42,8 @@ from aisdati.preprocess.streams import (
 MAX_HEADER_BYTES = 1 << 20
 """The header line must end within this many bytes."""
 PARSE_THREADS = min(2, os.cpu_count() or 1)
-"""Threads parsing CSV blocks on the fast path (`fastcsv` releases the GIL); this one reads and
-inflates meanwhile."""
+"""Threads parsing CSV blocks on the fast path (`fastcsv` releases the GIL), while one more
+reads, inflates and guards the next blocks and the caller's thread takes the parsed ones."""
 READ_AHEAD = 2
 """Blocks asked of the guarded stream ahead of the one being parsed."""
 MOSTLY_SLOW = 8
@@ -268,12 +268,7 @@ class SourceReader:
                     block_size=BLOCK_SIZE, skip_rows=0, column_names=names
                 ),
                 parse_options=pcsv.ParseOptions(invalid_row_handler=self._on_malformed),
-                convert_options=pcsv.ConvertOptions(
-                    include_columns=wanted,
-                    column_types={name: pa.string() for name in wanted},
-                    strings_can_be_null=True,
-                    quoted_strings_can_be_null=True,
-                ),
+                convert_options=text_columns(wanted),
             )
         except pa.ArrowInvalid as exc:
             if "Empty CSV file" in str(exc):
@@ -367,12 +362,7 @@ class SourceReader:
             parse_options=pcsv.ParseOptions(
                 invalid_row_handler=self._on_numbered_malformed if numbered else self._on_malformed
             ),
-            convert_options=pcsv.ConvertOptions(
-                include_columns=[*key, *wanted],
-                column_types={k: pa.int64() for k in key} | {n: pa.string() for n in wanted},
-                strings_can_be_null=True,
-                quoted_strings_can_be_null=True,
-            ),
+            convert_options=text_columns(wanted, key),
         ).combine_chunks()
         arrays = [table.column(name).combine_chunks() for name in [*key, *wanted]]
         return pa.record_batch(arrays, names=[*key, *self.columns.values()])
@@ -381,6 +371,19 @@ class SourceReader:
         """A malformed row read the usual way on the fast path: its text without its number."""
         self.malformed.append(shorten(row.text.split(",", 1)[1]))
         return "skip"
+
+
+def text_columns(wanted: list[str], numbers: list[str] | None = None) -> pcsv.ConvertOptions:
+    """pyarrow's conversion of the `wanted` columns as text (blank or quoted-blank: null), so
+    that `convert.to_canonical` types them and counts a bad value as one row; `numbers` come
+    first, as integers (the fast path's row numbers)."""
+    numbers = numbers or []
+    return pcsv.ConvertOptions(
+        include_columns=[*numbers, *wanted],
+        column_types={n: pa.int64() for n in numbers} | {n: pa.string() for n in wanted},
+        strings_can_be_null=True,
+        quoted_strings_can_be_null=True,
+    )
 
 
 def parse_header(line: str) -> list[str]:
