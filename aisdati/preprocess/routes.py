@@ -189,6 +189,11 @@ def _resample_all(xy, ends, steps, frac, out):  # pragma: no cover - compiled
         start = stop
 
 
+WHOLE_SET = 4
+"""`ShapeDistance.pairs` hands the kernel all tracks once the tracks named are 1 / WHOLE_SET of
+them or more."""
+
+
 class ShapeDistance:
     """Mean great-circle DTW (km) between resampled tracks, both ways round."""
 
@@ -198,22 +203,34 @@ class ShapeDistance:
     def pairs(self, i: np.ndarray, j: np.ndarray, reverse: bool = False) -> np.ndarray:
         """Distances of tracks i[p] to tracks j[p] (reversed). Only the tracks named are handed
         to the kernel, which checks every series it gets: the whole set each call would make
-        the per-group calls quadratic in the number of tracks."""
+        the per-group calls quadratic in the number of tracks. A call that names a good part
+        of them gets the whole set: copying the tracks named would cost more than the check."""
         if len(i) == 0:
             return np.zeros(0)
-        used, pairs = np.unique(np.concatenate([i, j]), return_inverse=True)
-        a = self.fwd[used]
+        used, inverse = np.unique(np.concatenate([i, j]), return_inverse=True)
+        if len(used) * WHOLE_SET >= len(self.fwd) and not reverse:
+            a, pairs = self.fwd, np.stack([i, j], axis=1)
+        else:
+            a, pairs = self.fwd[used], inverse.reshape(2, -1).T
         b = np.ascontiguousarray(a[:, ::-1]) if reverse else a
-        pairs = np.ascontiguousarray(pairs.reshape(2, -1).T.astype(np.int64))
+        pairs = np.ascontiguousarray(pairs.astype(np.int64))
         return pairs_mean_dtw_m(a, b, pairs) / 1000.0
 
-    def matrix(self, idx: np.ndarray) -> np.ndarray:
-        """Symmetric matrix of the distances among tracks `idx`."""
-        n = len(idx)
-        iu, ju = np.triu_indices(n, 1)
-        d = np.zeros((n, n))
-        d[iu, ju] = d[ju, iu] = self.pairs(idx[iu], idx[ju])
-        return d
+    def matrices(self, sets: list[np.ndarray]) -> list[np.ndarray]:
+        """The symmetric matrix of the distances among the tracks of each set, all from one
+        kernel call: a call per set costs its start and checks again (a third of route
+        clustering's DTW time at 1,000 groups)."""
+        triu = [np.triu_indices(len(idx), 1) for idx in sets]
+        i = [idx[iu] for idx, (iu, _) in zip(sets, triu, strict=True)]
+        j = [idx[ju] for idx, (_, ju) in zip(sets, triu, strict=True)]
+        d = self.pairs(np.concatenate(i), np.concatenate(j)) if sets else np.zeros(0)
+        parts = np.split(d, np.cumsum([len(k) for k in i])[:-1])
+        out = []
+        for idx, (iu, ju), part in zip(sets, triu, parts, strict=True):
+            m = np.zeros((len(idx), len(idx)))
+            m[iu, ju] = m[ju, iu] = part
+            out.append(m)
+        return out
 
     def nearest(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Position in `cols` of each row's nearest track (ties: the first). DTW only with
@@ -249,7 +266,7 @@ NEIGHBOURS = 16
 DENSITY_SAMPLE = 200_000
 """Tracks the large-scale HDBSCAN sees at most (`_sampled_hdbscan`)."""
 SHAPE_PAIRS = 500_000
-"""DTW pairs the shape split compares at most (about 15 s on 2 idle cores): when the groups'
+"""DTW pairs the shape split compares at most (about 2 s on 2 idle cores): when the groups'
 samples of `max_sample` would need more, every group's sample shrinks to the size that fits."""
 CANDIDATES = 3
 """Path medoids a track is compared with by DTW: the nearest in lock-step distance."""
@@ -346,18 +363,16 @@ def _sample(idx: np.ndarray, size: int, rng: np.random.Generator) -> np.ndarray:
 
 def split_by_shape(
     idx: np.ndarray,
+    sample: np.ndarray,
+    dist: np.ndarray,
     shapes: ShapeDistance,
     tau: float,
-    size: int,
-    rng: np.random.Generator,
 ) -> list[tuple[np.ndarray, int]]:
-    """The paths within one candidate group (compared on a sample of `size` of its tracks):
-    (member track indices, medoid track index) each, every member assigned to its nearest path
-    medoid."""
-    sample = _sample(idx, size, rng)
+    """The paths within one candidate group, found among a sample of its tracks (`dist`: their
+    distance matrix): (member track indices, medoid track index) each, every member assigned
+    to its nearest path medoid."""
     if len(sample) == 1:
         return [(idx, int(sample[0]))]
-    dist = shapes.matrix(sample)
     from scipy.cluster.hierarchy import fcluster, linkage
     from scipy.spatial.distance import squareform
 
@@ -514,9 +529,10 @@ def cluster_shapes(
     paths: list[tuple[np.ndarray, int, float]] = []
     members_of = _members(groups)
     size = _sample_size([len(idx) for idx in members_of], settings.max_sample)
-    for idx in members_of:
+    samples = [_sample(idx, size, rng) for idx in members_of]
+    for idx, sample, dist in zip(members_of, samples, shapes.matrices(samples), strict=True):
         tau = _tolerance(length_km[idx], settings)
-        for members, medoid in split_by_shape(idx, shapes, tau, size, rng):
+        for members, medoid in split_by_shape(idx, sample, dist, shapes, tau):
             paths.append((members, medoid, tau))
     lap("split")
 
@@ -526,11 +542,13 @@ def cluster_shapes(
 
     rows = []
     medoids = []
-    for number, (members, medoid) in enumerate(routes, start=1):
+    some = [_sample(members, settings.max_sample, rng) for members, _ in routes]
+    spreads = _spreads(shapes, some, [medoid for _, medoid in routes])
+    for number, ((members, medoid), spread) in enumerate(
+        zip(routes, spreads, strict=True), start=1
+    ):
         name = f"{ROUTE_PREFIX}{number}"
         labels[members] = name
-        some = _sample(members, settings.max_sample, rng)
-        spread = shapes.pairs(some, np.full(len(some), medoid))
         rows.append(
             {
                 "route": name,
@@ -593,6 +611,14 @@ def _merged_routes(
             medoid = int(candidates[_medoid(shapes.cross(candidates, sample))])
         routes.append((members, medoid))
     return routes
+
+
+def _spreads(shapes: ShapeDistance, some: list[np.ndarray], medoids: list[int]) -> list[np.ndarray]:
+    """The distances of each route's sampled tracks to its medoid, from one kernel call."""
+    if not some:
+        return []
+    d = shapes.pairs(np.concatenate(some), np.repeat(medoids, [len(s) for s in some]))
+    return np.split(d, np.cumsum([len(s) for s in some])[:-1])
 
 
 def _tolerance(length_km: np.ndarray, settings: RouteSettings) -> float:
@@ -658,9 +684,7 @@ def routes_geojson(routes: Routes) -> dict[str, Any]:
     return {"type": "FeatureCollection", "features": features}
 
 
-def write_routes(
-    out_dir: Path, routes: Routes, shapes: TrackShapes, title: str
-) -> list:
+def write_routes(out_dir: Path, routes: Routes, shapes: TrackShapes, title: str) -> list:
     """routes.parquet, routes.geojson and routes.png (each track drawn as its resampled
     shape), staged (renamed when the run commits)."""
     from aisdati.preprocess.figures import plot_routes
