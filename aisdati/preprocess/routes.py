@@ -329,18 +329,20 @@ def _hdbscan_knn(x: np.ndarray, min_cluster_size: int) -> tuple[np.ndarray, np.n
     dist, nbr = cKDTree(x).query(x, k + 1, workers=-1)
     rows = np.repeat(np.arange(n), k + 1)
     keep = nbr.ravel() != rows
+    i = np.minimum(rows[keep], nbr.ravel()[keep])
+    j = np.maximum(rows[keep], nbr.ravel()[keep])
     # identical endpoints (distance 0) would read as no edge in a sparse matrix
     data = np.maximum(dist.ravel()[keep], 1e-9)
-    graph = coo_matrix((data, (rows[keep], nbr.ravel()[keep])), shape=(n, n)).tocsr()
-    graph = graph.maximum(graph.T).tocsr()
-    parts, part = csgraph.connected_components(graph, directed=False)
+    # each edge once: one found from both ends has the same distance both ways
+    first = np.unique(i * n + j, return_index=True)[1]
+    i, j, data = i[first], j[first], data[first]
+    parts, part = csgraph.connected_components(coo_matrix((data, (i, j)), shape=(n, n)), False)
     if parts > 1:
         heads = np.unique(part, return_index=True)[1]
-        far = 2.0 * float(graph.data.max()) + 1.0
-        bridge = coo_matrix(
-            (np.full(parts - 1, far), (heads[:-1], heads[1:])), shape=(n, n)
-        ).tocsr()
-        graph = (graph + bridge + bridge.T).tocsr()
+        i, j = np.r_[i, heads[:-1]], np.r_[j, heads[1:]]
+        data = np.r_[data, np.full(parts - 1, 2.0 * float(data.max()) + 1.0)]
+    graph = coo_matrix((np.r_[data, data], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+    graph.sort_indices()
     model = HDBSCAN(
         min_cluster_size=min_cluster_size,
         min_samples=min_cluster_size - 1,
