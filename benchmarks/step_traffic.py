@@ -11,6 +11,11 @@ tracks the ashore rule flagged first (as the evaluation does), and prints per gr
 mean ROC AUC of step, nearest's lane and steptraffic, and at `--contamination 0.05` (the 0.95
 quantile of the training tracks' own sums) the share of normal and of altered tracks flagged.
 
+`--traffic-calibration track` recomputes the traffic term's calibration leave-one-track-out
+(each training track against every other, its own vessel's other trips included) from the
+nearest model's kept training tracks, instead of the models' leave-one-vessel-out; nearest's
+lane is then thresholded on it too.
+
 Run: python benchmarks/step_traffic.py runs/grid/kitimat/forward-s1-at-sea [more grid folders]
 """
 
@@ -24,7 +29,9 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import roc_auc_score
 
-from aisdati.detectors.scoring import ratio_sum
+from aisdati.ais.card import read_card
+from aisdati.detectors.scoring import ScoreSettings, ratio_sum
+from aisdati.detectors.traffic import Traffic
 from aisdati.tracks.ashore import AshoreCheck
 
 RULE = AshoreCheck()
@@ -46,7 +53,17 @@ def calibration(card: Path, key: str) -> np.ndarray:
     return np.asarray(json.loads(card.read_text())["calibration"][key], np.float64)
 
 
-def cell_result(cell: Path) -> dict[str, float]:
+def leave_one_track_out(models: Path, cache: dict[Path, np.ndarray]) -> np.ndarray:
+    """The training tracks' traffic scores, each against all the other training tracks."""
+    stem = (models / "all-nearest").resolve()
+    if stem not in cache:
+        kept = Traffic.read(stem.with_suffix(".npz"), read_card(stem.with_suffix(".json")))
+        each_its_own = Traffic(kept.tracks, np.arange(len(kept.tracks)), kept.whole_area)
+        cache[stem] = each_its_own.calibration(ScoreSettings())
+    return cache[stem]
+
+
+def cell_result(cell: Path, by_track: dict[Path, np.ndarray] | None) -> dict[str, float]:
     """ROC AUC of each score, and (FA, recall) of step and steptraffic, on one evaluate folder."""
     scores = pd.read_parquet(cell / "scores.parquet")
     models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
@@ -56,6 +73,8 @@ def cell_result(cell: Path) -> dict[str, float]:
     lane = pick("nearest", "lane").set_index("track_id").loc[step.index]
     cal_step = calibration(models / "all.json", "step")
     cal_lane = calibration(models / "all-nearest.json", "lane")
+    if by_track is not None:
+        cal_lane = leave_one_track_out(models, by_track)
     if len(cal_step) != len(cal_lane):
         raise SystemExit(f"{cell}: the two models were calibrated on different tracks")
     medians = {"step": cal_step, "traffic": cal_lane}
@@ -71,6 +90,7 @@ def cell_result(cell: Path) -> dict[str, float]:
     cal_ranks = ranks(cal_step, cal_step) + ranks(cal_lane, cal_lane) + TIE_BREAK * cal_ratio
     thresholds = {
         "step": np.quantile(cal_step, 1 - CONTAMINATION),
+        "lane": np.quantile(cal_lane, 1 - CONTAMINATION),
         "steptraffic": np.quantile(cal_ratio, 1 - CONTAMINATION),
         "ranks": np.quantile(cal_ranks, 1 - CONTAMINATION),
     }
@@ -86,19 +106,27 @@ def cell_result(cell: Path) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("grids", type=Path, nargs="+", help="grid folders (<out>/<area>/<tier>)")
+    parser.add_argument(
+        "--traffic-calibration",
+        choices=("vessel", "track"),
+        default="vessel",
+        help="leave one vessel out (the models') or one track out (recomputed)",
+    )
     args = parser.parse_args()
+    by_track: dict[Path, np.ndarray] | None = {} if args.traffic_calibration == "track" else None
     print("| grid | cells | step | nearest lane | steptraffic | ranks | step FA / recall | "
-          "steptraffic FA / recall | ranks FA / recall |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|")
+          "lane FA / recall | steptraffic FA / recall | ranks FA / recall |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for grid in args.grids:
         cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
         if not cells:
             raise SystemExit(f"{grid}: no evaluated cells")
-        mean = pd.DataFrame([cell_result(c) for c in cells]).mean()
+        mean = pd.DataFrame([cell_result(c, by_track) for c in cells]).mean()
         print(
             f"| {grid} | {len(cells)} | {mean['step']:.3f} | {mean['lane']:.3f} | "
             f"{mean['steptraffic']:.3f} | {mean['ranks']:.3f} | "
             f"{mean['step FA']:.3f} / {mean['step recall']:.2f} | "
+            f"{mean['lane FA']:.3f} / {mean['lane recall']:.2f} | "
             f"{mean['steptraffic FA']:.3f} / {mean['steptraffic recall']:.2f} | "
             f"{mean['ranks FA']:.3f} / {mean['ranks recall']:.2f} |"
         )
