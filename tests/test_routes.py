@@ -12,7 +12,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from aisdati.errors import UserError
-from aisdati.geo import haversine_m
+from aisdati.geo import haversine_m, haversine_one_m
 from aisdati.preprocess import routes as routes_module
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.routes import (
@@ -290,7 +290,8 @@ def test_resampling_all_tracks_at_once_is_np_interp_track_by_track(kitimat_lines
     lines = [*lines, np.array([[-74.0, 40.7], [-74.0, 40.7]])]  # a track that never moved
     frac = np.linspace(0.0, 1.0, 32)
     for xy, got in zip(lines, resample(lines, 32), strict=True):
-        along = np.r_[0.0, np.cumsum(haversine_m(xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1]))]
+        steps = [haversine_one_m(*xy[p - 1], *xy[p]) for p in range(1, len(xy))]
+        along = np.r_[0.0, np.cumsum(steps)]
         want = [np.interp(frac * along[-1], along, xy[:, c]) for c in (0, 1)]
         if along[-1] == 0:
             want = [np.full(32, xy[0, 0]), np.full(32, xy[0, 1])]

@@ -68,7 +68,7 @@ import shapely
 from numba import njit
 
 from aisdati.dtw import pairs_mean_dtw_m, prepare_lonlat
-from aisdati.geo import EARTH_RADIUS_M, arc_m, haversine_m, unit_vectors
+from aisdati.geo import EARTH_RADIUS_M, arc_m, haversine_m, haversine_one_m, unit_vectors
 from aisdati.tracks.schema import GEO_METADATA, ROUTE_COLUMNS, ROUTE_PREFIX, ROUTES_SCHEMA
 
 
@@ -156,22 +156,24 @@ def resample(lines: list[np.ndarray], k: int) -> np.ndarray:
         return out
     xy = np.ascontiguousarray(np.concatenate(lines), dtype=np.float64)
     ends = np.cumsum([len(line) for line in lines])
-    steps = haversine_m(xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1])
-    _resample_all(xy, ends, steps, np.linspace(0.0, 1.0, k), out)
+    _resample_all(xy, ends, np.linspace(0.0, 1.0, k), out)
     return out
 
 
 @njit(cache=True)
-def _resample_all(xy, ends, steps, frac, out):  # pragma: no cover - compiled
-    """`np.interp` of each track's lon and lat at `frac` of its length, bit for bit."""
+def _resample_all(xy, ends, frac, out):  # pragma: no cover - compiled
+    """`np.interp` of each track's lon and lat at `frac` of its length, bit for bit. The steps'
+    lengths are computed here, point by point: numpy's haversine over all reports made a dozen
+    temporaries of their size (28 M reports: 3 GB, and most of the time)."""
     start = 0
     for t in range(len(ends)):
         stop = ends[t]
         n = stop - start
         along = np.empty(n)
         along[0] = 0.0
-        for p in range(1, n):
-            along[p] = along[p - 1] + steps[start + p - 1]
+        for p in range(start + 1, stop):
+            step = haversine_one_m(xy[p - 1, 0], xy[p - 1, 1], xy[p, 0], xy[p, 1])
+            along[p - start] = along[p - start - 1] + step
         if along[-1] <= 0:
             out[t, :, 0] = xy[start, 0]
             out[t, :, 1] = xy[start, 1]
@@ -220,10 +222,12 @@ class ShapeDistance:
         """The symmetric matrix of the distances among the tracks of each set, all from one
         kernel call: a call per set costs its start and checks again (a third of route
         clustering's DTW time at 1,000 groups)."""
+        if not sets:
+            return []
         triu = [np.triu_indices(len(idx), 1) for idx in sets]
         i = [idx[iu] for idx, (iu, _) in zip(sets, triu, strict=True)]
         j = [idx[ju] for idx, (_, ju) in zip(sets, triu, strict=True)]
-        d = self.pairs(np.concatenate(i), np.concatenate(j)) if sets else np.zeros(0)
+        d = self.pairs(np.concatenate(i), np.concatenate(j))
         parts = np.split(d, np.cumsum([len(k) for k in i])[:-1])
         out = []
         for idx, (iu, ju), part in zip(sets, triu, parts, strict=True):
