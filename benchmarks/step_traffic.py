@@ -10,6 +10,8 @@ calibration, nearest's lane scores and calibration. This script sums them per ce
 tracks the ashore rule flagged first (as the evaluation does), and prints per grid the nine-cell
 mean ROC AUC of step, nearest's lane and steptraffic, and at `--contamination 0.05` (the 0.95
 quantile of the training tracks' own sums) the share of normal and of altered tracks flagged.
+"either" flags a track when either term alone passes its own 5 % threshold: the most that a rule
+of these two calibrated terms can flag; a second table gives each kind's share.
 
 `--traffic-calibration track` recomputes the traffic term's calibration leave-one-track-out
 (each training track against every other, its own vessel's other trips included) from the
@@ -36,6 +38,7 @@ from aisdati.tracks.ashore import AshoreCheck
 
 RULE = AshoreCheck()
 CONTAMINATION = 0.05
+KINDS = ("detour", "jump", "loiter")
 
 
 TIE_BREAK = 1e-6
@@ -97,9 +100,13 @@ def cell_result(cell: Path, by_track: dict[Path, np.ndarray] | None) -> dict[str
     counts, lengths = step.ashore_reports.to_numpy(), step.n_points.to_numpy()
     label = step.label.to_numpy()
     out = {k: roc_auc_score(label, RULE.ranked(v, counts, lengths)) for k, v in values.items()}
-    for k, threshold in thresholds.items():
-        flagged = (values[k] > threshold) | RULE.flags(counts)
+    flags = {k: (values[k] > threshold) | RULE.flags(counts) for k, threshold in thresholds.items()}
+    flags["either"] = flags["step"] | flags["lane"]
+    kinds = step.kind.to_numpy()
+    for k, flagged in flags.items():
         out[f"{k} FA"], out[f"{k} recall"] = flagged[label == 0].mean(), flagged[label == 1].mean()
+        for kind in KINDS:
+            out[f"{k} {kind}"] = flagged[kinds == kind].mean() if (kinds == kind).any() else np.nan
     return out
 
 
@@ -114,22 +121,31 @@ def main() -> None:
     )
     args = parser.parse_args()
     by_track: dict[Path, np.ndarray] | None = {} if args.traffic_calibration == "track" else None
-    print("| grid | cells | step | nearest lane | steptraffic | ranks | step FA / recall | "
-          "lane FA / recall | steptraffic FA / recall | ranks FA / recall |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    rated = ("step", "lane", "steptraffic", "ranks", "either")
+    print("| grid | cells | step | nearest lane | steptraffic | ranks | "
+          + " | ".join(f"{k} FA / recall" for k in rated) + " |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    means = {}
     for grid in args.grids:
         cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
         if not cells:
             raise SystemExit(f"{grid}: no evaluated cells")
-        mean = pd.DataFrame([cell_result(c, by_track) for c in cells]).mean()
+        mean = means[grid] = pd.DataFrame([cell_result(c, by_track) for c in cells]).mean()
+        rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
         print(
             f"| {grid} | {len(cells)} | {mean['step']:.3f} | {mean['lane']:.3f} | "
-            f"{mean['steptraffic']:.3f} | {mean['ranks']:.3f} | "
-            f"{mean['step FA']:.3f} / {mean['step recall']:.2f} | "
-            f"{mean['lane FA']:.3f} / {mean['lane recall']:.2f} | "
-            f"{mean['steptraffic FA']:.3f} / {mean['steptraffic recall']:.2f} | "
-            f"{mean['ranks FA']:.3f} / {mean['ranks recall']:.2f} |"
+            f"{mean['steptraffic']:.3f} | {mean['ranks']:.3f} | {rates} |"
         )
+    print(
+        "\nShare of each kind flagged at 5 % (ashore rule included): step / nearest lane / either"
+    )
+    print("\n| grid | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
+    for grid, mean in means.items():
+        shares = [
+            " / ".join(f"{mean[f'{k} {kind}']:.2f}" for k in ("step", "lane", "either"))
+            for kind in KINDS
+        ]
+        print(f"| {grid} | " + " | ".join(shares) + " |")
 
 
 if __name__ == "__main__":
