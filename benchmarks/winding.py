@@ -1,0 +1,140 @@
+"""A third signal for the area model, measured on forward grids (not a test, not in the tool).
+
+A track's winding is the total rotation of its heading: the sum over its reports of the change of
+course between consecutive moves, each wrapped to (-180, 180], in absolute value (degrees). The
+sum telescopes, so back-and-forth noise cancels, a turn onto a new course counts its angle, and
+each full circle adds 360: a loitering circle, which the one-step score and the distance to the
+traffic both pass at sea (`benchmarks/step_traffic.py`, "either"), winds 360-720 degrees more than
+the track it was written into. It has no parameter and is calibrated on the training tracks
+themselves.
+
+For each cell of `benchmarks/detection_quality.py --forward --detectors dati,nearest`, it
+computes the winding of the judged tracks (data/points.parquet) and of the training tracks (the
+nearest model's kept tracks), then prints per grid the nine-cell means of: the ROC AUC of winding
+alone; "either2", a track flagged when the one-step score or nearest's lane passes its own 95 %
+training quantile; and "either3", flagged when any of step, lane and winding passes its training
+quantile q, with one q for the three chosen so that 5 % of the training tracks are flagged. FA /
+recall as in step_traffic.py (the ashore rule's flags included).
+
+Run: python benchmarks/winding.py runs/grid/*/forward-*
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from sklearn.metrics import roc_auc_score
+
+from aisdati.ais.card import read_card
+from aisdati.detectors.traffic import Traffic
+from aisdati.geo import initial_bearing_deg
+from aisdati.tracks.ashore import AshoreCheck
+
+RULE = AshoreCheck()
+CONTAMINATION = 0.05
+KINDS = ("detour", "jump", "loiter")
+
+
+def winding_deg(positions: np.ndarray) -> float:
+    """|total rotation of the heading| of a [n, 2] lon/lat track, degrees."""
+    moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
+    p = positions[moved]
+    if len(p) < 3:
+        return 0.0
+    course = initial_bearing_deg(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
+    turn = (np.diff(course) + 180.0) % 360.0 - 180.0
+    return float(abs(turn.sum()))
+
+
+def flagged_at(values: dict[str, np.ndarray], cal: dict[str, np.ndarray], q: float) -> np.ndarray:
+    """Tracks where any term passes its training quantile q."""
+    return np.any([values[k] > np.quantile(cal[k], q) for k in values], axis=0)
+
+
+def union_quantile(cal: dict[str, np.ndarray]) -> float:
+    """The largest common quantile q at which the union flags at most `CONTAMINATION` of the
+    training tracks themselves (bisection)."""
+    lo, hi = 1.0 - CONTAMINATION, 1.0
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        if flagged_at(cal, cal, mid).mean() > CONTAMINATION:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def cell_result(cell: Path) -> dict[str, float]:
+    scores = pd.read_parquet(cell / "scores.parquet")
+    models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
+    models = Path(models) if models else cell / "models"
+    pick = lambda det, kind: scores[(scores.detector == det) & (scores.score == kind)]  # noqa: E731
+    step = pick("dati", "step").set_index("track_id")
+    lane = pick("nearest", "lane").set_index("track_id").loc[step.index]
+    points = pd.read_parquet(cell / "data" / "points.parquet", columns=["track_id", "lon", "lat"])
+    by_track = {t: g[["lon", "lat"]].to_numpy() for t, g in points.groupby("track_id", sort=False)}
+    stem = models / "all-nearest"
+    kept = Traffic.read(stem.with_suffix(".npz"), read_card(stem.with_suffix(".json")))
+    calibration = lambda card, key: np.asarray(json.loads(card.read_text())["calibration"][key])  # noqa: E731
+    cal = {
+        "step": calibration(models / "all.json", "step"),
+        "lane": calibration(stem.with_suffix(".json"), "lane"),
+        "winding": np.array([winding_deg(t) for t in kept.tracks]),
+    }
+    values = {
+        "step": step.value.to_numpy(),
+        "lane": lane.value.to_numpy(),
+        "winding": np.array([winding_deg(by_track[t]) for t in step.index]),
+    }
+    ashore = RULE.flags(step.ashore_reports.to_numpy())
+    label, kinds = step.label.to_numpy(), step.kind.to_numpy()
+    counts, lengths = step.ashore_reports.to_numpy(), step.n_points.to_numpy()
+    out = {"winding": roc_auc_score(label, RULE.ranked(values["winding"], counts, lengths))}
+    two = {k: values[k] for k in ("step", "lane")}
+    flags = {
+        "either2": flagged_at(two, cal, 1 - CONTAMINATION) | ashore,
+        "either3": flagged_at(values, cal, union_quantile(cal)) | ashore,
+        "winding alone": (values["winding"] > np.quantile(cal["winding"], 1 - CONTAMINATION))
+        | ashore,
+    }
+    for k, f in flags.items():
+        out[f"{k} FA"], out[f"{k} recall"] = f[label == 0].mean(), f[label == 1].mean()
+        for kind in KINDS:
+            out[f"{k} {kind}"] = f[kinds == kind].mean() if (kinds == kind).any() else np.nan
+    out["q"] = union_quantile(cal)
+    out["winding q95"] = np.quantile(cal["winding"], 1 - CONTAMINATION)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("grids", type=Path, nargs="+", help="grid folders (<out>/<area>/<tier>)")
+    args = parser.parse_args()
+    rated = ("winding alone", "either2", "either3")
+    print("| grid | cells | winding AUC | training q95 of winding | q of either3 | "
+          + " | ".join(f"{k} FA / recall" for k in rated) + " |")  # fmt: skip
+    print("|---|---|---|---|---|" + "---|" * len(rated))
+    means = {}
+    for grid in args.grids:
+        cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
+        if not cells:
+            raise SystemExit(f"{grid}: no evaluated cells")
+        mean = means[grid] = pd.DataFrame([cell_result(c) for c in cells]).mean()
+        rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
+        print(
+            f"| {grid} | {len(cells)} | {mean['winding']:.3f} | {mean['winding q95']:.0f} | "
+            f"{mean['q']:.3f} | {rates} |"
+        )
+    print("\nShare of each kind flagged (ashore rule included): either2 / either3")
+    print("\n| grid | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
+    for grid, mean in means.items():
+        shares = [f"{mean[f'either2 {k}']:.2f} / {mean[f'either3 {k}']:.2f}" for k in KINDS]
+        print(f"| {grid} | " + " | ".join(shares) + " |")
+
+
+if __name__ == "__main__":
+    main()
