@@ -16,7 +16,11 @@ training quantile; and "either3", flagged when any of step, lane and winding pas
 quantile q, with one q for the three chosen so that 5 % of the training tracks are flagged. FA /
 recall as in step_traffic.py (the ashore rule's flags included).
 
-Run: python benchmarks/winding.py runs/grid/*/forward-*
+`--signal crossings` measures instead how many times a track crosses its own path (pairs of
+non-adjacent segments that intersect): a loitering circle closes a loop, a harbour turn-around
+turns as far without closing one.
+
+Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossings]
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import shapely
 from sklearn.metrics import roc_auc_score
 
 from aisdati.ais.card import read_card
@@ -50,6 +55,20 @@ def winding_deg(positions: np.ndarray) -> float:
     return float(abs(turn.sum()))
 
 
+def self_crossings(positions: np.ndarray) -> float:
+    """How many pairs of non-adjacent segments of a [n, 2] lon/lat track intersect."""
+    moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
+    p = positions[moved]
+    if len(p) < 4:
+        return 0.0
+    segments = shapely.linestrings(np.stack([p[:-1], p[1:]], axis=1))
+    a, b = shapely.STRtree(segments).query(segments, predicate="intersects")
+    return float(np.count_nonzero(b > a + 1))
+
+
+SIGNALS = {"winding": winding_deg, "crossings": self_crossings}
+
+
 def flagged_at(values: dict[str, np.ndarray], cal: dict[str, np.ndarray], q: float) -> np.ndarray:
     """Tracks where any term passes its training quantile q."""
     return np.any([values[k] > np.quantile(cal[k], q) for k in values], axis=0)
@@ -68,7 +87,7 @@ def union_quantile(cal: dict[str, np.ndarray]) -> float:
     return hi
 
 
-def cell_result(cell: Path) -> dict[str, float]:
+def cell_result(cell: Path, signal: str) -> dict[str, float]:
     scores = pd.read_parquet(cell / "scores.parquet")
     models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
     models = Path(models) if models else cell / "models"
@@ -83,39 +102,39 @@ def cell_result(cell: Path) -> dict[str, float]:
     cal = {
         "step": calibration(models / "all.json", "step"),
         "lane": calibration(stem.with_suffix(".json"), "lane"),
-        "winding": np.array([winding_deg(t) for t in kept.tracks]),
+        "third": np.array([SIGNALS[signal](t) for t in kept.tracks]),
     }
     values = {
         "step": step.value.to_numpy(),
         "lane": lane.value.to_numpy(),
-        "winding": np.array([winding_deg(by_track[t]) for t in step.index]),
+        "third": np.array([SIGNALS[signal](by_track[t]) for t in step.index]),
     }
     ashore = RULE.flags(step.ashore_reports.to_numpy())
     label, kinds = step.label.to_numpy(), step.kind.to_numpy()
     counts, lengths = step.ashore_reports.to_numpy(), step.n_points.to_numpy()
-    out = {"winding": roc_auc_score(label, RULE.ranked(values["winding"], counts, lengths))}
+    out = {"third": roc_auc_score(label, RULE.ranked(values["third"], counts, lengths))}
     two = {k: values[k] for k in ("step", "lane")}
     flags = {
         "either2": flagged_at(two, cal, 1 - CONTAMINATION) | ashore,
         "either3": flagged_at(values, cal, union_quantile(cal)) | ashore,
-        "winding alone": (values["winding"] > np.quantile(cal["winding"], 1 - CONTAMINATION))
-        | ashore,
+        "alone": (values["third"] > np.quantile(cal["third"], 1 - CONTAMINATION)) | ashore,
     }
     for k, f in flags.items():
         out[f"{k} FA"], out[f"{k} recall"] = f[label == 0].mean(), f[label == 1].mean()
         for kind in KINDS:
             out[f"{k} {kind}"] = f[kinds == kind].mean() if (kinds == kind).any() else np.nan
     out["q"] = union_quantile(cal)
-    out["winding q95"] = np.quantile(cal["winding"], 1 - CONTAMINATION)
+    out["third q95"] = np.quantile(cal["third"], 1 - CONTAMINATION)
     return out
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("grids", type=Path, nargs="+", help="grid folders (<out>/<area>/<tier>)")
+    parser.add_argument("--signal", choices=tuple(SIGNALS), default="winding")
     args = parser.parse_args()
-    rated = ("winding alone", "either2", "either3")
-    print("| grid | cells | winding AUC | training q95 of winding | q of either3 | "
+    rated = ("alone", "either2", "either3")
+    print(f"| grid | cells | {args.signal} AUC | training q95 of it | q of either3 | "
           + " | ".join(f"{k} FA / recall" for k in rated) + " |")  # fmt: skip
     print("|---|---|---|---|---|" + "---|" * len(rated))
     means = {}
@@ -123,10 +142,10 @@ def main() -> None:
         cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
         if not cells:
             raise SystemExit(f"{grid}: no evaluated cells")
-        mean = means[grid] = pd.DataFrame([cell_result(c) for c in cells]).mean()
+        mean = means[grid] = pd.DataFrame([cell_result(c, args.signal) for c in cells]).mean()
         rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
         print(
-            f"| {grid} | {len(cells)} | {mean['winding']:.3f} | {mean['winding q95']:.0f} | "
+            f"| {grid} | {len(cells)} | {mean['third']:.3f} | {mean['third q95']:.1f} | "
             f"{mean['q']:.3f} | {rates} |"
         )
     print("\nShare of each kind flagged (ashore rule included): either2 / either3")
