@@ -20,13 +20,19 @@ recall as in step_traffic.py (the ashore rule's flags included).
 non-adjacent segments that intersect): a loitering circle closes a loop, a harbour turn-around
 turns as far without closing one.
 
-Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossings]
+`--signal local --within KM` takes the largest |rotation| over any stretch of at most KM of the
+track's length: a circle closes within its circumference, a harbour turn-around spreads its
+turns over the whole track.
+
+Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossings|local]
+     [--within KM]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +42,7 @@ from sklearn.metrics import roc_auc_score
 
 from aisdati.ais.card import read_card
 from aisdati.detectors.traffic import Traffic
-from aisdati.geo import initial_bearing_deg
+from aisdati.geo import haversine_m, initial_bearing_deg
 from aisdati.tracks.ashore import AshoreCheck
 
 RULE = AshoreCheck()
@@ -44,15 +50,32 @@ CONTAMINATION = 0.05
 KINDS = ("detour", "jump", "loiter")
 
 
-def winding_deg(positions: np.ndarray) -> float:
-    """|total rotation of the heading| of a [n, 2] lon/lat track, degrees."""
+def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The wrapped change of course at each inner report of a [n, 2] lon/lat track (degrees;
+    reports that did not move left out), and the distance along the track there (m)."""
     moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
     p = positions[moved]
     if len(p) < 3:
-        return 0.0
+        return np.zeros(0), np.zeros(0)
     course = initial_bearing_deg(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
-    turn = (np.diff(course) + 180.0) % 360.0 - 180.0
-    return float(abs(turn.sum()))
+    along = np.cumsum(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1]))[:-1]
+    return (np.diff(course) + 180.0) % 360.0 - 180.0, along
+
+
+def winding_deg(positions: np.ndarray) -> float:
+    """|total rotation of the heading| of a [n, 2] lon/lat track, degrees."""
+    return float(abs(turns(positions)[0].sum()))
+
+
+def local_winding_deg(positions: np.ndarray, within_km: float) -> float:
+    """The largest |rotation of the heading| over a stretch of at most `within_km` of track."""
+    turn, along = turns(positions)
+    if len(turn) == 0:
+        return 0.0
+    rotated = np.r_[0.0, np.cumsum(turn)]
+    ends = np.searchsorted(along, along + within_km * 1000.0, side="right")
+    sums = rotated[ends] - rotated[np.arange(len(turn))]
+    return float(np.abs(sums).max())
 
 
 def self_crossings(positions: np.ndarray) -> float:
@@ -66,7 +89,13 @@ def self_crossings(positions: np.ndarray) -> float:
     return float(np.count_nonzero(b > a + 1))
 
 
-SIGNALS = {"winding": winding_deg, "crossings": self_crossings}
+SIGNALS = ("winding", "crossings", "local")
+
+
+def signal_of(name: str, within_km: float) -> Callable[[np.ndarray], float]:
+    if name == "local":
+        return lambda positions: local_winding_deg(positions, within_km)
+    return {"winding": winding_deg, "crossings": self_crossings}[name]
 
 
 def flagged_at(values: dict[str, np.ndarray], cal: dict[str, np.ndarray], q: float) -> np.ndarray:
@@ -87,7 +116,7 @@ def union_quantile(cal: dict[str, np.ndarray]) -> float:
     return hi
 
 
-def cell_result(cell: Path, signal: str) -> dict[str, float]:
+def cell_result(cell: Path, signal: Callable[[np.ndarray], float]) -> dict[str, float]:
     scores = pd.read_parquet(cell / "scores.parquet")
     models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
     models = Path(models) if models else cell / "models"
@@ -102,12 +131,12 @@ def cell_result(cell: Path, signal: str) -> dict[str, float]:
     cal = {
         "step": calibration(models / "all.json", "step"),
         "lane": calibration(stem.with_suffix(".json"), "lane"),
-        "third": np.array([SIGNALS[signal](t) for t in kept.tracks]),
+        "third": np.array([signal(t) for t in kept.tracks]),
     }
     values = {
         "step": step.value.to_numpy(),
         "lane": lane.value.to_numpy(),
-        "third": np.array([SIGNALS[signal](by_track[t]) for t in step.index]),
+        "third": np.array([signal(by_track[t]) for t in step.index]),
     }
     ashore = RULE.flags(step.ashore_reports.to_numpy())
     label, kinds = step.label.to_numpy(), step.kind.to_numpy()
@@ -131,9 +160,11 @@ def cell_result(cell: Path, signal: str) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("grids", type=Path, nargs="+", help="grid folders (<out>/<area>/<tier>)")
-    parser.add_argument("--signal", choices=tuple(SIGNALS), default="winding")
+    parser.add_argument("--signal", choices=SIGNALS, default="winding")
+    parser.add_argument("--within", type=float, default=5.0, help="km, for --signal local")
     args = parser.parse_args()
     rated = ("alone", "either2", "either3")
+    signal = signal_of(args.signal, args.within)
     print(f"| grid | cells | {args.signal} AUC | training q95 of it | q of either3 | "
           + " | ".join(f"{k} FA / recall" for k in rated) + " |")  # fmt: skip
     print("|---|---|---|---|---|" + "---|" * len(rated))
@@ -142,7 +173,7 @@ def main() -> None:
         cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
         if not cells:
             raise SystemExit(f"{grid}: no evaluated cells")
-        mean = means[grid] = pd.DataFrame([cell_result(c, args.signal) for c in cells]).mean()
+        mean = means[grid] = pd.DataFrame([cell_result(c, signal) for c in cells]).mean()
         rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
         print(
             f"| {grid} | {len(cells)} | {mean['third']:.3f} | {mean['third q95']:.1f} | "
