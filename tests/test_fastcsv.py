@@ -54,6 +54,11 @@ ODD_ROWS = [
     '367000030,"",40.5,-74.1,10.2,90.0,511,EMPTY QUOTED TIME',
     '367000031,2022-01-03T00:00:27,"40.5"1,-74.1,10.2,90.0,511,TEXT AFTER THE QUOTES',
     '367000032,2022-01-03T00:00:28,"40""5",-74.1,10.2,90.0,511,ESCAPED QUOTE',
+    '367000034,2022-01-03T00:00:30,40.5,-74.1,10.2,90.0,511,"RAY ""CHIEF"" TONEY"',
+    '367000035,2022-01-03T00:00:31,40.5,-74.1,10.2,90.0,511,""""',
+    '367000036,2022-01-03T00:00:32,40.5,-74.1,10.2,90.0,"5""11","""LEADING"',
+    '367000037,2022-01-03T00:00:33,40.5,-74.1,10.2,90.0,511,"DOUBLED"" THEN UNENDED',
+    '367000038,2022-01-03T00:00:34,40.5,-74.1,10.2,90.0,511,"DOUBLED ""AT THE END"""',
     '367000033,2022-01-03T00:00:29,40.5,-74.1,10.2,90.0,511,"UNENDED',
 ]
 
@@ -110,7 +115,7 @@ def test_odd_rows_read_the_same_both_ways_between_plain_ones(data, tmp_path):
     path = tmp_path / "odd.csv"
     path.write_text("\r\n".join(lines))  # CRLF, and the last line without its end
     rows = sum(1 for row in lines[1:] if row.strip())
-    assert assert_same(path) == rows - 3  # too few fields, too many, a quote never closed
+    assert assert_same(path) == rows - 4  # too few fields, too many, two quotes never closed
     with gzip.open(tmp_path / "odd.csv.gz", "wt") as out:
         out.write("\n".join([*lines, "MMSI,LAT,LON,BaseDateTime,SOG,COG", *lines[1:3]]))
     assert_same(tmp_path / "odd.csv.gz")  # a header mid-file, another column order
@@ -135,6 +140,19 @@ def test_quoted_fields_take_the_fast_path_and_a_mostly_odd_file_reads_the_same(d
     odd.write_text("\n".join([lines[0], *(line.replace('"', '""', 2) + '"' if k % 2 else line
                                             for k, line in enumerate(lines[1:2000]))]))  # fmt: skip
     assert_same(odd)
+
+
+def test_a_doubled_quote_in_a_text_field_is_plain_and_in_a_needed_one_goes_the_usual_way():
+    """MarineCadastre writes a quote in a vessel's name doubled ("RAY ""CHIEF"" TONEY"): such
+    rows are plain; a needed value with one inside is left to pyarrow, which unquotes it."""
+    names = HEADER.split(",")
+    canonical = ["mmsi", "time", "lat", "lon", "sog", "cog"]
+    slots = ColumnSlots.of(names, dict(zip(canonical, names[:6], strict=True)))
+    rows = [r for r in ODD_ROWS if "DOUBLED" in r or "CHIEF" in r or '""""' in r or "LEADING" in r]
+    parsed = parse_block(("\n".join(rows) + "\n").encode(), slots)
+    assert parsed.slow.tolist() == [False, False, False, True, False]  # the unended one: usual
+    escaped = parse_block(b'367000032,2022-01-03T00:00:28,"40""5",-74.1,10.2,90.0,511,X\n', slots)
+    assert escaped.slow.tolist() == [True]
 
 
 def test_numbers_are_the_correctly_rounded_floats_of_their_text():

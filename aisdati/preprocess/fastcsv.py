@@ -3,7 +3,8 @@
 pyarrow's CSV reader tokenises every column of a MarineCadastre row (17 of them) and hands the six
 we need on as text, which `convert.to_canonical` then parses again: about 5 s of one core for 10
 million rows. Nearly every real row is plain: the header's number of fields, no quote but around a
-whole field (`"..."`, as pyarrow's and pandas' writers quote text), the MMSI digits, the time
+whole field (`"..."`, as pyarrow's and pandas' writers quote text; a quote doubled within it, as
+in MarineCadastre's `"RAY ""CHIEF"" TONEY"`, is one quote of its text), the MMSI digits, the time
 `YYYY-MM-DDTHH:MM:SS` (or with a space), the numbers `-?digits[.digits]`. Those
 are parsed here in one compiled pass over the block (`scan_block`, which releases the GIL, so
 blocks are parsed on threads); every other row (a blank or odd value, a quote, a wrong number
@@ -145,13 +146,21 @@ def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - co
             start = i
             end = -1
             kind = DELIMITER[buf[i]]
-            if kind == 3:  # a quoted field: its text, where no quote is inside it
+            if kind == 3:  # a quoted field: its text, where a doubled quote is one quote
                 j = i + 1
-                while buf[j] != 34 and buf[j] != 10:  # (commas are text here)
-                    j += 1
+                doubled = False
+                while True:
+                    while buf[j] != 34 and buf[j] != 10:  # (commas are text here)
+                        j += 1
+                    if buf[j] != 34 or buf[j + 1] != 34:
+                        break
+                    doubled = True
+                    j += 2
                 after = DELIMITER[buf[j + 1]] if buf[j] == 34 else 0
                 if after == 1 or after == 2:
                     start, end, i, kind = i + 1, j, j + 1, after
+                    # a needed value's text would have to be unquoted: the usual way does it
+                    bad |= doubled and field < n_fields and slots[field] >= 0
             while True:
                 while kind == 0:  # (the block ends with a line end)
                     i += 1
