@@ -66,14 +66,47 @@ def leave_one_track_out(models: Path, cache: dict[Path, np.ndarray]) -> np.ndarr
     return cache[stem]
 
 
-def cell_result(cell: Path, by_track: dict[Path, np.ndarray] | None) -> dict[str, float]:
-    """ROC AUC of each score, and (FA, recall) of step and steptraffic, on one evaluate folder."""
+def judged(cell: Path) -> tuple[pd.DataFrame, pd.DataFrame, Path]:
+    """One evaluate folder's rows of DATI's step score and of nearest's lane score (by track,
+    the same order), and the folder of the models that judged them."""
     scores = pd.read_parquet(cell / "scores.parquet")
     models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
-    models = Path(models) if models else cell / "models"
     pick = lambda det, kind: scores[(scores.detector == det) & (scores.score == kind)]  # noqa: E731
     step = pick("dati", "step").set_index("track_id")
     lane = pick("nearest", "lane").set_index("track_id").loc[step.index]
+    return step, lane, Path(models) if models else cell / "models"
+
+
+def cells_of(grid: Path) -> list[Path]:
+    """A grid folder's evaluated cells (`train*-seed*`)."""
+    cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
+    if not cells:
+        raise SystemExit(f"{grid}: no evaluated cells")
+    return cells
+
+
+def print_kinds(means: dict[Path, pd.Series], rules: tuple[str, ...]) -> None:
+    """Each kind's share flagged by each rule (`'{rule} {kind}'` in a grid's means)."""
+    print(f"\nShare of each kind flagged (ashore rule included): {' / '.join(rules)}")
+    print("\n| grid | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
+    for grid, mean in means.items():
+        shares = [" / ".join(f"{mean[f'{k} {kind}']:.2f}" for k in rules) for kind in KINDS]
+        print(f"| {grid} | " + " | ".join(shares) + " |")
+
+
+def flag_rates(flags: dict[str, np.ndarray], label: np.ndarray, kinds: np.ndarray) -> dict:
+    """FA and recall of each rule's flags, and the share of each kind it flags."""
+    out = {}
+    for k, flagged in flags.items():
+        out[f"{k} FA"], out[f"{k} recall"] = flagged[label == 0].mean(), flagged[label == 1].mean()
+        for kind in KINDS:
+            out[f"{k} {kind}"] = flagged[kinds == kind].mean() if (kinds == kind).any() else np.nan
+    return out
+
+
+def cell_result(cell: Path, by_track: dict[Path, np.ndarray] | None) -> dict[str, float]:
+    """ROC AUC of each score, and (FA, recall) of step and steptraffic, on one evaluate folder."""
+    step, lane, models = judged(cell)
     cal_step = calibration(models / "all.json", "step")
     cal_lane = calibration(models / "all-nearest.json", "lane")
     if by_track is not None:
@@ -102,12 +135,7 @@ def cell_result(cell: Path, by_track: dict[Path, np.ndarray] | None) -> dict[str
     out = {k: roc_auc_score(label, RULE.ranked(v, counts, lengths)) for k, v in values.items()}
     flags = {k: (values[k] > threshold) | RULE.flags(counts) for k, threshold in thresholds.items()}
     flags["either"] = flags["step"] | flags["lane"]
-    kinds = step.kind.to_numpy()
-    for k, flagged in flags.items():
-        out[f"{k} FA"], out[f"{k} recall"] = flagged[label == 0].mean(), flagged[label == 1].mean()
-        for kind in KINDS:
-            out[f"{k} {kind}"] = flagged[kinds == kind].mean() if (kinds == kind).any() else np.nan
-    return out
+    return out | flag_rates(flags, label, step.kind.to_numpy())
 
 
 def main() -> None:
@@ -127,25 +155,14 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     means = {}
     for grid in args.grids:
-        cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
-        if not cells:
-            raise SystemExit(f"{grid}: no evaluated cells")
+        cells = cells_of(grid)
         mean = means[grid] = pd.DataFrame([cell_result(c, by_track) for c in cells]).mean()
         rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
         print(
             f"| {grid} | {len(cells)} | {mean['step']:.3f} | {mean['lane']:.3f} | "
             f"{mean['steptraffic']:.3f} | {mean['ranks']:.3f} | {rates} |"
         )
-    print(
-        "\nShare of each kind flagged at 5 % (ashore rule included): step / nearest lane / either"
-    )
-    print("\n| grid | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
-    for grid, mean in means.items():
-        shares = [
-            " / ".join(f"{mean[f'{k} {kind}']:.2f}" for k in ("step", "lane", "either"))
-            for kind in KINDS
-        ]
-        print(f"| {grid} | " + " | ".join(shares) + " |")
+    print_kinds(means, ("step", "lane", "either"))
 
 
 if __name__ == "__main__":

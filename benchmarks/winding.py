@@ -31,7 +31,6 @@ Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossi
 from __future__ import annotations
 
 import argparse
-import json
 from collections.abc import Callable
 from pathlib import Path
 
@@ -39,15 +38,19 @@ import numpy as np
 import pandas as pd
 import shapely
 from sklearn.metrics import roc_auc_score
+from step_traffic import (  # (this folder: run as a script)
+    CONTAMINATION,
+    RULE,
+    calibration,
+    cells_of,
+    flag_rates,
+    judged,
+    print_kinds,
+)
 
 from aisdati.ais.card import read_card
 from aisdati.detectors.traffic import Traffic
 from aisdati.geo import haversine_m, initial_bearing_deg
-from aisdati.tracks.ashore import AshoreCheck
-
-RULE = AshoreCheck()
-CONTAMINATION = 0.05
-KINDS = ("detour", "jump", "loiter")
 
 
 def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,17 +120,11 @@ def union_quantile(cal: dict[str, np.ndarray]) -> float:
 
 
 def cell_result(cell: Path, signal: Callable[[np.ndarray], float]) -> dict[str, float]:
-    scores = pd.read_parquet(cell / "scores.parquet")
-    models = json.loads((cell / "evaluation.json").read_text())["settings"]["models_dir"]
-    models = Path(models) if models else cell / "models"
-    pick = lambda det, kind: scores[(scores.detector == det) & (scores.score == kind)]  # noqa: E731
-    step = pick("dati", "step").set_index("track_id")
-    lane = pick("nearest", "lane").set_index("track_id").loc[step.index]
+    step, lane, models = judged(cell)
     points = pd.read_parquet(cell / "data" / "points.parquet", columns=["track_id", "lon", "lat"])
     by_track = {t: g[["lon", "lat"]].to_numpy() for t, g in points.groupby("track_id", sort=False)}
     stem = models / "all-nearest"
     kept = Traffic.read(stem.with_suffix(".npz"), read_card(stem.with_suffix(".json")))
-    calibration = lambda card, key: np.asarray(json.loads(card.read_text())["calibration"][key])  # noqa: E731
     cal = {
         "step": calibration(models / "all.json", "step"),
         "lane": calibration(stem.with_suffix(".json"), "lane"),
@@ -139,22 +136,20 @@ def cell_result(cell: Path, signal: Callable[[np.ndarray], float]) -> dict[str, 
         "third": np.array([signal(by_track[t]) for t in step.index]),
     }
     ashore = RULE.flags(step.ashore_reports.to_numpy())
-    label, kinds = step.label.to_numpy(), step.kind.to_numpy()
+    label = step.label.to_numpy()
     counts, lengths = step.ashore_reports.to_numpy(), step.n_points.to_numpy()
-    out = {"third": roc_auc_score(label, RULE.ranked(values["third"], counts, lengths))}
+    q = union_quantile(cal)
     two = {k: values[k] for k in ("step", "lane")}
     flags = {
         "either2": flagged_at(two, cal, 1 - CONTAMINATION) | ashore,
-        "either3": flagged_at(values, cal, union_quantile(cal)) | ashore,
+        "either3": flagged_at(values, cal, q) | ashore,
         "alone": (values["third"] > np.quantile(cal["third"], 1 - CONTAMINATION)) | ashore,
     }
-    for k, f in flags.items():
-        out[f"{k} FA"], out[f"{k} recall"] = f[label == 0].mean(), f[label == 1].mean()
-        for kind in KINDS:
-            out[f"{k} {kind}"] = f[kinds == kind].mean() if (kinds == kind).any() else np.nan
-    out["q"] = union_quantile(cal)
-    out["third q95"] = np.quantile(cal["third"], 1 - CONTAMINATION)
-    return out
+    return {
+        "third": roc_auc_score(label, RULE.ranked(values["third"], counts, lengths)),
+        "q": q,
+        "third q95": np.quantile(cal["third"], 1 - CONTAMINATION),
+    } | flag_rates(flags, label, step.kind.to_numpy())
 
 
 def main() -> None:
@@ -170,20 +165,14 @@ def main() -> None:
     print("|---|---|---|---|---|" + "---|" * len(rated))
     means = {}
     for grid in args.grids:
-        cells = sorted(p for p in grid.glob("train*-seed*") if (p / "scores.parquet").is_file())
-        if not cells:
-            raise SystemExit(f"{grid}: no evaluated cells")
+        cells = cells_of(grid)
         mean = means[grid] = pd.DataFrame([cell_result(c, signal) for c in cells]).mean()
         rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
         print(
             f"| {grid} | {len(cells)} | {mean['third']:.3f} | {mean['third q95']:.1f} | "
             f"{mean['q']:.3f} | {rates} |"
         )
-    print("\nShare of each kind flagged (ashore rule included): either2 / either3")
-    print("\n| grid | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
-    for grid, mean in means.items():
-        shares = [f"{mean[f'either2 {k}']:.2f} / {mean[f'either3 {k}']:.2f}" for k in KINDS]
-        print(f"| {grid} | " + " | ".join(shares) + " |")
+    print_kinds(means, ("either2", "either3"))
 
 
 if __name__ == "__main__":
