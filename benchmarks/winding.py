@@ -22,9 +22,11 @@ turns as far without closing one.
 
 `--signal local --within KM` takes the largest |rotation| over any stretch of at most KM of the
 track's length: a circle closes within its circumference, a harbour turn-around spreads its
-turns over the whole track.
+turns over the whole track. `--signal place --within KM` takes how much more the track turns
+within KM than the training traffic turned within KM of the same place (`PlaceTurning`): a tug
+that works in one corner of a harbour makes turning normal there, not across the ferries' lane.
 
-Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossings|local]
+Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossings|local|place]
      [--within KM]
 """
 
@@ -37,6 +39,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import shapely
+from scipy.spatial import cKDTree
 from sklearn.metrics import roc_auc_score
 from step_traffic import (  # (this folder: run as a script)
     CONTAMINATION,
@@ -50,19 +53,20 @@ from step_traffic import (  # (this folder: run as a script)
 
 from aisdati.ais.card import read_card
 from aisdati.detectors.traffic import Traffic
-from aisdati.geo import haversine_m, initial_bearing_deg
+from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg, unit_vectors
 
 
-def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The wrapped change of course at each inner report of a [n, 2] lon/lat track (degrees;
-    reports that did not move left out), and the distance along the track there (m)."""
+    reports that did not move left out), the distance along the track there (m), and those
+    reports [m, 2]."""
     moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
     p = positions[moved]
     if len(p) < 3:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros((0, 2))
     course = initial_bearing_deg(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
     along = np.cumsum(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1]))[:-1]
-    return (np.diff(course) + 180.0) % 360.0 - 180.0, along
+    return (np.diff(course) + 180.0) % 360.0 - 180.0, along, p[1:-1]
 
 
 def winding_deg(positions: np.ndarray) -> float:
@@ -70,15 +74,47 @@ def winding_deg(positions: np.ndarray) -> float:
     return float(abs(turns(positions)[0].sum()))
 
 
-def local_winding_deg(positions: np.ndarray, within_km: float) -> float:
-    """The largest |rotation of the heading| over a stretch of at most `within_km` of track."""
-    turn, along = turns(positions)
-    if len(turn) == 0:
-        return 0.0
+def turning_ahead(positions: np.ndarray, within_km: float) -> tuple[np.ndarray, np.ndarray]:
+    """At each inner report, |rotation of the heading| over the next `within_km` of track
+    (degrees), and the reports [m, 2]."""
+    turn, along, points = turns(positions)
     rotated = np.r_[0.0, np.cumsum(turn)]
     ends = np.searchsorted(along, along + within_km * 1000.0, side="right")
-    sums = rotated[ends] - rotated[np.arange(len(turn))]
-    return float(np.abs(sums).max())
+    return np.abs(rotated[ends] - rotated[np.arange(len(turn))]), points
+
+
+def local_winding_deg(positions: np.ndarray, within_km: float) -> float:
+    """The largest |rotation of the heading| over a stretch of at most `within_km` of track."""
+    ahead = turning_ahead(positions, within_km)[0]
+    return float(ahead.max()) if len(ahead) else 0.0
+
+
+class PlaceTurning:
+    """How much more a track turns within `within_km` than the training traffic turned at the
+    same place: per report, its `turning_ahead` less the largest of the training reports within
+    `within_km` of it (0 where there is none); the track's largest excess."""
+
+    def __init__(self, tracks: list[np.ndarray], vessels: np.ndarray, within_km: float) -> None:
+        self.within_km = within_km
+        profiles = [turning_ahead(t, within_km) for t in tracks]
+        self.turning = np.concatenate([a for a, _ in profiles])
+        self.vessel = np.repeat(vessels, [len(a) for a, _ in profiles])
+        self.tree = cKDTree(unit_vectors(np.concatenate([p for _, p in profiles])))
+        self.training = np.array(
+            [self.excess(t, v) for t, v in zip(tracks, vessels, strict=True)]
+        )  # each against the other vessels' tracks, as the traffic term is calibrated
+
+    def excess(self, positions: np.ndarray, vessel: int = -1) -> float:
+        ahead, points = turning_ahead(positions, self.within_km)
+        if not len(ahead):
+            return 0.0
+        near = cKDTree(unit_vectors(points)).sparse_distance_matrix(
+            self.tree, self.within_km * 1000.0 / EARTH_RADIUS_M, output_type="ndarray"
+        )
+        other = self.vessel[near["j"]] != vessel
+        reference = np.zeros(len(ahead))
+        np.maximum.at(reference, near["i"][other], self.turning[near["j"][other]])
+        return float((ahead - reference).max())
 
 
 def self_crossings(positions: np.ndarray) -> float:
@@ -92,13 +128,25 @@ def self_crossings(positions: np.ndarray) -> float:
     return float(np.count_nonzero(b > a + 1))
 
 
-SIGNALS = ("winding", "crossings", "local")
+SIGNALS = ("winding", "crossings", "local", "place")
+Signal = Callable[[list[np.ndarray], np.ndarray], tuple[np.ndarray, Callable[[np.ndarray], float]]]
+"""(training tracks, their vessels) -> (the training tracks' own values, the judge of a track)."""
 
 
-def signal_of(name: str, within_km: float) -> Callable[[np.ndarray], float]:
-    if name == "local":
-        return lambda positions: local_winding_deg(positions, within_km)
-    return {"winding": winding_deg, "crossings": self_crossings}[name]
+def signal_of(name: str, within_km: float) -> Signal:
+    if name == "place":
+
+        def place(tracks: list[np.ndarray], vessels: np.ndarray):
+            model = PlaceTurning(tracks, vessels, within_km)
+            return model.training, model.excess
+
+        return place
+    one = {
+        "winding": winding_deg,
+        "crossings": self_crossings,
+        "local": lambda positions: local_winding_deg(positions, within_km),
+    }[name]
+    return lambda tracks, _: (np.array([one(t) for t in tracks]), one)
 
 
 def flagged_at(values: dict[str, np.ndarray], cal: dict[str, np.ndarray], q: float) -> np.ndarray:
@@ -119,21 +167,22 @@ def union_quantile(cal: dict[str, np.ndarray]) -> float:
     return hi
 
 
-def cell_result(cell: Path, signal: Callable[[np.ndarray], float]) -> dict[str, float]:
+def cell_result(cell: Path, signal: Signal) -> dict[str, float]:
     step, lane, models = judged(cell)
     points = pd.read_parquet(cell / "data" / "points.parquet", columns=["track_id", "lon", "lat"])
     by_track = {t: g[["lon", "lat"]].to_numpy() for t, g in points.groupby("track_id", sort=False)}
     stem = models / "all-nearest"
     kept = Traffic.read(stem.with_suffix(".npz"), read_card(stem.with_suffix(".json")))
+    training, judge = signal(kept.tracks, kept.mmsi)
     cal = {
         "step": calibration(models / "all.json", "step"),
         "lane": calibration(stem.with_suffix(".json"), "lane"),
-        "third": np.array([signal(t) for t in kept.tracks]),
+        "third": training,
     }
     values = {
         "step": step.value.to_numpy(),
         "lane": lane.value.to_numpy(),
-        "third": np.array([signal(by_track[t]) for t in step.index]),
+        "third": np.array([judge(by_track[t]) for t in step.index]),
     }
     ashore = RULE.flags(step.ashore_reports.to_numpy())
     label = step.label.to_numpy()
@@ -156,7 +205,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("grids", type=Path, nargs="+", help="grid folders (<out>/<area>/<tier>)")
     parser.add_argument("--signal", choices=SIGNALS, default="winding")
-    parser.add_argument("--within", type=float, default=5.0, help="km, for --signal local")
+    parser.add_argument(
+        "--within", type=float, default=5.0, help="km, for --signal local and place"
+    )
     args = parser.parse_args()
     rated = ("alone", "either2", "either3")
     signal = signal_of(args.signal, args.within)
