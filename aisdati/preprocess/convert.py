@@ -210,6 +210,10 @@ def is_time_type(kind: pa.DataType) -> bool:
 
 
 def _null_mask(arr: pa.Array) -> np.ndarray:
+    """Whether each value is null; an array without nulls (every fast-path block) is answered
+    from its count: unpacking its validity bits took 90 % of `to_canonical`'s time."""
+    if arr.null_count == 0:
+        return np.zeros(len(arr), dtype=bool)
     return arr.is_null().to_numpy(zero_copy_only=False)
 
 
