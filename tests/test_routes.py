@@ -285,6 +285,25 @@ def ny_lines(tmp_path_factory):
     return tracks, lines_from_wkb(tracks["geometry"].tolist())
 
 
+def test_distances_are_the_same_from_one_call_for_many_groups_as_from_one_per_pair(kitimat_lines):
+    """Route clustering asks for the matrices of all its groups in one kernel call, and hands
+    the kernel every track once a call names a quarter of them: neither changes a distance."""
+    _, lines = kitimat_lines
+    shapes = ShapeDistance(resample(lines, 32))
+    groups = [np.arange(0, 6), np.array([7]), np.arange(20, 60, 3), np.array([], dtype=np.int64)]
+    for idx, matrix in zip(groups, shapes.matrices(groups), strict=True):
+        assert matrix.shape == (len(idx), len(idx))
+        for a in range(len(idx)):
+            for b in range(len(idx)):
+                one = shapes.pairs(idx[[a]], idx[[b]])[0] if a != b else 0.0
+                assert matrix[a, b] == one
+    assert shapes.matrices([]) == []
+    everyone = np.arange(len(lines))
+    whole = shapes.pairs(everyone, everyone[::-1])  # names every track: the whole set
+    named = [shapes.pairs(everyone[[k]], everyone[[-1 - k]])[0] for k in range(0, len(lines), 9)]
+    assert whole[::9].tolist() == named
+
+
 def test_resampling_all_tracks_at_once_is_np_interp_track_by_track(kitimat_lines):
     _, lines = kitimat_lines
     lines = [*lines, np.array([[-74.0, 40.7], [-74.0, 40.7]])]  # a track that never moved
