@@ -218,17 +218,22 @@ class ShapeDistance:
         pairs = np.ascontiguousarray(pairs.astype(np.int64))
         return pairs_mean_dtw_m(a, b, pairs) / 1000.0
 
-    def matrices(self, sets: list[np.ndarray]) -> list[np.ndarray]:
-        """The symmetric matrix of the distances among the tracks of each set, all from one
-        kernel call: a call per set costs its start and checks again (a third of route
-        clustering's DTW time at 1,000 groups)."""
-        if not sets:
+    def grouped(self, i: list[np.ndarray], j: list[np.ndarray]) -> list[np.ndarray]:
+        """`pairs` of each group of pairs (tracks i[g][p] to tracks j[g][p]), all from one kernel
+        call: a call per group costs its start and checks again (a third of route clustering's
+        DTW time at 1,000 groups)."""
+        if not i:
             return []
-        triu = [np.triu_indices(len(idx), 1) for idx in sets]
-        i = [idx[iu] for idx, (iu, _) in zip(sets, triu, strict=True)]
-        j = [idx[ju] for idx, (_, ju) in zip(sets, triu, strict=True)]
         d = self.pairs(np.concatenate(i), np.concatenate(j))
-        parts = np.split(d, np.cumsum([len(k) for k in i])[:-1])
+        return np.split(d, np.cumsum([len(k) for k in i])[:-1])
+
+    def matrices(self, sets: list[np.ndarray]) -> list[np.ndarray]:
+        """The symmetric matrix of the distances among the tracks of each set (`grouped`)."""
+        triu = [np.triu_indices(len(idx), 1) for idx in sets]
+        parts = self.grouped(
+            [idx[iu] for idx, (iu, _) in zip(sets, triu, strict=True)],
+            [idx[ju] for idx, (_, ju) in zip(sets, triu, strict=True)],
+        )
         out = []
         for idx, (iu, ju), part in zip(sets, triu, parts, strict=True):
             m = np.zeros((len(idx), len(idx)))
@@ -549,7 +554,8 @@ def cluster_shapes(
     rows = []
     medoids = []
     some = [_sample(members, settings.max_sample, rng) for members, _ in routes]
-    spreads = _spreads(shapes, some, [medoid for _, medoid in routes])
+    to_medoid = [np.full(len(s), medoid) for s, (_, medoid) in zip(some, routes, strict=True)]
+    spreads = shapes.grouped(some, to_medoid)
     for number, ((members, medoid), spread) in enumerate(
         zip(routes, spreads, strict=True), start=1
     ):
@@ -617,14 +623,6 @@ def _merged_routes(
             medoid = int(candidates[_medoid(shapes.cross(candidates, sample))])
         routes.append((members, medoid))
     return routes
-
-
-def _spreads(shapes: ShapeDistance, some: list[np.ndarray], medoids: list[int]) -> list[np.ndarray]:
-    """The distances of each route's sampled tracks to its medoid, from one kernel call."""
-    if not some:
-        return []
-    d = shapes.pairs(np.concatenate(some), np.repeat(medoids, [len(s) for s in some]))
-    return np.split(d, np.cumsum([len(s) for s in some])[:-1])
 
 
 def _tolerance(length_km: np.ndarray, settings: RouteSettings) -> float:
