@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -85,12 +86,28 @@ def cells_of(grid: Path) -> list[Path]:
     return cells
 
 
-def print_kinds(means: dict[Path, pd.Series], rules: tuple[str, ...]) -> None:
-    """Each kind's share flagged by each rule (`'{rule} {kind}'` in a grid's means)."""
-    print(f"\nShare of each kind flagged (ashore rule included): {' / '.join(rules)}")
+def print_grids(
+    grids: list[Path],
+    result: Callable[[Path], dict[str, float]],
+    figures: dict[str, tuple[str, str]],
+    rated: tuple[str, ...],
+    kinds: tuple[str, ...],
+) -> None:
+    """One markdown row per grid of its cells' means: `figures` (header -> (key, format)), then
+    FA / recall of each rule in `rated`; then each kind's share flagged by the rules `kinds`."""
+    headers = [*figures, *(f"{k} FA / recall" for k in rated)]
+    print("| grid | cells | " + " | ".join(headers) + " |\n|---|---|" + "---|" * len(headers))
+    means = {}
+    for grid in grids:
+        cells = cells_of(grid)
+        mean = means[grid] = pd.DataFrame([result(c) for c in cells]).mean()
+        shown = [format(mean[key], style) for key, style in figures.values()]
+        shown += [f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated]
+        print(f"| {grid} | {len(cells)} | " + " | ".join(shown) + " |")
+    print(f"\nShare of each kind flagged (ashore rule included): {' / '.join(kinds)}")
     print("\n| grid | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
     for grid, mean in means.items():
-        shares = [" / ".join(f"{mean[f'{k} {kind}']:.2f}" for k in rules) for kind in KINDS]
+        shares = [" / ".join(f"{mean[f'{k} {kind}']:.2f}" for k in kinds) for kind in KINDS]
         print(f"| {grid} | " + " | ".join(shares) + " |")
 
 
@@ -149,20 +166,19 @@ def main() -> None:
     )
     args = parser.parse_args()
     by_track: dict[Path, np.ndarray] | None = {} if args.traffic_calibration == "track" else None
-    rated = ("step", "lane", "steptraffic", "ranks", "either")
-    print("| grid | cells | step | nearest lane | steptraffic | ranks | "
-          + " | ".join(f"{k} FA / recall" for k in rated) + " |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    means = {}
-    for grid in args.grids:
-        cells = cells_of(grid)
-        mean = means[grid] = pd.DataFrame([cell_result(c, by_track) for c in cells]).mean()
-        rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
-        print(
-            f"| {grid} | {len(cells)} | {mean['step']:.3f} | {mean['lane']:.3f} | "
-            f"{mean['steptraffic']:.3f} | {mean['ranks']:.3f} | {rates} |"
-        )
-    print_kinds(means, ("step", "lane", "either"))
+    figures = {
+        "step": ("step", ".3f"),
+        "nearest lane": ("lane", ".3f"),
+        "steptraffic": ("steptraffic", ".3f"),
+        "ranks": ("ranks", ".3f"),
+    }
+    print_grids(
+        args.grids,
+        lambda cell: cell_result(cell, by_track),
+        figures,
+        ("step", "lane", "steptraffic", "ranks", "either"),
+        ("step", "lane", "either"),
+    )
 
 
 if __name__ == "__main__":

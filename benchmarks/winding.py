@@ -45,10 +45,9 @@ from step_traffic import (  # (this folder: run as a script)
     CONTAMINATION,
     RULE,
     calibration,
-    cells_of,
     flag_rates,
     judged,
-    print_kinds,
+    print_grids,
 )
 
 from aisdati.ais.card import read_card
@@ -209,21 +208,19 @@ def main() -> None:
         "--within", type=float, default=5.0, help="km, for --signal local and place"
     )
     args = parser.parse_args()
-    rated = ("alone", "either2", "either3")
     signal = signal_of(args.signal, args.within)
-    print(f"| grid | cells | {args.signal} AUC | training q95 of it | q of either3 | "
-          + " | ".join(f"{k} FA / recall" for k in rated) + " |")  # fmt: skip
-    print("|---|---|---|---|---|" + "---|" * len(rated))
-    means = {}
-    for grid in args.grids:
-        cells = cells_of(grid)
-        mean = means[grid] = pd.DataFrame([cell_result(c, signal) for c in cells]).mean()
-        rates = " | ".join(f"{mean[k + ' FA']:.3f} / {mean[k + ' recall']:.2f}" for k in rated)
-        print(
-            f"| {grid} | {len(cells)} | {mean['third']:.3f} | {mean['third q95']:.1f} | "
-            f"{mean['q']:.3f} | {rates} |"
-        )
-    print_kinds(means, ("either2", "either3"))
+    figures = {
+        f"{args.signal} AUC": ("third", ".3f"),
+        "training q95 of it": ("third q95", ".1f"),
+        "q of either3": ("q", ".3f"),
+    }
+    print_grids(
+        args.grids,
+        lambda cell: cell_result(cell, signal),
+        figures,
+        ("alone", "either2", "either3"),
+        ("either2", "either3"),
+    )
 
 
 if __name__ == "__main__":
