@@ -219,9 +219,9 @@ class ShapeDistance:
         return pairs_mean_dtw_m(a, b, pairs) / 1000.0
 
     def grouped(self, i: list[np.ndarray], j: list[np.ndarray]) -> list[np.ndarray]:
-        """`pairs` of each group of pairs (tracks i[g][p] to tracks j[g][p]), all from one kernel
-        call: a call per group costs its start and checks again (a third of route clustering's
-        DTW time at 1,000 groups)."""
+        """`pairs` of each group (the tracks of `i`'s group to those of `j`'s, pair by pair), all
+        from one kernel call: a call per group costs its start and checks again (a third of route
+        clustering's DTW time at 1,000 groups)."""
         if not i:
             return []
         d = self.pairs(np.concatenate(i), np.concatenate(j))
