@@ -7,6 +7,9 @@ keeps the best of K rollouts). Two questions, each answered without retraining:
 - `--aggregate`: does another statistic of a report's K errors rank the altered tracks better?
   The median (the typical draw: a model unsure where a vessel goes spreads its draws, and the
   best of a wide spread lands near anything) or the mean.
+- `--tails`: does another share of a track's largest per-report errors (the score's tail mean,
+  0.1 by default; `max`: the largest alone) rank better? A position jump is two large errors,
+  which the mean of the largest tenth of a long track dilutes.
 - `--ahead`: does predicting h reports ahead (the policy moved h times from the real report,
   over the real time steps, its own moves feeding its state) see more than one step? A loiter
   comes back to where it was while the policy sails on, and a detour bends away from where the
@@ -20,7 +23,7 @@ ranks the tracks the ashore rule flagged in the evaluation first (as it did), an
 per variant: per cell, and the mean over each grid's cells.
 
 Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
-     [--ahead 1,2,3,5] [--aggregate best,median,mean]
+     [--ahead 1,2,3,5] [--aggregate best,median,mean] [--tails 0.02,0.05,0.1,0.2,max]
 """
 
 from __future__ import annotations
@@ -50,7 +53,19 @@ AGGREGATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 """Statistics of a report's K draw errors ([n, K] -> [n])."""
 
 
-def cell_aucs(cell: Path, ahead: list[int], aggregate: list[str]) -> dict[str, float]:
+def _tailed(values: np.ndarray, tail: str) -> float:
+    """A track's per-report values aggregated: the tail mean of the largest share `tail`, or
+    their largest (`max`)."""
+    return float(values.max()) if tail == "max" else tail_mean(values, float(tail))
+
+
+def _name(aggregate: str, h: int, tail: str, tails: list[str]) -> str:
+    return f"{aggregate} h={h}" + (f" tail={tail}" if len(tails) > 1 else "")
+
+
+def cell_aucs(
+    cell: Path, ahead: list[int], aggregate: list[str], tails: list[str]
+) -> dict[str, float]:
     """ROC AUC of each variant on one evaluate folder, and the evaluation's own step AUC."""
     doc = json.loads((cell / "evaluation.json").read_text())
     settings = doc["settings"]
@@ -58,7 +73,6 @@ def cell_aucs(cell: Path, ahead: list[int], aggregate: list[str]) -> dict[str, f
     detector = load_detector(models / "all")
     labels = pd.read_csv(cell / "data" / "labels.csv")
     tracks = load_tracks(cell / "data", labels["track_id"].tolist())
-    tail = ScoreSettings().tail
     scores: dict[str, list[float]] = {}
     policy = detector.policy()
     for h in ahead:
@@ -70,9 +84,10 @@ def cell_aucs(cell: Path, ahead: list[int], aggregate: list[str]) -> dict[str, f
             )  # fmt: skip
             for name in aggregate:
                 per_report = [AGGREGATIONS[name](e) for e in errors]
-                scores.setdefault(f"{name} h={h}", []).extend(
-                    tail_mean(v, tail) for v in per_report
-                )
+                for tail in tails:
+                    scores.setdefault(_name(name, h, tail, tails), []).extend(
+                        _tailed(v, tail) for v in per_report
+                    )
     y = labels["label"].to_numpy()
     judged = pd.read_parquet(cell / "scores.parquet")  # the ashore rule's counts, as evaluated
     judged = judged[(judged["detector"] == "dati") & (judged["score"] == "step")]
@@ -91,26 +106,42 @@ def cell_aucs(cell: Path, ahead: list[int], aggregate: list[str]) -> dict[str, f
     return out
 
 
+def _valid_tail(text: str) -> bool:
+    try:
+        return text == "max" or 0 < float(text) <= 1
+    except ValueError:
+        return False
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("grids", nargs="+", type=Path, help="folders of evaluate runs (cells)")
     ap.add_argument("--ahead", default="1", help="comma-separated h: reports predicted ahead")
     ap.add_argument("--aggregate", default="best,median,mean", help="statistics of the K draws")
+    ap.add_argument(
+        "--tails",
+        default=str(ScoreSettings().tail),
+        help="comma-separated shares of a track's largest per-report errors averaged, or max",
+    )
     args = ap.parse_args()
+    tails = args.tails.split(",")
     ahead = [int(h) for h in args.ahead.split(",")]
     aggregate = args.aggregate.split(",")
     unknown = set(aggregate) - AGGREGATIONS.keys()
-    if unknown or min(ahead) < 1:
-        ap.error(f"--aggregate takes {', '.join(AGGREGATIONS)}; --ahead positive integers")
-    columns = [f"{a} h={h}" for h in ahead for a in aggregate] + ["evaluation"]
-    tail = ScoreSettings().tail
-    print(f"ROC AUC of the one-step score's variants (tail mean of the largest {tail:g}; "
+    if unknown or min(ahead) < 1 or not all(_valid_tail(t) for t in tails):
+        ap.error(
+            f"--aggregate takes {', '.join(AGGREGATIONS)}; --ahead positive integers; "
+            "--tails shares in (0, 1] or max"
+        )
+    columns = [_name(a, h, t, tails) for h in ahead for a in aggregate for t in tails]
+    columns.append("evaluation")
+    print(f"ROC AUC of the one-step score's variants (tail mean of the largest {args.tails}; "
           f"scoring chunks of {SCORE_CHUNK})")  # fmt: skip
     print("| cell | " + " | ".join(columns) + " |")
     print("|---" * (1 + len(columns)) + "|")
     for grid in args.grids:
         cells = sorted(p.parent for p in grid.glob("*/evaluation.json"))
-        rows = [cell_aucs(c, ahead, aggregate) for c in cells]
+        rows = [cell_aucs(c, ahead, aggregate, tails) for c in cells]
         for cell, row in zip(cells, rows, strict=True):
             values = " | ".join(f"{row[c]:.3f}" for c in columns)
             print(f"| {grid.parent.name}/{cell.name} | {values} |")
