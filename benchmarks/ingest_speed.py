@@ -84,7 +84,9 @@ print(proc.stdout, end="")
 """
 """Runs one command as its only child, so the children's peak RSS is that command's alone."""
 
-AISDATI = "import sys; from aisdati.cli import app; sys.argv[0] = 'aisdati'; app()"
+AISDATI = "import sys; sys.argv[0] = 'aisdati'; from aisdati.cli import app; app()"
+"""The `aisdati` console script, run as `python -c` so that it is this interpreter's: argv[0] is
+set before the import, so the package starts as the console script does."""
 
 
 def measure(argv: list[str]) -> tuple[float, float, str]:

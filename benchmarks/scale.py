@@ -42,6 +42,7 @@ import psutil
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
+from ingest_speed import AISDATI as CONSOLE_SCRIPT
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = {
@@ -53,7 +54,7 @@ GRID = 10
 STEP_DEG = 0.3
 NATIONAL_YEAR = {"rows": 3e9, "tracks": 12e6, "routes": 2000}
 """MarineCadastre's US coast: 7-10 M reports a day; a month holds about 1 M tracks."""
-AISDATI = [sys.executable, "-c", "from aisdati.cli import app; app()"]
+AISDATI = [sys.executable, "-c", CONSOLE_SCRIPT]
 
 
 def seed_table(path: Path) -> pa.Table:
