@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pcsv
 import pytest
@@ -105,3 +106,26 @@ def test_numeric_times_in_every_unit():
     assert list(us[:3]) == [t * 1_000_000] * 3 and list(bad) == [False, False, False, True]
     us, bad = time_us(pa.array([t + 0.5, float("nan")]))
     assert us[0] == t * 1_000_000 + 500_000 and list(bad) == [False, True]
+
+
+def test_the_guard_finds_every_header_line_at_every_offset_in_any_case():
+    """A header met mid-file ends the stream there, wherever `mmsi` falls among the eight-byte
+    words the search reads, whatever its case; `mmsi` inside a row's text ends nothing."""
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        spelling = "".join(c.upper() if rng.random() < 0.5 else c for c in "mmsi")
+        pad = "x" * int(rng.integers(0, 17))
+        header = f"{pad}{spelling},LAT"
+        rows = [f"{k},{'MMS' if k % 3 else 'MMSX'}{pad}" for k in range(int(rng.integers(1, 9)))]
+        text = "\n".join(["h", *rows, header, "1,2", ""]).encode()
+        met: list[bytes] = []
+
+        def header_of(line: bytes, met: list[bytes] = met, pad: str = pad) -> list[str] | None:
+            met.append(line)
+            return line.decode().split(",") if line.lower().startswith(pad.encode()) else None
+
+        guard = LineGuard(io.BytesIO(text), pytest.fail, 1, header_of)
+        before = b"".join(iter(lambda guard=guard: guard.read(int(rng.integers(1, 64))), b""))
+        assert before.decode().splitlines() == rows, trial
+        assert guard.next_header().names == [f"{pad}{spelling}", "LAT"]
+        assert met == [header.encode()]

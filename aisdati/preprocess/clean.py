@@ -44,18 +44,55 @@ def _col(table: pa.Table, name: str) -> np.ndarray:
 
 def check_values(table: pa.Table, codes: np.ndarray) -> pa.Table:
     """Reject sentinels and out-of-range values; return the table with COG normalised into
-    [0, 360) (some sources write -60.6 for 299.4)."""
+    [0, 360) (some sources write -60.6 for 299.4). One compiled pass over the rows: as five
+    vectorised masks and a modulo it was a fifth of the CSV reading's time."""
     lat, lon, sog, cog = (_col(table, c) for c in ("lat", "lon", "sog", "cog"))
-    with np.errstate(invalid="ignore"):
-        _mark(codes, lat == SENTINEL_LAT, "sentinel_lat")
-        _mark(codes, lon == SENTINEL_LON, "sentinel_lon")
-        _mark(codes, sog == SENTINEL_SOG, "sentinel_sog")
-        _mark(codes, cog == SENTINEL_COG, "sentinel_cog")
-        bad = (np.abs(lat) > 90) | (np.abs(lon) > 180) | (sog < 0) | (sog > MAX_VALID_SOG)
-        _mark(codes, bad | (cog <= -360) | (cog > 360), "out_of_range")
-        cog = np.mod(cog, 360.0)
-    cog[cog >= 360.0] = 0.0  # np.mod(-1e-15, 360) rounds to 360
+    cog = _check_rows(
+        lat,
+        lon,
+        sog,
+        cog,
+        codes,
+        np.array([CODE[r] for r in ("sentinel_lat", "sentinel_lon", "sentinel_sog")], np.uint8),
+        np.uint8(CODE["sentinel_cog"]),
+        np.uint8(CODE["out_of_range"]),
+    )
     return table.set_column(table.schema.get_field_index("cog"), "cog", pa.array(cog))
+
+
+@numba.njit(cache=True, nogil=True)
+def _check_rows(lat, lon, sog, cog, codes, sentinel, sentinel_cog, out_of_range):
+    """`check_values`' kernel: each row's first failed check, in the order sentinels (LAT, LON,
+    SOG, COG) then ranges, into `codes` where it is 0; the COG column normalised. NaN fails no
+    check (SOG and COG still to be derived are NaN)."""
+    n = lat.shape[0]
+    out = np.empty(n, np.float64)
+    for i in range(n):
+        c = cog[i]
+        if codes[i] == 0:
+            if lat[i] == SENTINEL_LAT:
+                codes[i] = sentinel[0]
+            elif lon[i] == SENTINEL_LON:
+                codes[i] = sentinel[1]
+            elif sog[i] == SENTINEL_SOG:
+                codes[i] = sentinel[2]
+            elif c == SENTINEL_COG:
+                codes[i] = sentinel_cog
+            elif (
+                abs(lat[i]) > 90
+                or abs(lon[i]) > 180
+                or sog[i] < 0
+                or sog[i] > MAX_VALID_SOG
+                or c <= -360
+                or c > 360
+            ):
+                codes[i] = out_of_range
+        if c < 0.0 or c >= 360.0:
+            c = np.mod(c, 360.0)
+            if c >= 360.0:  # np.mod(-1e-15, 360) rounds to 360
+                c = 0.0
+        out[i] = c
+    return out
 
 
 def filter_area_speed(table: pa.Table, codes: np.ndarray, roi, settings: IngestSettings) -> None:

@@ -12,6 +12,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from aisdati.preprocess.bytewords import each, equal
 from aisdati.preprocess.streams import ForwardOnly
 
 BLOCK_SIZE = 4 << 20
@@ -371,15 +372,55 @@ def _mark_offsets(buf: bytes | memoryview, a: int, b: int) -> list[int]:
 
 @numba.njit(nogil=True, cache=True)
 def _marks(buf: np.ndarray, out: np.ndarray) -> int:  # pragma: no cover - compiled
-    """Offsets (into `out`, as many as fit) of `mmsi` in `buf` in any case, and how many."""
+    """Offsets (into `out`, as many as fit, in order) of `mmsi` in `buf` in any case, and how
+    many. Eight bytes at a time (`_mark_ends`); a first pass only counts the words where a mark
+    ends, which the compiler vectorises (0.1 s per GB, where a byte at a time took 0.65 s, a
+    third of the reading thread's time), and only a block that has some is passed again to
+    find them."""
+    n = buf.shape[0]
+    whole = n - n % 8
+    words = buf[:whole].view(np.uint64)  # the words, without a copy (4 MiB of zeros cost more)
+    tail = np.uint64(0)  # the last bytes, as a word ending in zero bytes (no letter)
+    for q in range(whole, n):
+        tail |= np.uint64(buf[q]) << np.uint64(8 * (q - whole))
+    hits = 0
+    prev_m = prev_s = np.uint64(0)
+    for j in range(words.shape[0]):
+        ends, prev_m, prev_s = _mark_ends(words[j], prev_m, prev_s)
+        hits += ends != 0
+    ends, prev_m, prev_s = _mark_ends(tail, prev_m, prev_s)
+    if hits == 0 and ends == 0:
+        return 0
     found = 0
-    for i in range(buf.shape[0] - 3):
-        hit = (buf[i + 3] | 32) == 105 and (buf[i] | 32) == 109  # its last letter first: rare
-        if hit and (buf[i + 1] | 32) == 109 and (buf[i + 2] | 32) == 115:
-            if found < out.shape[0]:
-                out[found] = i
-            found += 1
+    prev_m = prev_s = np.uint64(0)
+    for j in range(words.shape[0] + 1):
+        word = words[j] if j < words.shape[0] else tail
+        ends, prev_m, prev_s = _mark_ends(word, prev_m, prev_s)
+        for k in range(8):
+            if (ends >> np.uint64(8 * k + 7)) & np.uint64(1):
+                if found < out.shape[0]:
+                    out[found] = 8 * j + k - 3
+                found += 1
     return found
+
+
+_LOWER = each(0x20)
+_M, _S, _I = each(ord("m")), each(ord("s")), each(ord("i"))
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _mark_ends(word, prev_m, prev_s):  # pragma: no cover - compiled
+    """The mask of the bytes of `word` where `mmsi` (any case) ends, and the word's masks of `m`
+    and `s` for the next word (`prev_m`, `prev_s`: the previous word's)."""
+    word |= _LOWER
+    m, s = equal(word, _M), equal(word, _S)
+    ends = (
+        equal(word, _I)
+        & ((s << np.uint64(8)) | (prev_s >> np.uint64(56)))
+        & ((m << np.uint64(16)) | (prev_m >> np.uint64(48)))
+        & ((m << np.uint64(24)) | (prev_m >> np.uint64(40)))
+    )
+    return ends, m, s
 
 
 def _may_hold_long_line(buf: bytes, a: int, b: int) -> bool:
