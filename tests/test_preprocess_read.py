@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gzip
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,7 @@ from aisdati.errors import UserError
 from aisdati.preprocess.convert import to_canonical
 from aisdati.preprocess.inputs import Source, sources_of
 from aisdati.preprocess.layouts import resolve_columns
+from aisdati.preprocess.lineguard import LineGuard
 from aisdati.preprocess.read import SourceReader
 from aisdati.preprocess.report import CODE
 
@@ -119,3 +122,24 @@ def test_zip_members_are_csv(data):
         None,
         "AIS_2022_01_03_head.zip:AIS_2022_01_03.csv",
     )
+
+
+@pytest.mark.parametrize("kind", ["csv", "gz", "zip"])
+def test_the_guard_gives_blocks_of_the_size_asked_and_every_line_once(data, tmp_path, kind):
+    """The start of a line that a chunk cuts goes in front of the next chunk (read in behind it,
+    without a copy of the chunk), not into a block of one line: every block but the last is
+    nearly the size asked, and the lines are the file's, in order."""
+    text = (data / "noaa_2023-01-11_1000rows.csv").read_bytes()
+    path = tmp_path / f"rows.{kind}"
+    if kind == "csv":
+        path.write_bytes(text)
+    elif kind == "gz":
+        path.write_bytes(gzip.compress(text))
+    else:
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("rows.csv", text)
+    stream, _ = Source(path, "rows.csv" if kind == "zip" else None).open()
+    guard = LineGuard(stream, pytest.fail)
+    blocks = [bytes(b) for b in iter(lambda: guard.read(8192), b"")]
+    assert b"".join(blocks) == text.split(b"\n", 1)[1]
+    assert all(8192 - 400 < len(b) <= 8192 and b.endswith(b"\n") for b in blocks[:-1])

@@ -95,6 +95,7 @@ def parse_block(block: bytes | memoryview, slots: ColumnSlots) -> ParsedBlock:
     if len(block) and block[-1] != 10:  # the file's last line, unended: the scan needs an end
         block = bytes(block) + b"\n"
     buf = np.frombuffer(block, np.uint8)
+    buf.flags.writeable = False  # (a chunk read into a bytearray: one compiled kernel, not two)
     for cap in (len(buf) // TYPICAL_ROW_BYTES + 1, len(buf) // 2 + 1):  # every row takes 2 or more
         ints = np.empty((2, cap), np.int64)
         numbers = np.empty((len(slots.numbers), cap), np.float64)

@@ -88,12 +88,12 @@ class LineGuard(ForwardOnly):
         is fine as long as it ends at a line end); empty only at the end."""
         want = BLOCK_SIZE if n is None or n < 0 else max(n, 1)
         while not self._ready and not self._eof and self._header is None:
-            chunk = self.raw.read(want)
-            if chunk:
-                self._feed(chunk)
-            else:
+            chunk = self._next_chunk(want)
+            if chunk is None:
                 self._eof = True
                 self._finish()
+            else:
+                self._feed(chunk)
         if not self._ready or self._header is not None:
             return b""
         piece = self._ready.popleft()
@@ -115,21 +115,41 @@ class LineGuard(ForwardOnly):
         self.closed = True
         self.raw.close()
 
-    def _feed(self, chunk: bytes) -> None:
+    def _next_chunk(self, want: int) -> bytes | bytearray | None:
+        """The start of a line carried over from the last chunk, then the stream's next bytes,
+        `want` in all (or a byte more than the carry), as one buffer; None at the stream's end
+        (the carry stays for `_finish`). The stream reads into the buffer behind the carry
+        where it can (`readinto`), so that no chunk is copied: the carried line made a piece
+        of its own before, half of the reader's blocks, each costing a parse, a typing and
+        partition writes however small (the read stage 2.58 -> 2.14 s of 10 M rows)."""
+        head = self._carry
+        readinto = getattr(self.raw, "readinto", None) if head else None
+        if readinto is None:
+            data = self.raw.read(max(want - len(head), 1))
+            if not data:
+                return None
+            self._carry = b""
+            return head + data if head else data
+        chunk = bytearray(len(head) + max(want - len(head), 1))
+        chunk[: len(head)] = head
+        size = readinto(memoryview(chunk)[len(head) :])
+        if not size:
+            return None
+        self._carry = b""
+        del chunk[len(head) + size :]
+        return chunk
+
+    def _feed(self, chunk: bytes | bytearray) -> None:
         if b"\r" in chunk:
             chunk = chunk.replace(b"\r", b"\n")  # CRLF leaves an empty line: pyarrow skips it
         start = 0
-        while self._dropping is not None or self._carry:
+        while self._dropping is not None:
             first = chunk.find(b"\n", start)
             if first < 0:
                 self._hold(chunk[start:])
                 return
-            if self._dropping is not None:
-                self._drop_more(chunk[start:first])
-                self._end_drop()
-            else:
-                line, self._carry = self._carry + chunk[start : first + 1], b""
-                self._emit(line, 0, len(line))
+            self._drop_more(chunk[start:first])
+            self._end_drop()
             start = first + 1
         cut = chunk.rfind(b"\n") + 1
         if cut > start:
@@ -303,6 +323,7 @@ def _found(
     """Every offset into buf[a:b] that a compiled `kernel(bytes, out) -> how many` finds, however
     many there are (it fills `out` as far as it reaches)."""
     view = np.frombuffer(buf, np.uint8, count=b - a, offset=a)
+    view.flags.writeable = False  # (a chunk read into a bytearray: one compiled kernel, not two)
     out = np.empty(64, np.int64)
     found = kernel(view, out)
     if found > len(out):

@@ -53,7 +53,12 @@ class CountingReader(ForwardOnly):
         return data
 
     def readinto(self, buffer: bytearray | memoryview) -> int:
-        """What ISA-L's gzip reader asks of its file."""
+        """What ISA-L's gzip reader and the line guard ask of a file: straight into `buffer`
+        where the file can, else a read and a copy."""
+        if hasattr(self.raw, "readinto"):
+            size = self.raw.readinto(buffer)
+            self.bytes_read += size
+            return size
         data = self.read(len(buffer))
         buffer[: len(data)] = data
         return len(data)
@@ -74,6 +79,9 @@ class Decompressed(ForwardOnly):
 
     def read(self, n: int = -1) -> bytes:
         return self.stream.read(None if n is None or n < 0 else n)
+
+    def readinto(self, buffer: bytearray | memoryview) -> int:
+        return self.stream.readinto(buffer)
 
     def close(self) -> None:
         self.closed = True

@@ -55,6 +55,19 @@ class InflatedMember(ForwardOnly):
     def read(self, n: int = -1) -> bytes:
         if n is None or n < 0:
             return b"".join(iter(lambda: self.read(CHUNK_BYTES), b""))
+        return b"".join(self._inflate(n))
+
+    def readinto(self, buffer: bytearray | memoryview) -> int:
+        """`read` into `buffer`, each inflated piece copied once (the line guard reads a chunk
+        after the start of a line it carries over)."""
+        view, size = memoryview(buffer), 0
+        for piece in self._inflate(len(view)):
+            view[size : size + len(piece)] = piece
+            size += len(piece)
+        return size
+
+    def _inflate(self, n: int) -> list[bytes]:
+        """The next pieces of the member, `n` bytes of them in all until the end."""
         pieces, wanted = [], n
         while wanted > 0 and not self.inflater.eof:
             if not self.pending and self.left:
@@ -72,7 +85,7 @@ class InflatedMember(ForwardOnly):
             self.size += len(data)
         if self.inflater.eof:
             self._check()
-        return b"".join(pieces)
+        return pieces
 
     def _check(self) -> None:
         """What `zipfile` checks at a member's end: its size and CRC-32."""
