@@ -21,7 +21,7 @@ from hardening import one_line_error, run
 from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings
 from aisdati.errors import UserError
-from aisdati.execution import Execution, InProcess, open_runner
+from aisdati.execution import Execution, InProcess, InThreads, open_runner
 from aisdati.execution.runner import DaskRunner
 
 distributed = pytest.importorskip("distributed")
@@ -94,7 +94,7 @@ def die_once(marker: str, x: int) -> int:
 
 
 def test_runners_return_results_in_order_and_say_when_each_ends(cluster):
-    for runner in (InProcess(), DaskRunner(cluster)):
+    for runner in (InProcess(), InThreads(2), DaskRunner(cluster)):
         ended: list[int] = []
         assert runner.map(square, list(range(7)), ended.append) == [x * x for x in range(7)]
         assert sorted(ended) == list(range(7))
@@ -104,6 +104,15 @@ def test_runners_return_results_in_order_and_say_when_each_ends(cluster):
 def started_at(x: int) -> float:
     time.sleep(0.05)
     return time.monotonic()
+
+
+def test_in_threads_two_tasks_run_at_once_and_an_error_is_raised_here():
+    """`InThreads(2)`: a task waiting on another one's start proves both run at once; a task
+    that raises raises from `map`, as in one thread."""
+    started = threading.Barrier(2, timeout=10)
+    assert InThreads(2).map(lambda x: started.wait() * 0 + x, [1, 2]) == [1, 2]
+    with pytest.raises(ZeroDivisionError):
+        InThreads(2).map(lambda x: 1 // x, [1, 0, 2])
 
 
 def test_the_costliest_tasks_start_first_and_results_keep_their_order():

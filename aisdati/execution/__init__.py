@@ -3,6 +3,6 @@
 (`--device`; `aisdati.execution.device`)."""
 
 from aisdati.execution.device import resolve_device
-from aisdati.execution.runner import Execution, InProcess, Runner, open_runner
+from aisdati.execution.runner import Execution, InProcess, InThreads, Runner, open_runner
 
-__all__ = ["Execution", "InProcess", "Runner", "open_runner", "resolve_device"]
+__all__ = ["Execution", "InProcess", "InThreads", "Runner", "open_runner", "resolve_device"]

@@ -3,7 +3,8 @@
 Every command that has parallel work (ingest's partitions, one model per group of routes,
 chunks of tracks to score) cuts it into tasks by a rule that depends on the data only, never on
 the number of workers, and hands them to a `Runner`: `InProcess` runs them one after the other
-in this process (the default), `DaskRunner` as tasks
+in this process (the default; `InThreads` on threads, for a stage whose work releases the GIL),
+`DaskRunner` as tasks
 of a dask.distributed cluster, local processes started here (`--workers N`) or an existing
 cluster (`--scheduler tcp://HOST:PORT`). The same tasks with the same inputs give the same
 outputs, so the results do not depend on where they ran.
@@ -19,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
@@ -97,6 +99,32 @@ class InProcess:
             results.append(fn(item))
             if on_done is not None:
                 on_done(i)
+        return results
+
+
+class InThreads(InProcess):
+    """The tasks in this process on `threads` threads, the results in the items' order: for
+    tasks whose work mostly releases the GIL (numpy, Arrow, compiled kernels) and whose memory
+    allows that many at once. `on_done` is called in the items' order."""
+
+    def __init__(self, threads: int) -> None:
+        self.threads = threads
+
+    def map(
+        self,
+        fn: Callable[[T], R],
+        items: Sequence[T],
+        on_done: Callable[[int], None] | None = None,
+        costs: Sequence[float] | None = None,
+    ) -> list[R]:
+        del costs  # the threads take the items in order
+        with ThreadPoolExecutor(self.threads) as pool:
+            futures = [pool.submit(fn, item) for item in items]
+            results = []
+            for i, future in enumerate(futures):
+                results.append(future.result())
+                if on_done is not None:
+                    on_done(i)
         return results
 
 
