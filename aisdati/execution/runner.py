@@ -85,6 +85,7 @@ class InProcess:
     """The tasks one after the other, here."""
 
     workers = 1
+    threads = 1
 
     def map(
         self,
@@ -93,12 +94,17 @@ class InProcess:
         on_done: Callable[[int], None] | None = None,
         costs: Sequence[float] | None = None,
     ) -> list[R]:
-        del costs  # one after the other: the order changes nothing
-        results = []
-        for i, item in enumerate(items):
-            results.append(fn(item))
-            if on_done is not None:
-                on_done(i)
+        del costs  # one after the other, or taken in order by the threads: costs change nothing
+        with contextlib.ExitStack() as stack:
+            if self.threads > 1:
+                ran = stack.enter_context(ThreadPoolExecutor(self.threads)).map(fn, items)
+            else:
+                ran = map(fn, items)
+            results = []
+            for i, result in enumerate(ran):
+                results.append(result)
+                if on_done is not None:
+                    on_done(i)
         return results
 
 
@@ -109,23 +115,6 @@ class InThreads(InProcess):
 
     def __init__(self, threads: int) -> None:
         self.threads = threads
-
-    def map(
-        self,
-        fn: Callable[[T], R],
-        items: Sequence[T],
-        on_done: Callable[[int], None] | None = None,
-        costs: Sequence[float] | None = None,
-    ) -> list[R]:
-        del costs  # the threads take the items in order
-        with ThreadPoolExecutor(self.threads) as pool:
-            futures = [pool.submit(fn, item) for item in items]
-            results = []
-            for i, future in enumerate(futures):
-                results.append(future.result())
-                if on_done is not None:
-                    on_done(i)
-        return results
 
 
 class DaskRunner:
