@@ -496,13 +496,29 @@ class IncrementalDTW:
 
 
 # ------------------------------------------------------------------ batched great-circle DTW
+ASIN_SERIES_MAX = 0.02
+"""Half chords (unit sphere) up to which `_half_chord_arc_m` sums the series of asin instead of
+calling it: arcs up to 255 km. There the first term left out, 63/2816 x^11, is below 2.3e-19 of
+x, a five-hundredth of a double's rounding, so the arc is asin's within a rounding or two, in a
+third of the time: route clustering's 32 x 32 DTWs spent nearly half their time in asin."""
+
+
+@njit(cache=True)
+def _half_chord_arc_m(half: float) -> float:
+    """Great-circle distance (m) of a chord between unit vectors, given half its length."""
+    if half <= ASIN_SERIES_MAX:
+        h2 = half * half
+        series = 1.0 / 6.0 + h2 * (3.0 / 40.0 + h2 * (5.0 / 112.0 + h2 * (35.0 / 1152.0)))
+        return 2.0 * EARTH_RADIUS_M * (half + half * h2 * series)
+    return 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
+
+
 @njit(cache=True)
 def _chord_m(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:
     dx = a[i, 0] - b[j, 0]
     dy = a[i, 1] - b[j, 1]
     dz = a[i, 2] - b[j, 2]
-    half = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz)
-    return 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
+    return _half_chord_arc_m(0.5 * math.sqrt(dx * dx + dy * dy + dz * dz))
 
 
 @njit(cache=True)
@@ -662,8 +678,7 @@ def _sweep_min(a, a_lo, n, b, b_lo, m, proj, order, axis, cap_m, out):  # pragma
                     least = sq
                     reach = math.sqrt(sq) + 1e-12
                 j += step
-        half = 0.5 * math.sqrt(least)
-        out[i] = cap_m if least >= cap * cap else 2.0 * EARTH_RADIUS_M * math.asin(min(half, 1.0))
+        out[i] = cap_m if least >= cap * cap else _half_chord_arc_m(0.5 * math.sqrt(least))
 
 
 @njit(cache=True)

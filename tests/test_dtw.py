@@ -26,7 +26,7 @@ from aisdati.dtw import (
     pairs_mean_dtw_m,
     prepare_lonlat,
 )
-from aisdati.geo import haversine_m
+from aisdati.geo import arc_m, haversine_m
 
 COORD = st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
 # Few distinct values make exact ties between warping paths common.
@@ -227,6 +227,19 @@ def test_indices_into_the_kernels_arrays_are_checked():
         with pytest.raises(ValueError, match=needle):
             call()
     assert pairs_mean_dtw_m(ready, ready, np.array([[0, 0]])) == pytest.approx([0.0])
+
+
+def test_point_distances_are_the_arc_of_the_chord_to_the_last_roundings():
+    """The kernels sum asin's series for arcs up to 255 km (`ASIN_SERIES_MAX`) and call asin
+    beyond: one-point series from 1 mm to 20,000 km apart measure 2R asin(chord / 2) as numpy
+    computes it, within a few roundings."""
+    east = np.geomspace(1e-8, 179.0, 400)  # degrees of longitude along the equator
+    a = prepare_lonlat(np.zeros((1, 1, 2)))
+    b = prepare_lonlat(np.stack([east, np.zeros_like(east)], axis=1)[:, None, :])
+    got = pairs_mean_dtw_m(a, b, np.stack([np.zeros(len(east), int), np.arange(len(east))], 1))
+    want = arc_m(np.linalg.norm(b[:, 0] - a[0, 0], axis=1))
+    assert np.all(np.abs(got - want) <= 4 * np.spacing(want))
+    assert got[east < 2.0].size and got[east > 3.0].size  # both sides of the 255 km switch
 
 
 BACK_TRACK = """
