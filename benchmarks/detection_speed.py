@@ -170,6 +170,8 @@ def main() -> None:
     ap.add_argument("--before", type=int, default=20, help="test tracks the brute force scores")
     ap.add_argument("--only-scale", action="store_true", help="only the Scoring at scale table")
     args = ap.parse_args()
+    if min(args.tracks, args.points, args.draws, args.before) < 1:
+        ap.error("--tracks, --points, --draws and --before must be at least 1")
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
     heads = rng.uniform(0, 360, 5)

@@ -16,11 +16,13 @@ in; refused every move that does not enter at once, it was held at its start for
 from __future__ import annotations
 
 import io
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from scipy.ndimage import distance_transform_edt
 
 from aisdati.errors import UserError
@@ -32,6 +34,8 @@ TURNS_DEG = (*(a for k in range(15, 180, 15) for a in (k, -k)), 180)
 """Courses tried, in this order, when a step would leave the corridor. Up to 90° was not
 enough: Kitimat track 97 starts at the tip of an inlet open only to the east-south-east, its
 policy heads north-west like its route, and its rollouts never left the start (131 km)."""
+_TURN_COS = np.array([np.cos(np.radians(turn)) for turn in TURNS_DEG])
+_TURN_SIN = np.array([np.sin(np.radians(turn)) for turn in TURNS_DEG])
 
 
 @dataclass
@@ -79,18 +83,11 @@ class Corridor:
         """Distance (m, to the cell) from each point to the nearest allowed cell: 0 inside;
         off the grid, the distance to the grid's nearest cell plus that cell's; inf for a
         non-finite point. The grid's distance map is computed once, on first use."""
-        lat = self.origin[1] + self.step[1] * self.mask.shape[0] / 2
-        cell = self.step * M_PER_DEG * np.array([np.cos(np.radians(lat)), 1.0])
-        if self._gap is None:
-            self._gap = distance_transform_edt(~self.mask, sampling=(cell[1], cell[0]))
-        raw = np.floor((np.asarray(points, np.float64) - self.origin) / self.step)
-        finite = np.all(np.isfinite(raw), axis=-1)
-        raw = np.where(finite[..., None], raw, 0.0)
-        rows, cols = self.mask.shape
-        ij = np.clip(raw, 0, [cols - 1, rows - 1]).astype(int)
-        off = (raw - ij) * cell
-        beyond = np.hypot(off[..., 0], off[..., 1])
-        return np.where(finite, self._gap[ij[..., 1], ij[..., 0]] + beyond, np.inf)
+        points = np.asarray(points, np.float64)
+        flat = np.ascontiguousarray(points.reshape(-1, 2))
+        out = np.empty(len(flat))
+        _gaps(flat, *self._grid(), out)
+        return out.reshape(points.shape[:-1])
 
     def allowed(self, points: np.ndarray) -> np.ndarray:
         """Whether each point lies in an allowed cell (no gap to the corridor)."""
@@ -99,30 +96,25 @@ class Corridor:
     def slide(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         """Where each agent ends up: the proposed point if it takes the agent no farther from
         the corridor (`gap_m`; inside, that is staying inside), else the smallest turn of the
-        same step that does, else where it is. Rows of [N, 2] arrays."""
-        limit = self.gap_m(position)
-        finite = np.all(np.isfinite(proposed), axis=1)
-        fits = finite & (self.gap_m(proposed) <= limit)
-        out = np.where(fits[:, None], proposed, position)
-        todo = ~fits & finite
-        if not todo.any():
-            return out
-        coslat = np.cos(np.radians(position[todo, 1]))
-        d = (proposed[todo] - position[todo]) * np.column_stack([coslat, np.ones_like(coslat)])
-        found = np.zeros(todo.sum(), dtype=bool)
-        result = position[todo].copy()
-        for turn in TURNS_DEG:
-            a = np.radians(turn)  # clockwise turn of a course (x east, y north)
-            rx = d[:, 0] * np.cos(a) + d[:, 1] * np.sin(a)
-            ry = -d[:, 0] * np.sin(a) + d[:, 1] * np.cos(a)
-            cand = position[todo] + np.column_stack([rx / coslat, ry])
-            ok = ~found & (self.gap_m(cand) <= limit[todo])
-            result[ok] = cand[ok]
-            found |= ok
-            if found.all():
-                break
-        out[todo] = result
+        same step that does, else where it is. Rows of [N, 2] arrays. Compiled, agent by agent:
+        a rollout calls it at every step, and as numpy passes over the agents still turning it
+        was half of scoring's time."""
+        position = np.ascontiguousarray(position, np.float64)
+        proposed = np.ascontiguousarray(proposed, np.float64)
+        coslat = np.cos(np.radians(position[:, 1]))
+        out = np.empty_like(position)
+        _slide(position, proposed, coslat, _TURN_COS, _TURN_SIN, *self._grid(), out)
         return out
+
+    def _grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the compiled lookups read: the distance map (m), the grid's origin and cell
+        (degrees) and the cell's size in metres (east, north)."""
+        lat = self.origin[1] + self.step[1] * self.mask.shape[0] / 2
+        cell = self.step * M_PER_DEG * np.array([np.cos(np.radians(lat)), 1.0])
+        if self._gap is None:
+            self._gap = distance_transform_edt(~self.mask, sampling=(cell[1], cell[0]))
+        origin, step = (np.asarray(x, np.float64) for x in (self.origin, self.step))
+        return self._gap, origin, step, cell
 
     def to_bytes(self) -> bytes:
         buf = io.BytesIO()
@@ -139,6 +131,49 @@ class Corridor:
         if not np.all(step > 0):
             raise UserError(f"cannot load {path}: the cell size ('step') must be > 0, got {step}")
         return cls(mask, origin, step)
+
+
+@njit(cache=True)
+def _gap_one(x, y, gap, origin, step, cell):  # pragma: no cover - compiled
+    """`Corridor.gap_m` of one point."""
+    rx = np.floor((x - origin[0]) / step[0])
+    ry = np.floor((y - origin[1]) / step[1])
+    if not (math.isfinite(rx) and math.isfinite(ry)):
+        return math.inf
+    rows, cols = gap.shape
+    ix = min(max(rx, 0.0), cols - 1.0)
+    iy = min(max(ry, 0.0), rows - 1.0)
+    beyond = math.hypot((rx - ix) * cell[0], (ry - iy) * cell[1])
+    return gap[int(iy), int(ix)] + beyond
+
+
+@njit(cache=True)
+def _gaps(points, gap, origin, step, cell, out):  # pragma: no cover - compiled
+    for k in range(len(points)):
+        out[k] = _gap_one(points[k, 0], points[k, 1], gap, origin, step, cell)
+
+
+@njit(cache=True)
+def _slide(  # pragma: no cover - compiled
+    position, proposed, coslat, cos_t, sin_t, gap, origin, step, cell, out
+):
+    """`Corridor.slide`, agent by agent."""
+    for k in range(len(position)):
+        px, py, qx, qy = position[k, 0], position[k, 1], proposed[k, 0], proposed[k, 1]
+        out[k, 0], out[k, 1] = px, py
+        if not (math.isfinite(qx) and math.isfinite(qy)):
+            continue
+        limit = _gap_one(px, py, gap, origin, step, cell)
+        if _gap_one(qx, qy, gap, origin, step, cell) <= limit:
+            out[k, 0], out[k, 1] = qx, qy
+            continue
+        dx, dy = (qx - px) * coslat[k], (qy - py) * 1.0
+        for t in range(len(cos_t)):  # clockwise turns of the course (x east, y north)
+            cx = px + (dx * cos_t[t] + dy * sin_t[t]) / coslat[k]
+            cy = py + (-dx * sin_t[t] + dy * cos_t[t])
+            if _gap_one(cx, cy, gap, origin, step, cell) <= limit:
+                out[k, 0], out[k, 1] = cx, cy
+                break
 
 
 CORRIDOR_ARRAYS = {
