@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from aisdati.ais.card import CalibratedWith
-from aisdati.ais.corridor import Corridor
+from aisdati.ais.corridor import TURNS_DEG, Corridor
 from aisdati.ais.policy import AISPolicy
 from aisdati.ais.source import build_source, make_env, track_reference
 from aisdati.ais.space import PRESETS, LaneConfig, lane_config
@@ -155,6 +155,40 @@ def test_corridor_refuses_steps_out_of_it_and_onto_land(tracks):
     probe = east + np.array([0.008, 0.0])
     onland = probe[~corridor.allowed(probe) | (probe[:, 0] > cut + 0.05)]
     assert not (dry.allowed(onland) & ~corridor.allowed(onland)).any()
+
+
+def _slide_by_numpy(corridor, position, proposed):
+    """The slide rule as numpy states it: a move no farther from the corridor is taken, else
+    the smallest turn (15, -15, 30, ... 180 degrees) of the same step that is, else none."""
+    limit = corridor.gap_m(position)
+    finite = np.isfinite(proposed).all(axis=1)
+    out = np.where((finite & (corridor.gap_m(proposed) <= limit))[:, None], proposed, position)
+    coslat = np.cos(np.radians(position[:, 1]))
+    d = (proposed - position) * np.column_stack([coslat, np.ones_like(coslat)])
+    for k in np.flatnonzero(finite & (corridor.gap_m(proposed) > limit)):
+        for turn in TURNS_DEG:
+            a = np.radians(turn)
+            rx = d[k, 0] * np.cos(a) + d[k, 1] * np.sin(a)
+            ry = -d[k, 0] * np.sin(a) + d[k, 1] * np.cos(a)
+            cand = position[k] + np.array([rx / coslat[k], ry])
+            if corridor.gap_m(cand[None])[0] <= limit[k]:
+                out[k] = cand
+                break
+    return out
+
+
+def test_the_compiled_slide_is_the_rule_to_the_last_bit(tracks):
+    positions = [t.positions for t in tracks]
+    corridor = Corridor.from_tracks(positions, buffer_km=1.0)
+    rng = np.random.default_rng(3)
+    pts = np.concatenate(positions)
+    start = pts[rng.integers(0, len(pts), 3000)] + rng.normal(0, 0.02, (3000, 2))
+    course, step_deg = rng.uniform(0, 2 * np.pi, 3000), rng.uniform(0.0005, 0.03, 3000)
+    moved = start + step_deg[:, None] * np.column_stack([np.sin(course), np.cos(course)])
+    moved[:30, 0] = np.nan  # a broken decision stays where it is
+    got = corridor.slide(start, moved)
+    np.testing.assert_array_equal(got, _slide_by_numpy(corridor, start, moved))
+    assert 0 < (got != moved).any(axis=1).mean() < 1  # some moves taken, some turned or refused
 
 
 def test_an_agent_at_the_closed_end_of_a_channel_turns_round():
