@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The one-command AIS demo: an analyst's month, on two months of real traffic around Kitimat, BC,
-# that ship with the project (tests/data, see tests/data/PROVENANCE.md), in about 5 minutes on
+# that ship with the project (tests/data, see tests/data/PROVENANCE.md), in about a minute on
 # 2 CPU cores:
 #
 #   1. ingest: clean, segment and cluster the reports of July and August 2018;
