@@ -117,19 +117,25 @@ def courses_deg(polyline: np.ndarray) -> np.ndarray:
     """Course at each point of a polyline (lon, lat) [n, 2], from its neighbours (the
     previous point to the next; the ends use the one neighbour they have)."""
     p = np.asarray(polyline, np.float64)
-    prv, nxt = _neighbours([len(p)])
-    return initial_bearing_deg(p[prv, 0], p[prv, 1], p[nxt, 0], p[nxt, 1])
+    return _courses(p, [len(p)])[0]
 
 
-def _course_vectors(polylines: Sequence[np.ndarray]) -> np.ndarray:
-    """[sum n_i, 2] unit (cos, sin) of each point's course (`courses_deg`), the polylines' points
-    end to end; zero where the point does not move (a stuck rollout has no course, so it is
-    equally near every heading). One pass over all points: a lane is tens of rollouts, and a
-    pass per rollout was a tenth of lane scoring's time."""
-    p = np.concatenate([np.asarray(q, np.float64) for q in polylines])
-    prv, nxt = _neighbours([len(q) for q in polylines])
-    theta = np.radians(initial_bearing_deg(p[prv, 0], p[prv, 1], p[nxt, 0], p[nxt, 1]))
-    moves = np.any(p[nxt] != p[prv], axis=1)
+def _courses(points: np.ndarray, sizes: Sequence[int]) -> tuple[np.ndarray, ...]:
+    """`courses_deg` of polylines of `sizes` points laid end to end in `points`, with each
+    point's previous and next point (the ends stand in for the missing)."""
+    prv, nxt = _neighbours(sizes)
+    before, after = points[prv], points[nxt]
+    return initial_bearing_deg(before[:, 0], before[:, 1], after[:, 0], after[:, 1]), before, after
+
+
+def _course_vectors(points: np.ndarray, sizes: Sequence[int]) -> np.ndarray:
+    """[sum n_i, 2] unit (cos, sin) of each point's course, polylines of `sizes` points laid end
+    to end in `points`; zero where the point does not move (a stuck rollout has no course, so it
+    is equally near every heading). One pass over all points: a lane is tens of rollouts, and
+    a pass per rollout was a tenth of lane scoring's time."""
+    course, before, after = _courses(points, sizes)
+    theta = np.radians(course)
+    moves = np.any(after != before, axis=1)
     return np.column_stack([np.cos(theta), np.sin(theta)]) * moves[:, None]
 
 
@@ -171,7 +177,8 @@ def _lane_keys(polylines: Sequence[np.ndarray], course_m: float) -> np.ndarray:
     cloud = np.concatenate([np.asarray(p, np.float64) for p in polylines])
     keys = EARTH_RADIUS_M * unit_vectors(cloud)
     if course_m > 0:
-        keys = np.hstack([keys, course_m / 2 * _course_vectors(polylines)])
+        course = _course_vectors(cloud, [len(p) for p in polylines])
+        keys = np.hstack([keys, course_m / 2 * course])
     return keys
 
 

@@ -46,7 +46,7 @@ class Corridor:
     """(lon, lat) of the grid's lower-left corner."""
     step: np.ndarray
     """(dlon, dlat) cell size in degrees."""
-    _gap: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _lookup: tuple[np.ndarray, ...] | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_tracks(
@@ -106,15 +106,17 @@ class Corridor:
         _slide(position, proposed, coslat, _TURN_COS, _TURN_SIN, *self._grid(), out)
         return out
 
-    def _grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """What the compiled lookups read: the distance map (m), the grid's origin and cell
-        (degrees) and the cell's size in metres (east, north)."""
-        lat = self.origin[1] + self.step[1] * self.mask.shape[0] / 2
-        cell = self.step * M_PER_DEG * np.array([np.cos(np.radians(lat)), 1.0])
-        if self._gap is None:
-            self._gap = distance_transform_edt(~self.mask, sampling=(cell[1], cell[0]))
-        origin, step = (np.asarray(x, np.float64) for x in (self.origin, self.step))
-        return self._gap, origin, step, cell
+    def _grid(self) -> tuple[np.ndarray, ...]:
+        """What the compiled lookups read, made on first use and kept (a rollout looks up at
+        every step): the distance map (m), the grid's origin and cell (degrees) and the cell's
+        size in metres (east, north)."""
+        if self._lookup is None:
+            lat = self.origin[1] + self.step[1] * self.mask.shape[0] / 2
+            cell = self.step * M_PER_DEG * np.array([np.cos(np.radians(lat)), 1.0])
+            gap = distance_transform_edt(~self.mask, sampling=(cell[1], cell[0]))
+            origin, step = (np.asarray(x, np.float64) for x in (self.origin, self.step))
+            self._lookup = (gap, origin, step, cell)
+        return self._lookup
 
     def to_bytes(self) -> bytes:
         buf = io.BytesIO()
@@ -167,7 +169,7 @@ def _slide(  # pragma: no cover - compiled
         if _gap_one(qx, qy, gap, origin, step, cell) <= limit:
             out[k, 0], out[k, 1] = qx, qy
             continue
-        dx, dy = (qx - px) * coslat[k], (qy - py) * 1.0
+        dx, dy = (qx - px) * coslat[k], qy - py
         for t in range(len(cos_t)):  # clockwise turns of the course (x east, y north)
             cx = px + (dx * cos_t[t] + dy * sin_t[t]) / coslat[k]
             cy = py + (-dx * sin_t[t] + dy * cos_t[t])
