@@ -14,6 +14,7 @@ import pytest
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m, haversine_one_m
 from aisdati.preprocess import routes as routes_module
+from aisdati.preprocess.hdbscan_graph import hdbscan_labels, neighbour_graph
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.routes import (
     RouteSettings,
@@ -331,6 +332,44 @@ def test_neighbour_graph_hdbscan_finds_the_groups_of_all_pairs_hdbscan(ny_lines)
     assert adjusted_rand_score(exact, knn) > 0.95
     assert abs(knn.max() - exact.max()) <= 3 and abs((knn < 0).sum() - (exact < 0).sum()) < 25
     assert np.all(core > 0)
+
+
+@pytest.mark.parametrize("min_cluster_size", [2, 5, 9])
+def test_compiled_hdbscan_gives_scikit_learns_labels_on_the_neighbour_graph(
+    ny_lines, min_cluster_size
+):
+    """NY Harbor's endpoints as they are, snapped to a 200 m grid (many tracks share both ends:
+    tied distances) and twice over (every distance tied, as in a benchmark of copied days):
+    the labels of `hdbscan_labels` are scikit-learn's, label for label."""
+    from sklearn.cluster import HDBSCAN
+
+    _, lines = ny_lines
+    first = np.array([xy[0] for xy in lines])
+    last = np.array([xy[-1] for xy in lines])
+    x = np.hstack([earth_xyz_km(first[:, 0], first[:, 1]), earth_xyz_km(last[:, 0], last[:, 1])])
+    noise = 0
+    for points in (x, np.round(x / 0.2) * 0.2, np.vstack([x, x])):
+        graph, _ = neighbour_graph(points, 16)
+        model = HDBSCAN(
+            min_cluster_size=min_cluster_size,
+            min_samples=min_cluster_size - 1,
+            metric="precomputed",
+            copy=True,
+        )
+        want = model.fit_predict(graph)
+        got = hdbscan_labels(graph, min_cluster_size, min_cluster_size - 1)
+        np.testing.assert_array_equal(got, want)
+        assert want.max() >= 3  # groups to agree on
+        noise += int((want == -1).sum())
+    assert noise > 0  # and noise
+
+
+def test_compiled_hdbscan_refuses_a_graph_too_sparse_for_its_core_distances(ny_lines):
+    _, lines = ny_lines
+    x = np.array([xy[0] for xy in lines])
+    graph, _ = neighbour_graph(x, 3)
+    with pytest.raises(ValueError, match="at least 5 neighbours"):
+        hdbscan_labels(graph, 6, 5)
 
 
 def test_routes_of_the_large_scale_steps_keep_the_ferry_lanes(ny_lines, monkeypatch):

@@ -328,37 +328,13 @@ def _hdbscan_knn(x: np.ndarray, min_cluster_size: int) -> tuple[np.ndarray, np.n
     tree of the mutual reachability is exact within each connected part of the neighbour graph
     (its edges are short, so they are among the neighbours); the parts, every one of more than
     `NEIGHBOURS` points, are joined at a distance beyond any other, so each one is split (or
-    kept) by its own hierarchy. Returns the labels and the core distances."""
-    from scipy.sparse import coo_matrix, csgraph
-    from scipy.spatial import cKDTree
-    from sklearn.cluster import HDBSCAN
+    kept) by its own hierarchy. The labels are scikit-learn's HDBSCAN of that graph
+    (`hdbscan_labels`: the same steps compiled). Returns the labels and the core distances."""
+    from aisdati.preprocess.hdbscan_graph import hdbscan_labels, neighbour_graph
 
-    n = len(x)
-    k = min(n - 1, max(NEIGHBOURS, min_cluster_size))
-    dist, nbr = cKDTree(x).query(x, k + 1, workers=-1)
-    rows = np.repeat(np.arange(n), k + 1)
-    keep = nbr.ravel() != rows
-    i = np.minimum(rows[keep], nbr.ravel()[keep])
-    j = np.maximum(rows[keep], nbr.ravel()[keep])
-    # identical endpoints (distance 0) would read as no edge in a sparse matrix
-    data = np.maximum(dist.ravel()[keep], 1e-9)
-    # each edge once: one found from both ends has the same distance both ways
-    first = np.unique(i * n + j, return_index=True)[1]
-    i, j, data = i[first], j[first], data[first]
-    parts, part = csgraph.connected_components(coo_matrix((data, (i, j)), shape=(n, n)), False)
-    if parts > 1:
-        heads = np.unique(part, return_index=True)[1]
-        i, j = np.r_[i, heads[:-1]], np.r_[j, heads[1:]]
-        data = np.r_[data, np.full(parts - 1, 2.0 * float(data.max()) + 1.0)]
-    graph = coo_matrix((np.r_[data, data], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
-    graph.sort_indices()
-    model = HDBSCAN(
-        min_cluster_size=min_cluster_size,
-        min_samples=min_cluster_size - 1,
-        metric="precomputed",
-        copy=False,
-    )
-    return model.fit_predict(graph), dist[:, min_cluster_size - 1]
+    graph, dist = neighbour_graph(x, min(len(x) - 1, max(NEIGHBOURS, min_cluster_size)))
+    labels = hdbscan_labels(graph, min_cluster_size, min_cluster_size - 1)
+    return labels, dist[:, min_cluster_size - 1]
 
 
 def _medoid(dist: np.ndarray) -> int:
