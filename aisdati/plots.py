@@ -19,16 +19,22 @@ import numpy as np
 from aisdati.outdir import atomic_write_bytes
 
 
+def drawn(fig: plt.Figure, fmt: str = "png") -> bytes:
+    """The figure drawn in memory in format `fmt`, then closed: the bytes of a figure file,
+    which a worker process can hand back to the process that writes the outputs."""
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format=fmt, dpi=120, bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
 def save(fig: plt.Figure, path: Path) -> None:
     """Draw the figure in memory (in the format its suffix names), then write it whole under
     aisdati's one temporary name (`atomic_write_bytes`): a figure on disk is always complete,
     and a failed drawing leaves nothing."""
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format=path.suffix.lstrip("."), dpi=120, bbox_inches="tight")
-    finally:
-        plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, drawn(fig, path.suffix.lstrip(".")))
 
 
 def plain_text() -> contextlib.AbstractContextManager:

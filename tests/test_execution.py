@@ -202,7 +202,8 @@ def test_a_worker_killed_during_training_changes_no_model(kitimat, in_process, t
 
 def test_detect_on_two_workers_scores_as_in_process(kitimat, tmp_path):
     """Nearest models of every route (no learning: fast), then `detect --cluster all` in this
-    process and on a local cluster of 2 workers: the same scores, row for row."""
+    process and on a local cluster of 2 workers: the same scores, row for row, and the same
+    map and evidence figures byte for byte (on the cluster, the workers draw them)."""
     models = tmp_path / "models"
     trained = run(
         "train", "--cluster", "routes", "--method", "nearest", "--data", kitimat,
@@ -210,7 +211,7 @@ def test_detect_on_two_workers_scores_as_in_process(kitimat, tmp_path):
     )  # fmt: skip
     assert trained.exit_code == 0, trained.output
     assert sorted(p.name for p in models.glob("route-*-nearest.json"))
-    scores = {}
+    scores, figures = {}, {}
     for workers in ("1", "2"):
         out = tmp_path / f"detect-{workers}"
         result = run(
@@ -219,8 +220,13 @@ def test_detect_on_two_workers_scores_as_in_process(kitimat, tmp_path):
         )  # fmt: skip
         assert result.exit_code == 0, result.output
         scores[workers] = pd.read_parquet(out / "scores.parquet")
+        figures[workers] = {
+            p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*.png"))
+        }
     assert len(scores["1"]) > 0
     pd.testing.assert_frame_equal(scores["1"], scores["2"])
+    assert "map.png" in figures["1"] and any(k.startswith("evidence/") for k in figures["1"])
+    assert figures["1"] == figures["2"]
 
 
 def test_scores_in_chunks_are_the_scores_of_the_whole_set(kitimat, in_process, cluster):

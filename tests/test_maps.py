@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import sys
 import time
 
@@ -136,38 +137,35 @@ def _channel_tracks() -> list[np.ndarray]:
     return [np.column_stack([np.full_like(lat, -129.205 + d), lat]) for d in (-0.004, 0.004)]
 
 
-def test_png_map_draws_land_at_fjord_scale(tmp_path):
+def test_png_map_draws_land_at_fjord_scale():
     tracks = _channel_tracks()
     rollouts = [t + np.array([0.01, 0.0]) for t in tracks]
     lo, hi = np.array(KITIMAT_BOX[:2]), np.array(KITIMAT_BOX[2:])
-    path = tmp_path / "map.png"
-    plot_detection_map(
+    png = plot_detection_map(
         tracks,
         rollouts,
         np.array([True, False]),
         np.array([tracks[0][20], tracks[1][20]]),
         [(lo, hi)],
-        path,
         title="Douglas Channel",
     )
-    img = mpimg.imread(path)
+    img = mpimg.imread(io.BytesIO(png), format="png")
     assert _share(img, LAND_COLOR) > 0.15  # the old 1:110m outline drew no land here
     assert _share(img, WATER_COLOR) > 0.05
 
 
-def test_track_evidence_figure(tmp_path):
+def test_track_evidence_figure():
     track = _channel_tracks()[0]
     rollout = track + np.linspace(0, 0.03, len(track))[:, None] * [1.0, 0.0]
     profile = np.linspace(0, 0.03, len(track)) * 66_000
-    path = tmp_path / "evidence.png"
-    plot_track_evidence(track, rollout, profile, (25, 35), "track 7: drifts east", path)
-    img = mpimg.imread(path)
+    png = plot_track_evidence(track, rollout, profile, (25, 35), "track 7: drifts east")
+    img = mpimg.imread(io.BytesIO(png), format="png")
     assert img.shape[1] > img.shape[0] and _share(img, LAND_COLOR) > 0.05
-    assert not list(tmp_path.glob(".*"))  # no temporary file left behind
     hours = np.arange(len(track)) / 6
-    plot_track_evidence(track, None, profile, None, "no rollout", path, hours=hours)
+    png = plot_track_evidence(track, None, profile, None, "no rollout", hours=hours)
+    assert png.startswith(b"\x89PNG")
     with pytest.raises(ValueError, match="one value per track point"):
-        plot_track_evidence(track, rollout, profile[:-1], None, "bad", path)
+        plot_track_evidence(track, rollout, profile[:-1], None, "bad")
 
 
 def test_html_map_layers(tmp_path):

@@ -95,7 +95,7 @@ def run(
         where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"
         with spinner(err_console if as_json else console, where, show=not quiet):
             result = detect(settings, runner)
-            files = [outputs.final(f) for f in write_outputs(result, outputs.folder)]
+            files = [outputs.final(f) for f in write_outputs(result, outputs.folder, runner)]
         outputs.commit()
     if as_json:
         doc = report_dict(result)

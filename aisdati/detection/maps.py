@@ -7,7 +7,7 @@ flagged track, what it was compared with and its deviation profile, to say why i
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -15,7 +15,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from aisdati.detection.webmap import html_detection_map
-from aisdati.plots import draw_land, plain_text, save, set_map_limits
+from aisdati.execution import InProcess, Runner
+from aisdati.outdir import atomic_write_bytes
+from aisdati.plots import draw_land, drawn, plain_text, set_map_limits
 
 if TYPE_CHECKING:
     from aisdati.detection.run import Detection
@@ -32,14 +34,13 @@ def plot_detection_map(
     flagged: np.ndarray,
     max_dev: np.ndarray,
     regions: Sequence[tuple[np.ndarray, np.ndarray]],
-    path: Path,
     title: str = "",
     evidence_label: str = "nearest rollout",
-) -> None:
-    """Test tracks grey, flagged tracks red with their nearest rollout blue and a cross where they
-    deviate most, the models' regions dashed, over the offline coastline (aisdati.coastline, cut
-    to the map's box at any scale; lon/lat, the longitude axis stretched by 1/cos(latitude) so
-    that shapes are true)."""
+) -> bytes:
+    """map.png (its bytes): test tracks grey, flagged tracks red with their nearest rollout blue
+    and a cross where they deviate most, the models' regions dashed, over the offline coastline
+    (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
+    stretched by 1/cos(latitude) so that shapes are true)."""
     fig, ax = plt.subplots(figsize=(9, 7.5))
     for xy, f in zip(tracks, flagged, strict=True):
         if not f:
@@ -73,7 +74,7 @@ def plot_detection_map(
     ]
     ax.legend(handles=handles, fontsize=8, loc="best")
     ax.set_title(title or "DATI anomalies")
-    save(fig, path)
+    return drawn(fig)
 
 
 # ------------------------------------------------------------------------------ map.html
@@ -94,7 +95,6 @@ def plot_track_evidence(
     profile: np.ndarray,
     stretch: tuple[int, int] | None,
     title: str,
-    path: Path,
     *,
     hours: np.ndarray | None = None,
     profile_label: str = "deviation from the rollout (m)",
@@ -102,8 +102,8 @@ def plot_track_evidence(
     pad_deg: float = 0.01,
     context: Sequence[np.ndarray] = (),
     evidence_label: str = "rollout",
-) -> None:
-    """Why one track stands out, in two panels.
+) -> bytes:
+    """Why one track stands out, in two panels (a PNG's bytes).
 
     Left, a map: the coastline (at the map's scale), other tracks for context (`context`, light
     grey), the track (black, a green dot at its start), its rollout (blue dashed, when given),
@@ -113,7 +113,7 @@ def plot_track_evidence(
     rollout point, a teacher-forced step error) against the point index, or against `hours`
     ([n] hours since the start) when given, with the stretch shaded.
 
-    `stretch` is a Python slice (i0, i1): points i0..i1-1. Saved through a temporary name."""
+    `stretch` is a Python slice (i0, i1): points i0..i1-1."""
     track = np.asarray(track, dtype=float)
     profile = np.asarray(profile, dtype=float)
     n = len(track)
@@ -142,7 +142,7 @@ def plot_track_evidence(
     ax.legend(fontsize=8, loc="best")
     _profile_panel(axp, x, profile, stretch, peak, profile_label, hours is None)
     fig.suptitle(title)
-    save(fig, path)
+    return drawn(fig)
 
 
 def _evidence_map(
@@ -231,24 +231,41 @@ def deviation_stretch(profile: np.ndarray) -> tuple[int, int]:
     return a, b
 
 
-def write_maps(result: Detection, out: Path) -> list[Path]:
-    """map.png, map.html and the evidence figures of a detection, in `out`."""
+FigureJob = tuple[Callable[..., bytes], tuple, dict[str, Any]]
+"""A figure to draw: (function returning its PNG, positional arguments, keyword arguments)."""
+
+
+def figure_png(figure: FigureJob) -> bytes:
+    """One drawing task of `write_maps`: the figure's PNG."""
+    draw, args, kwargs = figure
+    return draw(*args, **kwargs)
+
+
+def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> list[Path]:
+    """map.png, map.html and the evidence figures of a detection, in `out`. The PNGs are drawn
+    as tasks of `runner` (default: here), which hand back their bytes: on a cluster the
+    figures are drawn side by side, and only this process writes the outputs."""
     flagged = result.scores["flagged"].to_numpy()
     stretches = [deviation_stretch(p) for p in result.profiles]
     title = _map_title(result)
     tracks = [t.positions for t in result.tracks]
     regions = [m.bounds for m in result.models]
-    png = out / "map.png"
-    plot_detection_map(
-        tracks,
-        result.rollouts,
-        flagged,
-        result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy(),
-        regions,
-        png,
-        title=title,
-        evidence_label=result.evidence_kind,
-    )
+    max_dev = result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy()
+    figures: list[tuple[Path, FigureJob]] = [
+        (
+            out / "map.png",
+            (
+                plot_detection_map,
+                (tracks, result.rollouts, flagged, max_dev, regions),
+                {"title": title, "evidence_label": result.evidence_kind},
+            ),
+        ),
+        *evidence_figures(result, out / "evidence", stretches),
+    ]
+    # map.png draws every test track (at 700 tracks, eight evidence figures' time): started
+    # first on a cluster, it does not end last
+    costs = [float(len(figures)), *([1.0] * (len(figures) - 1))]
+    pngs = (runner or InProcess()).map(figure_png, [job for _, job in figures], costs=costs)
     page = out / "map.html"
     html_detection_map(
         tracks,
@@ -264,14 +281,19 @@ def write_maps(result: Detection, out: Path) -> list[Path]:
         ],
         title=title,
     )
-    return [png, page, *evidence_figures(result, out / "evidence", stretches)]
+    if len(figures) > 1:
+        (out / "evidence").mkdir(parents=True, exist_ok=True)
+    for (path, _), png in zip(figures, pngs, strict=True):
+        atomic_write_bytes(path, png)
+    paths = [path for path, _ in figures]
+    return [paths[0], page, *paths[1:]]
 
 
 def evidence_figures(
     result: Detection, folder: Path, stretches: list[tuple[int, int]]
-) -> list[Path]:
-    """evidence/track-<id>.png for the highest-ranked flagged tracks: the track, what it was
-    compared with, the stretch of largest deviation and the deviation profile along it."""
+) -> list[tuple[Path, FigureJob]]:
+    """evidence/track-<id>.png for the highest-ranked flagged tracks, to draw: the track, what
+    it was compared with, the stretch of largest deviation and the deviation profile along it."""
     s = result.settings
     label = "one-step prediction error (m)" if s and s.score == "step" else "deviation (m)"
     if s and s.score == "lane":
@@ -280,28 +302,23 @@ def evidence_figures(
         label = "distance to the nearest training track (m)"
     rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
     index = {t.track_id: i for i, t in enumerate(result.tracks)}
-    files = []
-    if len(rows):
-        folder.mkdir(parents=True, exist_ok=True)
+    figures = []
     for row in rows.itertuples():
         i = index[int(row.track_id)]
         track = result.tracks[i]
-        hours = np.r_[0.0, np.cumsum(track.dts)]
-        path = folder / f"track-{int(row.track_id)}.png"
-        plot_track_evidence(
-            track.positions,
-            result.rollouts[i],
-            result.profiles[i],
-            stretches[i],
+        title = (
             f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
-            f"score {row.score_m / 1000:.2f} km, model {row.model}",
-            path,
-            hours=hours,
-            profile_label=label,
-            evidence_label=result.evidence_kind,
+            f"score {row.score_m / 1000:.2f} km, model {row.model}"
         )
-        files.append(path)
-    return files
+        args = (track.positions, result.rollouts[i], result.profiles[i], stretches[i], title)
+        kwargs = {
+            "hours": np.r_[0.0, np.cumsum(track.dts)],
+            "profile_label": label,
+            "evidence_label": result.evidence_kind,
+        }
+        path = folder / f"track-{int(row.track_id)}.png"
+        figures.append((path, (plot_track_evidence, args, kwargs)))
+    return figures
 
 
 def _track_props(row: Any) -> dict[str, Any]:

@@ -12,6 +12,7 @@ import pyarrow as pa
 
 from aisdati.ais.card import card_warnings
 from aisdati.detection.run import Detection
+from aisdati.execution import Runner
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.ashore import AshoreCheck
 
@@ -74,9 +75,10 @@ SCORE_DEFINITIONS = {
 """report.json's `score_definition`: what the score of each kind measures."""
 
 
-def write_outputs(result: Detection, out: Path) -> list[Path]:
+def write_outputs(result: Detection, out: Path, runner: Runner | None = None) -> list[Path]:
     """Every output of a detection in `out` (the command's staging folder: `OutputSet`), each
-    written whole or not at all, report.json last; returns them."""
+    written whole or not at all, report.json last; returns them. The figures are drawn as tasks
+    of `runner` (`write_maps`)."""
     from aisdati.detection.maps import write_maps  # matplotlib only when drawing
 
     out.mkdir(parents=True, exist_ok=True)
@@ -95,7 +97,7 @@ def write_outputs(result: Detection, out: Path) -> list[Path]:
     path = out / "anomalies.geojson"
     atomic_write_bytes(path, json.dumps(anomalies_geojson(result)).encode())
     files.append(path)
-    files += write_maps(result, out)
+    files += write_maps(result, out, runner)
     if result.metrics is not None:
         path = out / "metrics.json"
         atomic_write_bytes(path, json.dumps(result.metrics, indent=2).encode())
