@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
+from scipy.sparse import block_diag
 
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m, haversine_one_m
@@ -364,12 +365,15 @@ def test_compiled_hdbscan_gives_scikit_learns_labels_on_the_neighbour_graph(
     assert noise > 0  # and noise
 
 
-def test_compiled_hdbscan_refuses_a_graph_too_sparse_for_its_core_distances(ny_lines):
+def test_compiled_hdbscan_refuses_a_graph_too_sparse_or_in_parts(ny_lines):
     _, lines = ny_lines
     x = np.array([xy[0] for xy in lines])
     graph, _ = neighbour_graph(x, 3)
     with pytest.raises(ValueError, match="at least 5 neighbours"):
         hdbscan_labels(graph, 6, 5)
+    apart = block_diag([graph, graph], format="csr")  # two parts, no edge between them
+    with pytest.raises(ValueError, match="not connected"):
+        hdbscan_labels(apart, 3, 2)
 
 
 def test_routes_of_the_large_scale_steps_keep_the_ferry_lanes(ny_lines, monkeypatch):

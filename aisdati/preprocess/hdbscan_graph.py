@@ -11,7 +11,7 @@ tree, the single-linkage tree, the condensed tree, the clusters' stabilities and
 mass selection. Every step keeps the library's order (the spanning tree's edges sorted by the
 same `np.argsort`, the trees walked breadth first, stabilities summed row by row), so tied
 distances (vessels that start and end at the same berths) give the same labels too:
-`tests/test_hdbscan_graph.py` compares both on real and tie-heavy endpoints.
+`tests/test_routes.py` compares both on real and tie-heavy endpoints.
 """
 
 from __future__ import annotations
@@ -61,6 +61,8 @@ def hdbscan_labels(graph: csr_matrix, min_cluster_size: int, min_samples: int) -
         csr_matrix((reach, graph.indices, graph.indptr), shape=graph.shape)
     )
     a, b = tree.nonzero()
+    if len(a) != n - 1:
+        raise ValueError("the graph is not connected: its points have no single hierarchy")
     height = tree.data
     order = np.argsort(height)  # the library's sort, ties and all
     left, right, size = _single_linkage(a[order].astype(np.int64), b[order].astype(np.int64))
