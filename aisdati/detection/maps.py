@@ -251,6 +251,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
     tracks = [t.positions for t in result.tracks]
     regions = [m.bounds for m in result.models]
     max_dev = result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy()
+    evidence = out / "evidence"
     figures: list[tuple[Path, FigureJob]] = [
         (
             out / "map.png",
@@ -260,7 +261,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
                 {"title": title, "evidence_label": result.evidence_kind},
             ),
         ),
-        *evidence_figures(result, out / "evidence", stretches),
+        *evidence_figures(result, evidence, stretches),
     ]
     # map.png draws every test track (at 700 tracks, eight evidence figures' time): started
     # first on a cluster, it does not end last
@@ -282,7 +283,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
         title=title,
     )
     if len(figures) > 1:
-        (out / "evidence").mkdir(parents=True, exist_ok=True)
+        evidence.mkdir(parents=True, exist_ok=True)
     for (path, _), png in zip(figures, pngs, strict=True):
         atomic_write_bytes(path, png)
     paths = [path for path, _ in figures]

@@ -40,6 +40,7 @@ from rich.progress import Progress
 
 from aisdati.errors import UserError
 from aisdati.execution.runner import Execution, InProcess, InThreads, Runner, open_runner
+from aisdati.memory import hand_back
 from aisdati.outdir import OutputSet, hold_lock, staged_outputs
 from aisdati.preprocess.inputs import Source, sources_of
 from aisdati.preprocess.output import (
@@ -194,9 +195,9 @@ def _run(
             counts.merge(vessel.counts)
         parts, shapes = _write_points(on, tasks, vessels, points.tmp.absolute(), settings, progress)
         del vessels  # their shapes are joined: one copy, not two, through route clustering
-        # Arrow's allocator keeps what the reading and per-vessel stages freed (in one process,
-        # ~50 MiB at 100 M rows); route clustering's peak comes next, so hand it back first
-        pa.default_memory_pool().release_unused()
+        # the reading and per-vessel stages' freed memory (`aisdati.memory`): route clustering's
+        # peak comes next, so hand it back first
+        hand_back()
         if not parts:
             raise UserError(no_tracks_message(counts))
         stage_seconds["vessel_segment_cluster"] = (

@@ -69,6 +69,7 @@ from numba import njit
 
 from aisdati.dtw import pairs_mean_dtw_m, prepare_lonlat
 from aisdati.geo import EARTH_RADIUS_M, arc_m, haversine_m, haversine_one_m, unit_vectors
+from aisdati.memory import hand_back
 from aisdati.tracks.schema import GEO_METADATA, ROUTE_COLUMNS, ROUTE_PREFIX, ROUTES_SCHEMA
 
 
@@ -509,6 +510,7 @@ def cluster_shapes(
 
     first, last = tracks.first, tracks.last
     groups = endpoint_groups(first, last, settings)
+    hand_back()  # what the density clustering freed, before the shapes' unit vectors are made
     lap("endpoints")
     shapes = ShapeDistance(tracks.resampled)  # after: the density clustering's peak without it
     rng = np.random.default_rng(settings.seed)
