@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 
 from aisdati.ais.source import build_source, make_env, track_reference
 from aisdati.detection.run import flag
 from aisdati.dtw import batch_mean_dtw_m, dtw_path_length, matched_distances
+from aisdati.errors import UserError
 from aisdati.geo import haversine_m, spherical_step
 from aisdati.tracks.store import load_tracks, read_track_table
 
@@ -42,6 +46,29 @@ def test_perfect_policy_reproduces_real_tracks(processed):
         assert info["dtw"] == pytest.approx(0.0, abs=1e-6)
         np.testing.assert_allclose(env.position, track.positions[-1], atol=1e-9)
         assert set(rewards) == {1.0}
+
+
+def test_tracks_load_in_time_order_from_points_in_any_order(processed, tmp_path):
+    """The ingest's points written back as one file with their rows shuffled: each track's
+    positions and time steps are those of its own reports sorted by time (pandas, per track),
+    in the order the ids are asked for."""
+    points = pq.read_table(processed / "points.parquet").to_pandas()
+    shuffled = points.sample(frac=1.0, random_state=0).reset_index(drop=True)
+    data = tmp_path / "data"
+    data.mkdir()
+    shutil.copy(processed / "tracks.parquet", data / "tracks.parquet")
+    pq.write_table(pa.Table.from_pandas(shuffled, preserve_index=False), data / "points.parquet")
+    ids = read_track_table(processed)["track_id"].tolist()[::-1]
+    for tid, track in zip(ids, load_tracks(data, ids), strict=True):
+        mine = points[points["track_id"] == tid].sort_values("time")
+        hours = mine["time"].diff().dt.total_seconds().to_numpy()[1:] / 3600.0
+        assert track.track_id == tid
+        np.testing.assert_array_equal(track.positions, mine[["lon", "lat"]].to_numpy())
+        np.testing.assert_allclose(track.dts, hours, rtol=1e-12)
+    shuffled["time"] = shuffled["time"].astype(str)
+    pq.write_table(pa.Table.from_pandas(shuffled, preserve_index=False), data / "points.parquet")
+    with pytest.raises(UserError, match="not a timestamp"):
+        load_tracks(data, ids)
 
 
 @pytest.mark.parametrize("lat", [0.0, 25.0, 40.7, 60.0])
