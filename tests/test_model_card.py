@@ -78,6 +78,21 @@ def test_the_state_width_must_match_the_lane_configuration():
         (("rule", "max_dt_h"), True, "rule.max_dt_h must be a finite number"),
         (("seeds",), [0, 1], "seeds must be a list of 1, got 2 items"),
         (("kind",), "synthetic", "is not an AIS model card"),
+        (
+            ("data", "track_keys"),
+            [[366000001, "2015-01-01T00:00:00Z"], [366000002, "2015-01-02T00:00:00Z", "noon"]],
+            "data.track_keys[1][2] must be an ISO 8601 time, got 'noon'",
+        ),
+        (
+            ("data", "track_keys"),
+            [[366000001, 20150101], [366000002, "2015-01-02T00:00:00Z"]],
+            "data.track_keys[0][1] must be an ISO 8601 time, got 20150101",
+        ),
+        (
+            ("data", "track_keys"),
+            [[366000001, "2015-01-01T00:00:00Z"], [366000002, "2015-01-02T05:00", "2015-01-02"]],
+            "data.track_keys[1] must be a start before its end",
+        ),
     ],
 )
 def test_card_errors_name_the_field(path, value, message):

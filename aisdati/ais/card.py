@@ -478,29 +478,32 @@ def _read_training(f: CardFields) -> TrainingReport:
 # ------------------------------------------------------------------------- the training tracks
 def parse_track_keys(keys: Sequence[Any], fields: CardFields | None = None) -> pd.DataFrame:
     """`data.track_keys` ([mmsi, "start", "end"] per training track; "end" may be missing) as a
-    frame of mmsi, start and end (UTC)."""
+    frame of mmsi, start and end (UTC). The times are parsed together (ISO 8601): one by one,
+    pandas took 0.4 ms a key, and every model load reads its card's keys."""
     f = fields or CardFields({}, "?")
-    mmsi, start, end = [], [], []
+    mmsi, texts = [], []
     for i, key in enumerate(keys):
         name = f"data.track_keys[{i}]"
         if not isinstance(key, list) or len(key) not in (2, 3):
             raise f.fail(name, '[mmsi, "start", "end"]', key)
         mmsi.append(f.integer(f"{name}[0]", 1, MAX_MMSI, value=key[0]))
-        times = []
         for j, text in enumerate(key[1:], start=1):
-            ok = isinstance(text, str)
-            stamp = pd.to_datetime(text, utc=True, errors="coerce") if ok else None
-            if stamp is None or pd.isna(stamp):
+            if not isinstance(text, str):
                 raise f.fail(f"{name}[{j}]", "an ISO 8601 time", text)
-            times.append(stamp)
-        if len(times) == 2 and times[1] < times[0]:
-            raise f.fail(name, "a start before its end", key)
-        start.append(times[0])
-        end.append(times[-1])
-    return pd.DataFrame(
-        {"mmsi": np.asarray(mmsi, np.int64), "start": pd.DatetimeIndex(start, tz="UTC"),
-         "end": pd.DatetimeIndex(end, tz="UTC")}
-    )  # fmt: skip
+        texts += [key[1], key[-1]]
+    stamps = pd.DatetimeIndex(
+        pd.to_datetime(pd.Series(texts, dtype=object), utc=True, errors="coerce", format="ISO8601")
+    )
+    if stamps.isna().any():
+        at = int(np.flatnonzero(stamps.isna())[0])
+        key = keys[at // 2]
+        j = 1 if at % 2 == 0 else len(key) - 1
+        raise f.fail(f"data.track_keys[{at // 2}][{j}]", "an ISO 8601 time", key[j])
+    start, end = stamps[0::2], stamps[1::2]
+    if (end < start).any():
+        i = int(np.flatnonzero(end < start)[0])
+        raise f.fail(f"data.track_keys[{i}]", "a start before its end", keys[i])
+    return pd.DataFrame({"mmsi": np.asarray(mmsi, np.int64), "start": start, "end": end})
 
 
 def track_keys(tracks: pd.DataFrame) -> list[list[Any]]:
