@@ -172,13 +172,10 @@ def load_tracks(data_dir: Path, track_ids: Sequence[int]) -> list[Track]:
     track, then time; points of one time keep their order in the file) instead of pandas work per
     track, which took a millisecond a track: 2 s for a thousand, minutes for a month of a coast."""
     points_path, _ = _paths(data_dir)
-    rows = {
-        int(r.track_id): r
-        for r in read_track_table(data_dir)[
-            ["track_id", "mmsi", "start", "cluster", "route"]
-        ].itertuples(index=False)
-    }
     ids = [int(i) for i in track_ids]
+    table = read_track_table(data_dir)[["track_id", "mmsi", "start", "cluster", "route"]]
+    asked = table[table["track_id"].isin(ids)]
+    rows = {int(r.track_id): r for r in asked.itertuples(index=False)}
     try:
         points = pq.read_table(
             points_path,
