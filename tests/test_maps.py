@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import io
+import json
 import sys
 import time
 
 import matplotlib.image as mpimg
 import numpy as np
+import pandas as pd
 import pytest
 from shapely.geometry import MultiPolygon, box
 
 from aisdati import coastline
-from aisdati.detection.maps import plot_detection_map, plot_track_evidence
+from aisdati.detection import maps
+from aisdati.detection.maps import map_subset, plot_detection_map, plot_track_evidence
 from aisdati.detection.webmap import (
     LAYER_BEST_ROLLOUTS,
     LAYER_COAST,
@@ -205,3 +208,41 @@ def test_html_map_layers(tmp_path):
         assert name in page
     assert "injected turn" in page and "Kitimat &lt;test&gt;" in page
     assert "L.control.layers" in page
+
+
+def test_maps_draw_every_flagged_track_and_at_most_the_cap_of_the_others():
+    flagged = np.zeros(12_003, dtype=bool)
+    flagged[[5, 6_000, 12_002]] = True
+    drawn = map_subset(flagged, 1_000)
+    assert set(np.flatnonzero(flagged)) <= set(drawn.tolist())
+    others = drawn[~flagged[drawn]]
+    assert 900 <= len(others) <= 1_000 and np.all(np.diff(drawn) > 0)
+    assert others[0] == 0 and others[-1] > 11_000  # evenly over the whole set
+    np.testing.assert_array_equal(map_subset(flagged[:500], 1_000), np.arange(500))
+
+
+def test_a_detection_over_the_cap_says_how_many_tracks_its_maps_draw(cli, kitimat, tmp_path):
+    """Kitimat's tracks judged by `nearest` route models, the maps' cap set to 2: map.html holds
+    every flagged track and 2 of the others, and its title says so."""
+    models = tmp_path / "models"
+    trained = cli("train", "--cluster", "routes", "--method", "nearest", "--data", kitimat,
+                  "--out", models, "--quiet")  # fmt: skip
+    assert trained.exit_code == 0, trained.output
+    out = tmp_path / "report"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(maps, "MAP_UNFLAGGED_TRACKS", 2)
+        result = cli(
+            "detect", "--data", kitimat, "--models", models, "--method", "nearest",
+            "--cluster", "all", "--top-percent", "10", "--out", out, "--quiet",
+        )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    scores = pd.read_parquet(out / "scores.parquet")
+    others = int((~scores["flagged"]).sum())
+    assert others > 2
+    page = (out / "map.html").read_text()
+    assert f"2 of {others:,} others drawn" in page
+    payload = page.split('id="aisdati-data">', 1)[1].split("</script>", 1)[0]
+    layers = json.loads(payload.replace("<\\/", "</"))["layers"]
+    assert len(layers["tracks"]["features"]) == 2
+    assert len(layers["flagged"]["features"]) == int(scores["flagged"].sum())
+    assert (out / "map.png").stat().st_size > 0

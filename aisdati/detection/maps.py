@@ -24,6 +24,19 @@ if TYPE_CHECKING:
 
 EVIDENCE_FIGURES = 20
 """At most this many flagged tracks (the highest ranked) get an evidence figure."""
+MAP_UNFLAGGED_TRACKS = 5_000
+"""At most this many unflagged tracks are drawn on map.png and map.html (evenly: every k-th in
+the scores' order); flagged tracks are always drawn, all of them. A month of a coast holds
+hundreds of thousands of tracks: all of them would make the page gigabytes and the PNG
+minutes, and the grey context reads the same from a few thousand."""
+
+
+def map_subset(flagged: np.ndarray, most: int) -> np.ndarray:
+    """Indices of the tracks the maps draw: every flagged one, and of the unflagged ones all,
+    or every k-th when there are more than `most`."""
+    normal = np.flatnonzero(~flagged)
+    stride = -(-len(normal) // most) if len(normal) > most else 1
+    return np.sort(np.r_[np.flatnonzero(flagged), normal[::stride]])
 
 
 # ------------------------------------------------------------------------------- map.png
@@ -41,10 +54,12 @@ def plot_detection_map(
     and a cross where they deviate most, the models' regions dashed, over the offline coastline
     (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
     stretched by 1/cos(latitude) so that shapes are true)."""
+    from matplotlib.collections import LineCollection
+
     fig, ax = plt.subplots(figsize=(9, 7.5))
-    for xy, f in zip(tracks, flagged, strict=True):
-        if not f:
-            ax.plot(xy[:, 0], xy[:, 1], color="0.55", lw=0.6, alpha=0.7, zorder=1)
+    normal = [xy for xy, f in zip(tracks, flagged, strict=True) if not f]
+    # one artist for all: fast for thousands of tracks
+    ax.add_collection(LineCollection(normal, colors="0.55", linewidths=0.6, alpha=0.7, zorder=1))
     for xy, roll, f in zip(tracks, rollouts, flagged, strict=True):
         if f:
             ax.plot(roll[:, 0], roll[:, 1], color="tab:blue", lw=1.0, zorder=2)
@@ -248,16 +263,20 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
     flagged = result.scores["flagged"].to_numpy()
     stretches = [deviation_stretch(p) for p in result.profiles]
     title = _map_title(result)
-    tracks = [t.positions for t in result.tracks]
     regions = [m.bounds for m in result.models]
-    max_dev = result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy()
+    drawn = map_subset(flagged, MAP_UNFLAGGED_TRACKS)
+    if len(drawn) < len(flagged):
+        title += f"; {int((~flagged[drawn]).sum()):,} of {int((~flagged).sum()):,} others drawn"
+    tracks = [result.tracks[i].positions for i in drawn]
+    rollouts = [result.rollouts[i] for i in drawn]
+    max_dev = result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy()[drawn]
     evidence = out / "evidence"
     figures: list[tuple[Path, FigureJob]] = [
         (
             out / "map.png",
             (
                 plot_detection_map,
-                (tracks, result.rollouts, flagged, max_dev, regions),
+                (tracks, rollouts, flagged[drawn], max_dev, regions),
                 {"title": title, "evidence_label": result.evidence_kind},
             ),
         ),
@@ -268,11 +287,12 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
     costs = [float(len(figures)), *([1.0] * (len(figures) - 1))]
     pngs = (runner or InProcess()).map(figure_png, [job for _, job in figures], costs=costs)
     page = out / "map.html"
+    rows = list(result.scores.itertuples())
     html_detection_map(
         tracks,
-        result.rollouts,
-        [_track_props(r) for r in result.scores.itertuples()],
-        flagged,
+        rollouts,
+        [_track_props(rows[i]) for i in drawn],
+        flagged[drawn],
         regions,
         page,
         stretches=[
