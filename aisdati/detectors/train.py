@@ -87,8 +87,10 @@ def training_costs(settings: Sequence[TrainSettings]) -> list[float]:
     """Each model's expected training work per member, for the order the tasks start in: the
     mean report count of its tracks (a DATI episode sails one track, and every route has the
     same episode budget). Only an order: 1 where the tracks cannot be read here. Each ingest
-    folder's track table is read once."""
+    folder's track table is read once, and its routes' means taken in one pass (a selection
+    per route took 9 ms: 99 s before the first task for the 11,038 routes of 100 M rows)."""
     tables: dict[Path, pd.DataFrame | None] = {}
+    route_means: dict[Path, dict[str, float]] = {}
     out = []
     for s in settings:
         if s.data_dir is not None and s.data_dir not in tables:
@@ -96,13 +98,28 @@ def training_costs(settings: Sequence[TrainSettings]) -> list[float]:
                 tables[s.data_dir] = read_track_table(s.data_dir)
             except UserError:
                 tables[s.data_dir] = None
+            route_means[s.data_dir] = _route_means(tables[s.data_dir])
         table = tables.get(s.data_dir) if s.data_dir is not None else None
+        if s.data_dir is not None and s.cluster in route_means[s.data_dir]:
+            out.append(route_means[s.data_dir][s.cluster])
+            continue
         try:
             chosen = None if table is None else select_cluster(table, s.cluster, s.data_dir, 1)
         except UserError:
             chosen = None
         out.append(1.0 if chosen is None else float(chosen["n_points"].mean()))
     return out
+
+
+def _route_means(table: pd.DataFrame | None) -> dict[str, float]:
+    """The mean report count of each route's tracks in a track table."""
+    if table is None or "route" not in table.columns:
+        return {}
+    points = table["n_points"].to_numpy()
+    return {
+        str(route): float(points[rows].mean())
+        for route, rows in table.groupby("route").indices.items()
+    }
 
 
 def train_task(
