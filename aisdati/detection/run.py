@@ -39,6 +39,7 @@ from aisdati.ais.card import training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import score_each
+from aisdati.detectors.od import track_ends
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.tracks.ashore import AshoreCheck
@@ -182,10 +183,11 @@ def is_area_model(model: Detector) -> bool:
     return model.card.cluster == AREA
 
 
-def reach_km(model: Detector, tracks: Sequence[Track]) -> np.ndarray:
-    """How far (km) each track is from being bound the way the model's training tracks are
-    (`Detector.od_m`: start and end, or start alone for older cards, the paper's rule)."""
-    return model.od_m([t.positions for t in tracks]) / 1000.0
+def reach_km(model: Detector, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """How far (km) each track (its first and last positions) is from being bound the way the
+    model's training tracks are (`Detector.od_m`: start and end, or start alone for older
+    cards, the paper's rule)."""
+    return model.od_m(starts, ends) / 1000.0
 
 
 def route_test_tracks(
@@ -197,7 +199,8 @@ def route_test_tracks(
     nearest in reach; a track no such model reaches goes to an area model; with none, it is
     listed as not judged, with the reason. `track_ids` given: the nearest model judges."""
     n = len(tracks)
-    reach = np.stack([reach_km(m, tracks) for m in models], axis=1)
+    starts, ends = track_ends([t.positions for t in tracks])
+    reach = np.stack([reach_km(m, starts, ends) for m in models], axis=1)
     trained_any = np.zeros(n, dtype=bool)
     if not settings.track_ids:
         for m, model in enumerate(models):

@@ -221,14 +221,13 @@ class Detector(ABC):
         ends = self.card.data.end_points
         return None if ends is None else np.asarray(ends, np.float64).reshape(-1, 2)
 
-    def od_m(self, positions: Sequence[np.ndarray]) -> np.ndarray:
-        """Each track's origin-destination distance (m) to the training tracks
-        (`aisdati.detectors.od`); for a card from before end points were recorded, the
-        distance between starts (the paper's rule for which model judges a track)."""
-        starts = np.array([p[0] for p in positions])
+    def od_m(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Each track's origin-destination distance (m) to the training tracks, from its first
+        and last positions (`aisdati.detectors.od.track_ends`); for a card from before end
+        points were recorded, the distance between starts (the paper's rule for which model
+        judges a track)."""
         if self.end_points is None:
             return od_distances(starts, starts, self.start_points, self.start_points)
-        ends = np.array([p[-1] for p in positions])
         return od_distances(starts, ends, self.start_points, self.end_points)
 
     @property

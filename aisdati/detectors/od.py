@@ -13,6 +13,8 @@ in metres (`area = lane + od_excess`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from aisdati.geo import haversine_m
@@ -35,6 +37,15 @@ def od_pairs_m(
     )
     d_end = haversine_m(ends[:, None, 0], ends[:, None, 1], train_ends[:, 0], train_ends[:, 1])
     return np.maximum(d_start, d_end)
+
+
+def track_ends(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """[N, 2] first and [N, 2] last positions of tracks: taken once for every model that asks
+    how far each track is from its training tracks (a list pass per model was 0.7 s at a
+    quarter of a million tracks)."""
+    starts = np.array([p[0] for p in positions], np.float64).reshape(-1, 2)
+    ends = np.array([p[-1] for p in positions], np.float64).reshape(-1, 2)
+    return starts, ends
 
 
 def od_distances(

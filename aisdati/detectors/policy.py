@@ -29,7 +29,7 @@ from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
-from aisdati.detectors.od import area_scores, od_distances, od_pairs_m
+from aisdati.detectors.od import area_scores, od_distances, od_pairs_m, track_ends
 from aisdati.detectors.scoring import Scores, ScoreSettings, ratio_sum, tail_mean
 from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import matched_distances
@@ -166,7 +166,7 @@ class PolicyDetector(Detector):
                 f"model {self.name} does not record where its training tracks end (a card from "
                 "before 0.2.0): retrain it for --score area"
             )
-        return self.od_m(positions)
+        return self.od_m(*track_ends(positions))
 
     def calibration_of(self, key: str) -> np.ndarray:
         values = self.card.calibration.get(key)
