@@ -265,34 +265,35 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
     title = _map_title(result)
     regions = [m.bounds for m in result.models]
     drawn = map_subset(flagged, MAP_UNFLAGGED_TRACKS)
+    shown = flagged[drawn]
     if len(drawn) < len(flagged):
-        title += f"; {int((~flagged[drawn]).sum()):,} of {int((~flagged).sum()):,} others drawn"
+        title += f"; {int((~shown).sum()):,} of {int((~flagged).sum()):,} others drawn"
     tracks = [result.tracks[i].positions for i in drawn]
     rollouts = [result.rollouts[i] for i in drawn]
-    max_dev = result.scores[["max_dev_lon", "max_dev_lat"]].to_numpy()[drawn]
+    rows = result.scores.iloc[drawn]
+    max_dev = rows[["max_dev_lon", "max_dev_lat"]].to_numpy()
     evidence = out / "evidence"
     figures: list[tuple[Path, FigureJob]] = [
         (
             out / "map.png",
             (
                 plot_detection_map,
-                (tracks, rollouts, flagged[drawn], max_dev, regions),
+                (tracks, rollouts, shown, max_dev, regions),
                 {"title": title, "evidence_label": result.evidence_kind},
             ),
         ),
         *evidence_figures(result, evidence, stretches),
     ]
-    # map.png draws every test track (at 700 tracks, eight evidence figures' time): started
+    # map.png draws the test tracks (at 700 tracks, eight evidence figures' time): started
     # first on a cluster, it does not end last
     costs = [float(len(figures)), *([1.0] * (len(figures) - 1))]
     pngs = (runner or InProcess()).map(figure_png, [job for _, job in figures], costs=costs)
     page = out / "map.html"
-    rows = list(result.scores.itertuples())
     html_detection_map(
         tracks,
         rollouts,
-        [_track_props(rows[i]) for i in drawn],
-        flagged[drawn],
+        [_track_props(r) for r in rows.itertuples()],
+        shown,
         regions,
         page,
         stretches=[
