@@ -26,8 +26,15 @@ turns over the whole track. `--signal place --within KM` takes how much more the
 within KM than the training traffic turned within KM of the same place (`PlaceTurning`): a tug
 that works in one corner of a harbour makes turning normal there, not across the ferries' lane.
 
-Run: python benchmarks/winding.py runs/grid/*/forward-* [--signal winding|crossings|local|place]
-     [--within KM]
+`--signal excess` takes how much longer the track sailed than it had to (`PathExcess`): its length
+less the shortest way between its two ends along the training traffic. A detour, a loiter or a
+jump lengthens a track without moving its ends; a normal track on a path no vessel sailed before,
+the later months' tail that passes the other terms' thresholds, is not longer for it.
+`--signal split` sums that excess over the two halves of the track cut at its report farthest
+from its first: a round trip's ends coincide, so all of its length would be excess.
+
+Run: python benchmarks/winding.py runs/grid/*/forward-*
+     [--signal winding|crossings|local|place|excess|split] [--within KM]
 """
 
 from __future__ import annotations
@@ -116,6 +123,54 @@ class PlaceTurning:
         return float((ahead - reference).max())
 
 
+class PathExcess:
+    """A track's length less the shortest way it could have sailed along the training traffic
+    between its ends: straight from its first report to a report of a training track, along that
+    track either way, straight from there to its last report (the least over the training
+    tracks, its own vessel's left out); metres, no parameter. `split` sums it over the track's
+    two halves cut at its report farthest from its first, so a round trip is two one-way trips."""
+
+    def __init__(self, tracks: list[np.ndarray], vessels: np.ndarray, split: bool = False) -> None:
+        self.tracks = tracks
+        self.vessels = vessels
+        self.split = split
+        self.along = [np.r_[0.0, np.cumsum(_legs_m(t))] for t in tracks]
+        self.training = np.array([self.excess(t, v) for t, v in zip(tracks, vessels, strict=True)])
+
+    def shortest_m(self, start: np.ndarray, end: np.ndarray, vessel: int = -1) -> float:
+        """The shortest start -> a training report -> along its track -> end (metres)."""
+        best = np.inf
+        for points, along, v in zip(self.tracks, self.along, self.vessels, strict=True):
+            if v == vessel:
+                continue
+            to_start = haversine_m(start[0], start[1], points[:, 0], points[:, 1])
+            to_end = haversine_m(end[0], end[1], points[:, 0], points[:, 1])
+            # its way (join at a, leave at b >= a), then the other way (b <= a)
+            ahead = np.minimum.accumulate(to_start - along) + along + to_end
+            back = np.minimum.accumulate((to_start + along)[::-1])[::-1] - along + to_end
+            best = min(best, float(ahead.min()), float(back.min()))
+        return best
+
+    def excess(self, positions: np.ndarray, vessel: int = -1) -> float:
+        if not self.split:
+            return self.one_way(positions, vessel)
+        p = positions
+        turn = int(np.argmax(haversine_m(p[0, 0], p[0, 1], p[:, 0], p[:, 1])))
+        return self.one_way(p[: turn + 1], vessel) + self.one_way(p[turn:], vessel)
+
+    def one_way(self, positions: np.ndarray, vessel: int) -> float:
+        if len(positions) < 2:
+            return 0.0
+        length = float(_legs_m(positions).sum())
+        return length - self.shortest_m(positions[0], positions[-1], vessel)
+
+
+def _legs_m(positions: np.ndarray) -> np.ndarray:
+    """The great-circle length of each leg of a [n, 2] lon/lat track (m)."""
+    p = positions
+    return haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
+
+
 def self_crossings(positions: np.ndarray) -> float:
     """How many pairs of non-adjacent segments of a [n, 2] lon/lat track intersect."""
     moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
@@ -127,7 +182,7 @@ def self_crossings(positions: np.ndarray) -> float:
     return float(np.count_nonzero(b > a + 1))
 
 
-SIGNALS = ("winding", "crossings", "local", "place")
+SIGNALS = ("winding", "crossings", "local", "place", "excess", "split")
 Signal = Callable[[list[np.ndarray], np.ndarray], tuple[np.ndarray, Callable[[np.ndarray], float]]]
 """(training tracks, their vessels) -> (the training tracks' own values, the judge of a track)."""
 
@@ -140,6 +195,13 @@ def signal_of(name: str, within_km: float) -> Signal:
             return model.training, model.excess
 
         return place
+    if name in ("excess", "split"):
+
+        def excess(tracks: list[np.ndarray], vessels: np.ndarray):
+            model = PathExcess(tracks, vessels, split=name == "split")
+            return model.training, model.excess
+
+        return excess
     one = {
         "winding": winding_deg,
         "crossings": self_crossings,
