@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
@@ -171,3 +172,24 @@ def test_bad_input_is_one_line(run, tmp_path):
         assert result.exit_code == 2, result.output
         assert needle in result.output
         assert len(result.output.strip().splitlines()) == 1, result.output
+
+
+def test_detect_table_of_several_models_keeps_its_figures_whole(kitimat, cli, tmp_path):
+    """Kitimat's routes, each a `nearest` model, judge the area: the table gains the model's
+    column and still prints every figure whole at 80 columns (a log, a pipe), where the place
+    and the model's name may wrap but are never cut to an ellipsis."""
+    models, out = tmp_path / "models", tmp_path / "report"
+    r = cli(
+        "train", "--method", "nearest", "--cluster", "routes", "--data", kitimat, "--out", models
+    )
+    assert r.exit_code == 0, r.output
+    r = cli(
+        "detect", "--method", "nearest", "--cluster", "all", "--data", kitimat,
+        "--models", models, "--top-percent", 100, "--out", out,
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    scores = pd.read_parquet(out / "scores.parquet")
+    shown = scores[scores["flagged"]].sort_values("rank").head(15)
+    assert scores["model"].nunique() > 1 and len(shown) > 1 and "…" not in r.output
+    for row in shown.itertuples():
+        assert f"{row.score:.3f}" in r.output and f"{row.max_dev_m / 1000:,.2f}" in r.output

@@ -281,33 +281,46 @@ def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
         if len(flagged)
         else f"no track flagged among {len(scores)}; the highest scores"
     )
-    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False)
-    cols = ["rank", "track", "mmsi", "score", "mean dist", "max dev", "at (lat, lon)"]
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+    cols = ["rank", "track", "mmsi", "score", "mean km", "max km", "at (lat, lon)"]
     several = scores["model"].nunique() > 1
     if several:
         cols.insert(3, "model")
     ashore = bool((scores["ashore_reports"] > 0).any())
     if ashore:
         cols.append("ashore")
-    for col in cols:
-        table.add_column(
-            col, justify="left" if col in ("model", "at (lat, lon)") else "right", no_wrap=True
-        )
+    rows = []
     for r in shown.head(limit).itertuples():
         row = [
             str(r.rank),
             str(r.track_id),
             str(r.mmsi),
-            f"[{'red' if r.flagged else 'white'}]{r.score:.3f}[/]",
-            f"{r.score_m / 1000:,.2f} km",
-            f"{r.max_dev_m / 1000:,.2f} km",
+            f"{r.score:.3f}",
+            f"{r.score_m / 1000:,.2f}",
+            f"{r.max_dev_m / 1000:,.2f}",
             f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         ]
         if several:
-            row.insert(3, escape(str(r.model)))
+            row.insert(3, str(r.model))
         if ashore:
             row.append(str(r.ashore_reports))
-        table.add_row(*row)
+        rows.append((row, bool(r.flagged)))
+    # every figure whole at 80 columns (a log, a pipe): only the place and the model wrap
+    wraps = ("model", "at (lat, lon)")
+    for k, col in enumerate(cols):
+        whole = max([len(col), *(len(row[k]) for row, _ in rows)])
+        table.add_column(
+            col,
+            justify="left" if col in wraps else "right",
+            no_wrap=col not in wraps,
+            min_width=None if col in wraps else whole,
+            overflow="fold",
+        )
+    score = cols.index("score")
+    for row, flagged in rows:
+        cells = [escape(c) for c in row]
+        cells[score] = f"[{'red' if flagged else 'white'}]{row[score]}[/]"
+        table.add_row(*cells)
     if len(shown) > limit:
         table.caption = f"... and {len(shown) - limit} more in scores.parquet"
     return table
