@@ -2,7 +2,8 @@
 
 Rich draws no live bar when the output is not a terminal (`nohup ... > log`), so a long run
 would say nothing until it ends; there the bars print a plain line per task instead, at most
-every `LOG_EVERY` seconds and when the task completes."""
+every `LOG_EVERY` seconds and once when the task completes, and the bars' last frame (cut to
+the log's 80 columns) is left out."""
 
 from __future__ import annotations
 
@@ -30,9 +31,12 @@ class _Bars:
 
     progress: Progress
     _logged: dict[int, float]
+    _completed: set[int]
 
     def __enter__(self) -> _Bars:
         self._logged = {}
+        self._completed = set()
+        self.progress.live.transient = not self.progress.console.is_terminal
         self.progress.start()
         return self
 
@@ -42,7 +46,11 @@ class _Bars:
             return
         task = next(t for t in self.progress.tasks if t.id == task_id)
         now = time.monotonic()
-        if not task.finished and now - self._logged.get(task_id, -LOG_EVERY) < LOG_EVERY:
+        if task_id in self._completed:
+            return
+        if task.finished:
+            self._completed.add(task_id)
+        elif now - self._logged.get(task_id, -LOG_EVERY) < LOG_EVERY:
             return
         self._logged[task_id] = now
         left = task.time_remaining

@@ -24,6 +24,8 @@ def test_a_log_file_gets_a_plain_line_now_and_then_and_at_the_end(monkeypatch):
         bars.update(0, 2, False)
         bars.update(0, 2, True)  # a member that stops early counts as done
         bars.update(1, 3, True)
+        bars.update(1, 3, True)  # complete already: no second line
+    assert "━" not in out.getvalue()  # nor the bar's last frame
     lines = [line for line in out.getvalue().splitlines() if line.startswith("training dati:")]
     assert [line.split(" (")[0] for line in lines] == [
         "training dati: 1/6",
