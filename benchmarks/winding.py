@@ -33,8 +33,12 @@ the later months' tail that passes the other terms' thresholds, is not longer fo
 `--signal split` sums that excess over the two halves of the track cut at its report farthest
 from its first: a round trip's ends coincide, so all of its length would be excess.
 
+`--signal speed` takes a track's top speed, the largest implied speed between consecutive reports:
+a position jump moves a stretch several kilometres within one report interval. `--signal relspeed`
+divides it by the track's median leg speed, so that a fast vessel is not a jump.
+
 Run: python benchmarks/winding.py runs/grid/*/forward-*
-     [--signal winding|crossings|local|place|excess|split] [--within KM]
+     [--signal winding|crossings|local|place|excess|split|speed|relspeed] [--within KM]
 """
 
 from __future__ import annotations
@@ -171,6 +175,27 @@ def _legs_m(positions: np.ndarray) -> np.ndarray:
     return haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
 
 
+def leg_speeds_mps(timed: np.ndarray) -> np.ndarray:
+    """The implied speed of each leg of a [n, 3] (lon, lat, seconds) track, m/s; legs between
+    reports at the same second are left out (their speed is not defined)."""
+    dt = np.diff(timed[:, 2])
+    ok = dt > 0
+    return _legs_m(timed[:, :2])[ok] / dt[ok]
+
+
+def top_speed_mps(timed: np.ndarray) -> float:
+    """The largest implied speed between consecutive reports, m/s."""
+    speeds = leg_speeds_mps(timed)
+    return float(speeds.max()) if len(speeds) else 0.0
+
+
+def relative_top_speed(timed: np.ndarray) -> float:
+    """The top speed over the median leg's: a fast vessel is fast all along, a position jump
+    for two legs."""
+    speeds = leg_speeds_mps(timed)
+    return float(speeds.max() / max(np.median(speeds), 0.01)) if len(speeds) else 0.0
+
+
 def self_crossings(positions: np.ndarray) -> float:
     """How many pairs of non-adjacent segments of a [n, 2] lon/lat track intersect."""
     moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
@@ -182,7 +207,9 @@ def self_crossings(positions: np.ndarray) -> float:
     return float(np.count_nonzero(b > a + 1))
 
 
-SIGNALS = ("winding", "crossings", "local", "place", "excess", "split")
+SIGNALS = ("winding", "crossings", "local", "place", "excess", "split", "speed", "relspeed")
+TIMED = ("speed", "relspeed")
+"""Signals that read each track's report times too: their tracks are [n, 3] (lon, lat, s)."""
 Signal = Callable[[list[np.ndarray], np.ndarray], tuple[np.ndarray, Callable[[np.ndarray], float]]]
 """(training tracks, their vessels) -> (the training tracks' own values, the judge of a track)."""
 
@@ -206,6 +233,8 @@ def signal_of(name: str, within_km: float) -> Signal:
         "winding": winding_deg,
         "crossings": self_crossings,
         "local": lambda positions: local_winding_deg(positions, within_km),
+        "speed": top_speed_mps,
+        "relspeed": relative_top_speed,
     }[name]
     return lambda tracks, _: (np.array([one(t) for t in tracks]), one)
 
@@ -228,13 +257,17 @@ def union_quantile(cal: dict[str, np.ndarray]) -> float:
     return hi
 
 
-def cell_result(cell: Path, signal: Signal) -> dict[str, float]:
+def cell_result(cell: Path, signal: Signal, timed: bool) -> dict[str, float]:
     step, lane, models = judged(cell)
-    points = pd.read_parquet(cell / "data" / "points.parquet", columns=["track_id", "lon", "lat"])
-    by_track = {t: g[["lon", "lat"]].to_numpy() for t, g in points.groupby("track_id", sort=False)}
+    points = pd.read_parquet(cell / "data" / "points.parquet")
+    points["s"] = (points["time"] - points["time"].min()).dt.total_seconds()
+    columns = ["lon", "lat", "s"] if timed else ["lon", "lat"]
+    by_track = {t: g[columns].to_numpy() for t, g in points.groupby("track_id", sort=False)}
     stem = models / "all-nearest"
-    kept = Traffic.read(stem.with_suffix(".npz"), read_card(stem.with_suffix(".json")))
-    training, judge = signal(kept.tracks, kept.mmsi)
+    card = read_card(stem.with_suffix(".json"))
+    kept = Traffic.read(stem.with_suffix(".npz"), card)
+    own = [by_track[t] for t in card.data.track_ids] if timed else kept.tracks
+    training, judge = signal(own, kept.mmsi)
     cal = {
         "step": calibration(models / "all.json", "step"),
         "lane": calibration(stem.with_suffix(".json"), "lane"),
@@ -278,7 +311,7 @@ def main() -> None:
     }
     print_grids(
         args.grids,
-        lambda cell: cell_result(cell, signal),
+        lambda cell: cell_result(cell, signal, args.signal in TIMED),
         figures,
         ("alone", "either2", "either3"),
         ("either2", "either3"),
