@@ -72,7 +72,8 @@ class _Bars:
 
 
 class EpisodeProgress(_Bars):
-    """Counts training episodes of many members; a member that stops early counts as done."""
+    """Counts training episodes of many members; a member that stops early counts as done.
+    `unit` names what is counted (models, for a detector that learns in one pass)."""
 
     def __init__(
         self,
@@ -81,6 +82,7 @@ class EpisodeProgress(_Bars):
         label: str,
         disable: bool = False,
         console: Console | None = None,
+        unit: str = "episodes",
     ):
         self.episodes = episodes
         self.done: dict[int, int] = {}
@@ -88,7 +90,7 @@ class EpisodeProgress(_Bars):
             TextColumn("[bold]{task.description}"),
             BarColumn(),
             MofNCompleteColumn(),
-            TextColumn("episodes"),
+            TextColumn(unit),
             TimeElapsedColumn(),
             TimeRemainingColumn(),
             disable=disable,

@@ -57,3 +57,13 @@ def test_no_output_when_disabled():
     with EpisodeProgress(1, 2, "training dati", disable=True, console=console) as bars:
         bars.update(0, 2, True)
     assert out.getvalue() == ""
+
+
+def test_nearest_counts_its_route_models_not_episodes(kitimat, cli, tmp_path):
+    """`nearest` learns each route in one pass: its bar counts the routes' models (Kitimat's
+    4), not members times `--episodes` (4 x 170 before)."""
+    r = cli("train", "--method", "nearest", "--cluster", "routes", "--data", kitimat,
+            "--out", tmp_path)  # fmt: skip
+    assert r.exit_code == 0, r.output
+    lines = [line for line in r.output.splitlines() if line.startswith("training nearest:")]
+    assert lines and lines[-1].startswith("training nearest: 4/4 (")

@@ -17,7 +17,7 @@ from rich.markup import escape
 from aisdati.ais.training import TrainSettings
 from aisdati.commands.common import console, err_console, lane_settings, spinner
 from aisdati.commands.tables import pooled_table, results_table
-from aisdati.detectors import ScoreSettings, parse_detectors
+from aisdati.detectors import ScoreSettings, detector_class, parse_detectors
 from aisdati.detectors.train import Trained, train_detector, train_routes
 from aisdati.evaluation.inject import parse_kinds, parse_params
 from aisdati.evaluation.outputs import (
@@ -178,9 +178,12 @@ class Display:
         self, method: str, group: list[TrainSettings], how: ScoreSettings
     ) -> list[Trained]:
         """The evaluation's `train_routes`: `train_routes` with a bar over every member."""
-        members = len(group) * self.settings.lane.members
+        cls = detector_class(method)
+        members = sum(cls.members(s) for s in group)
         label = f"training {method} on {len(group)} routes"
-        with EpisodeProgress(members, self.settings.episodes, label, disable=not self.show) as bars:
+        with EpisodeProgress(
+            members, cls.episodes(group[0]), label, disable=not self.show, unit=cls.progress_unit
+        ) as bars:
             return train_routes(
                 method, group, how, on_step=bars.on_step, runner=self.runner,
                 on_task=bars.members_done,

@@ -216,7 +216,9 @@ def train_every_route(
     )
     with (
         open_runner(execution) as runner,
-        EpisodeProgress(members, settings[0].episodes, label, disable=quiet) as bar,
+        EpisodeProgress(
+            members, cls.episodes(settings[0]), label, disable=quiet, unit=cls.progress_unit
+        ) as bar,
     ):
         trained = train_routes(
             method, settings, on_step=bar.on_step, runner=runner,

@@ -111,6 +111,15 @@ class Detector(ABC):
         """Models one training run of `settings` holds (a progress bar counts their episodes)."""
         return 1
 
+    progress_unit = "episodes"
+    """What a training progress bar counts for this detector (`episodes`)."""
+
+    @classmethod
+    def episodes(cls, settings: TrainSettings) -> int:
+        """Episodes one member trains at most, for the progress bar: `settings.episodes`; a
+        detector that learns in one pass counts each of its models as one."""
+        return settings.episodes
+
     @classmethod
     def fit_routes(
         cls,

@@ -37,6 +37,7 @@ from aisdati.tracks.store import Track
 
 class NearestDetector(Detector):
     method = "nearest"
+    progress_unit = "models"
 
     def __init__(
         self,
@@ -47,6 +48,10 @@ class NearestDetector(Detector):
         super().__init__(settings, how, name)
         self.training_tracks = Traffic([], np.empty(0, np.int64), False)
         """The training tracks."""
+
+    @classmethod
+    def episodes(cls, settings: TrainSettings) -> int:
+        return 1  # it remembers its tracks in one pass
 
     def fit(
         self,
