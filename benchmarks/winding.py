@@ -35,10 +35,11 @@ from its first: a round trip's ends coincide, so all of its length would be exce
 
 `--signal speed` takes a track's top speed, the largest implied speed between consecutive reports:
 a position jump moves a stretch several kilometres within one report interval. `--signal relspeed`
-divides it by the track's median leg speed, so that a fast vessel is not a jump.
+divides it by the track's median leg speed, so that a fast vessel is not a jump; `--signal spike`
+by the faster of the leg's two neighbours', so that a boat speeding up is not one either.
 
 Run: python benchmarks/winding.py runs/grid/*/forward-*
-     [--signal winding|crossings|local|place|excess|split|speed|relspeed] [--within KM]
+     [--signal winding|crossings|local|place|excess|split|speed|relspeed|spike] [--within KM]
 """
 
 from __future__ import annotations
@@ -196,6 +197,17 @@ def relative_top_speed(timed: np.ndarray) -> float:
     return float(speeds.max() / max(np.median(speeds), 0.01)) if len(speeds) else 0.0
 
 
+def speed_spike(timed: np.ndarray) -> float:
+    """The largest ratio of a leg's implied speed to the faster of its neighbouring legs': a
+    boat that speeds up is fast on consecutive legs, a displaced stretch on its entry and exit
+    legs only."""
+    speeds = leg_speeds_mps(timed)
+    if len(speeds) < 2:
+        return 0.0
+    neighbours = np.maximum(np.r_[speeds[1], speeds[:-1]], np.r_[speeds[1:], speeds[-2]])
+    return float((speeds / np.maximum(neighbours, 0.01)).max())
+
+
 def self_crossings(positions: np.ndarray) -> float:
     """How many pairs of non-adjacent segments of a [n, 2] lon/lat track intersect."""
     moved = np.r_[True, (np.diff(positions, axis=0) != 0).any(axis=1)]
@@ -207,8 +219,10 @@ def self_crossings(positions: np.ndarray) -> float:
     return float(np.count_nonzero(b > a + 1))
 
 
-SIGNALS = ("winding", "crossings", "local", "place", "excess", "split", "speed", "relspeed")
-TIMED = ("speed", "relspeed")
+SIGNALS = (
+    "winding", "crossings", "local", "place", "excess", "split", "speed", "relspeed", "spike",
+)  # fmt: skip
+TIMED = ("speed", "relspeed", "spike")
 """Signals that read each track's report times too: their tracks are [n, 3] (lon, lat, s)."""
 Signal = Callable[[list[np.ndarray], np.ndarray], tuple[np.ndarray, Callable[[np.ndarray], float]]]
 """(training tracks, their vessels) -> (the training tracks' own values, the judge of a track)."""
@@ -235,6 +249,7 @@ def signal_of(name: str, within_km: float) -> Signal:
         "local": lambda positions: local_winding_deg(positions, within_km),
         "speed": top_speed_mps,
         "relspeed": relative_top_speed,
+        "spike": speed_spike,
     }[name]
     return lambda tracks, _: (np.array([one(t) for t in tracks]), one)
 
