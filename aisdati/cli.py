@@ -4,6 +4,7 @@ stays fast; every user mistake surfaces as a `UserError` and is shown as one red
 
 from __future__ import annotations
 
+import inspect
 import os
 from datetime import datetime
 from pathlib import Path
@@ -442,6 +443,15 @@ def detect(
     run_command("detect", locals())
 
 
+def one_line_summaries(commands: typer.Typer) -> None:
+    """Each command's line in `aisdati --help`: its docstring's first paragraph with the line
+    breaks joined (typer's rich help keeps them there, so the list broke mid-sentence)."""
+    for info in commands.registered_commands:
+        doc = inspect.cleandoc((info.callback.__doc__ if info.callback else None) or "")
+        info.short_help = " ".join(doc.split("\n\n")[0].split())
+
+
+one_line_summaries(app)
 end_startup_guard()  # loaded: from here Ctrl-C is click's and each command's to handle
 
 if __name__ == "__main__":
