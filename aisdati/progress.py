@@ -42,12 +42,10 @@ class _Bars:
 
     def _log(self, task_id: Any) -> None:
         """One plain line for a task when nobody sees the live bar (see the module docstring)."""
-        if self.progress.disable or self.progress.console.is_terminal:
+        if self.progress.disable or self.progress.console.is_terminal or task_id in self._completed:
             return
         task = next(t for t in self.progress.tasks if t.id == task_id)
         now = time.monotonic()
-        if task_id in self._completed:
-            return
         if task.finished:
             self._completed.add(task_id)
         elif now - self._logged.get(task_id, -LOG_EVERY) < LOG_EVERY:

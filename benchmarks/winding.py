@@ -76,7 +76,7 @@ def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if len(p) < 3:
         return np.zeros(0), np.zeros(0), np.zeros((0, 2))
     course = initial_bearing_deg(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
-    along = np.cumsum(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1]))[:-1]
+    along = np.cumsum(_legs_m(p))[:-1]
     return (np.diff(course) + 180.0) % 360.0 - 180.0, along, p[1:-1]
 
 
@@ -274,9 +274,12 @@ def union_quantile(cal: dict[str, np.ndarray]) -> float:
 
 def cell_result(cell: Path, signal: Signal, timed: bool) -> dict[str, float]:
     step, lane, models = judged(cell)
-    points = pd.read_parquet(cell / "data" / "points.parquet")
-    points["s"] = (points["time"] - points["time"].min()).dt.total_seconds()
-    columns = ["lon", "lat", "s"] if timed else ["lon", "lat"]
+    read = ["track_id", "lon", "lat", "time"] if timed else ["track_id", "lon", "lat"]
+    points = pd.read_parquet(cell / "data" / "points.parquet", columns=read)
+    columns = ["lon", "lat"]
+    if timed:
+        points["s"] = (points["time"] - points["time"].min()).dt.total_seconds()
+        columns.append("s")
     by_track = {t: g[columns].to_numpy() for t, g in points.groupby("track_id", sort=False)}
     stem = models / "all-nearest"
     card = read_card(stem.with_suffix(".json"))

@@ -17,8 +17,8 @@ from rich.markup import escape
 from aisdati.ais.training import TrainSettings
 from aisdati.commands.common import console, err_console, lane_settings, spinner
 from aisdati.commands.tables import pooled_table, results_table
-from aisdati.detectors import ScoreSettings, detector_class, parse_detectors
-from aisdati.detectors.train import Trained, train_detector, train_routes
+from aisdati.detectors import ScoreSettings, parse_detectors
+from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
 from aisdati.evaluation.inject import parse_kinds, parse_params
 from aisdati.evaluation.outputs import (
     REPORT,
@@ -39,7 +39,7 @@ from aisdati.evaluation.run import (
 from aisdati.execution import Execution, Runner, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import OutputSet, staged_outputs
-from aisdati.progress import EpisodeProgress, TrainingProgress
+from aisdati.progress import TrainingProgress
 from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
 
@@ -178,12 +178,8 @@ class Display:
         self, method: str, group: list[TrainSettings], how: ScoreSettings
     ) -> list[Trained]:
         """The evaluation's `train_routes`: `train_routes` with a bar over every member."""
-        cls = detector_class(method)
-        members = sum(cls.members(s) for s in group)
         label = f"training {method} on {len(group)} routes"
-        with EpisodeProgress(
-            members, cls.episodes(group[0]), label, disable=not self.show, unit=cls.progress_unit
-        ) as bars:
+        with routes_bar(method, group, label, disable=not self.show) as bars:
             return train_routes(
                 method, group, how, on_step=bars.on_step, runner=self.runner,
                 on_task=bars.members_done,

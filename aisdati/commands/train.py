@@ -23,14 +23,13 @@ from aisdati.commands.common import (
 )
 from aisdati.commands.tables import dati_model_table, route_models_table
 from aisdati.detectors import model_name, parse_detectors
-from aisdati.detectors.registry import detector_class
-from aisdati.detectors.train import Trained, train_detector, train_routes
+from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
 from aisdati.errors import UserError
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.interrupts import Terminated
 from aisdati.options import check_options
 from aisdati.outdir import prepare_output_dir
-from aisdati.progress import EpisodeProgress, TrainingProgress
+from aisdati.progress import TrainingProgress
 from aisdati.storage import RemoteFolder, is_url
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
 
@@ -209,16 +208,12 @@ def train_every_route(
 ) -> None:
     """Every route's model, the routes trained as tasks (`aisdati.detectors.train`) here or on
     the Dask cluster of `execution`."""
-    cls = detector_class(method)
-    members = sum(cls.members(s) for s in settings)
     label = f"training {method}" + (
         "" if not execution.distributed else f" on {execution.describe()}"
     )
     with (
         open_runner(execution) as runner,
-        EpisodeProgress(
-            members, cls.episodes(settings[0]), label, disable=quiet, unit=cls.progress_unit
-        ) as bar,
+        routes_bar(method, settings, label, disable=quiet) as bar,
     ):
         trained = train_routes(
             method, settings, on_step=bar.on_step, runner=runner,

@@ -26,6 +26,7 @@ from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.model.trainer import Callback
+from aisdati.progress import EpisodeProgress
 from aisdati.storage import RemoteFolder, staging_folder
 from aisdati.tracks.store import read_track_table, select_cluster
 
@@ -81,6 +82,19 @@ def train_routes(
     ended = None if on_task is None else (lambda i: on_task(jobs[i][0]))
     done = runner.map(functools.partial(train_task, method, how, follow), jobs, ended, costs)
     return [t for group in done for t in group]
+
+
+def routes_bar(
+    method: str, settings: Sequence[TrainSettings], label: str, disable: bool = False
+) -> EpisodeProgress:
+    """A bar over every member of `method`'s route models, for `train_routes`'s `on_step` and
+    `on_task`: each detector's own members and episodes (nearest: a model per route, learnt in
+    one pass)."""
+    cls = detector_class(method)
+    members = sum(cls.members(s) for s in settings)
+    return EpisodeProgress(
+        members, cls.episodes(settings[0]), label, disable=disable, unit=cls.progress_unit
+    )
 
 
 def training_costs(settings: Sequence[TrainSettings]) -> list[float]:
