@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import inspect
 import os
+import shutil
 from datetime import datetime
 from pathlib import Path
 
@@ -22,12 +23,25 @@ from aisdati.commands.common import user_errors
 from aisdati.startup import end_startup_guard
 from aisdati.tracks.ashore import AshoreCheck
 
+RICH_HELP_COLUMNS = 100
+"""Narrowest terminal that gets rich's help panels: their option columns take about 45
+characters (`--lane-traffic` beside `--no-lane-traffic`, a metavar), so at 80 columns each
+option's help was squeezed into 20."""
+
+
+def help_markup(columns: int) -> str | None:
+    """Rich's help panels at `RICH_HELP_COLUMNS` or more; below (an 80-column terminal, a pipe,
+    a log) click's plain layout, which puts a long option's help under it at full width."""
+    return "rich" if columns >= RICH_HELP_COLUMNS else None
+
+
 app = typer.Typer(
     help="aisdati: find abnormal vessel tracks in AIS data with DATI (domain-adaptive trajectory "
     "imitation).",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=help_markup(shutil.get_terminal_size().columns),
 )
 
 
