@@ -400,7 +400,9 @@ def detect(
         "--score",
         help="How a policy judges a track: lane (distance to where its K free rollouts go; "
         "for nearest: to where the training tracks go), step (teacher-forced one-step "
-        "errors), rollout (the best free rollout's DTW, the paper's), both (rollout + step), "
+        "errors, m), steprate (the same errors over their report intervals, m/s; models "
+        "trained since it exists), rollout (the best free rollout's DTW, the paper's), both "
+        "(rollout + step), "
         "steplane (step + lane), steptraffic (step + the distance to the training tracks "
         "themselves; models trained since it exists) or area (lane + how much rarer the "
         "track's start-end pair is than the training tracks'; models trained since 0.2.0). "

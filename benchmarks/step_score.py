@@ -10,6 +10,11 @@ keeps the best of K rollouts). Two questions, each answered without retraining:
 - `--tails`: does another share of a track's largest per-report errors (the score's tail mean,
   0.1 by default; `max`: the largest alone) rank better? A position jump is two large errors,
   which the mean of the largest tenth of a long track dilutes.
+- `--normalise`: does a one-step error in the track's own units rank better? `track` divides a
+  track's errors by its median step (metres between consecutive reports, at least 10 m): a
+  fast ferry's metres of error weigh as a slow tug's; `velocity` divides each report's error by
+  its time step, at least the track's median one (an error in m/s), so a gap's long prediction
+  weighs no more than a typical report's: the tool's `--score steprate` (`error_rates`).
 - `--ahead`: does predicting h reports ahead (the policy moved h times from the real report,
   over the real time steps, its own moves feeding its state) see more than one step? A loiter
   comes back to where it was while the policy sails on, and a detour bends away from where the
@@ -24,6 +29,7 @@ per variant: per cell, and the mean over each grid's cells.
 
 Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
      [--ahead 1,2,3,5] [--aggregate best,median,mean] [--tails 0.02,0.05,0.1,0.2,max]
+     [--normalise none,track,velocity]
 """
 
 from __future__ import annotations
@@ -38,9 +44,16 @@ import pandas as pd
 from sklearn.metrics import roc_auc_score
 
 from aisdati.detectors import load_detector
-from aisdati.detectors.scoring import SCORE_CHUNK, ScoreSettings, score_chunks, tail_mean
+from aisdati.detectors.scoring import (
+    SCORE_CHUNK,
+    ScoreSettings,
+    error_rates,
+    score_chunks,
+    tail_mean,
+)
+from aisdati.geo import haversine_m
 from aisdati.tracks.ashore import AshoreCheck
-from aisdati.tracks.store import load_tracks
+from aisdati.tracks.store import Track, load_tracks
 
 RULE = AshoreCheck()
 """Tracks the ashore rule flags rank first, as in the evaluation (`AshoreCheck.ranked`)."""
@@ -53,18 +66,45 @@ AGGREGATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 """Statistics of a report's K draw errors ([n, K] -> [n])."""
 
 
+MIN_STEP_M = 10.0
+"""`track`'s floor on a track's median step, so a near-still track's errors stay finite."""
+
+
+def _divisor(track: Track, normalise: str) -> float:
+    """What a track's per-report errors are divided by: its median step (`track`), or 1."""
+    if normalise == "track":
+        lon, lat = track.positions.T
+        return max(MIN_STEP_M, float(np.median(haversine_m(lon[:-1], lat[:-1], lon[1:], lat[1:]))))
+    return 1.0
+
+
+def _normalised(errors: np.ndarray, track: Track, normalise: str, h: int) -> np.ndarray:
+    """A track's per-report errors in the unit `normalise` asks for; `velocity` is the tool's
+    `steprate` (`error_rates`), over the h time steps from each anchor to its target."""
+    if normalise == "velocity":
+        return error_rates(errors, np.convolve(track.dts, np.ones(h), "valid"))
+    return errors / _divisor(track, normalise)
+
+
+NORMALISATIONS = ("none", "track", "velocity")
+
+
 def _tailed(values: np.ndarray, tail: str) -> float:
     """A track's per-report values aggregated: the tail mean of the largest share `tail`, or
     their largest (`max`)."""
     return float(values.max()) if tail == "max" else tail_mean(values, float(tail))
 
 
-def _name(aggregate: str, h: int, tail: str, tails: list[str]) -> str:
-    return f"{aggregate} h={h}" + (f" tail={tail}" if len(tails) > 1 else "")
+def _name(aggregate: str, h: int, tail: str, tails: list[str], normalise: str = "none") -> str:
+    return (
+        f"{aggregate} h={h}"
+        + (f" tail={tail}" if len(tails) > 1 else "")
+        + ("" if normalise == "none" else f" /{normalise}")
+    )
 
 
 def cell_aucs(
-    cell: Path, ahead: list[int], aggregate: list[str], tails: list[str]
+    cell: Path, ahead: list[int], aggregate: list[str], tails: list[str], normalise: list[str]
 ) -> dict[str, float]:
     """ROC AUC of each variant on one evaluate folder, and the evaluation's own step AUC."""
     doc = json.loads((cell / "evaluation.json").read_text())
@@ -84,10 +124,14 @@ def cell_aucs(
             )  # fmt: skip
             for name in aggregate:
                 per_report = [AGGREGATIONS[name](e) for e in errors]
-                for tail in tails:
-                    scores.setdefault(_name(name, h, tail, tails), []).extend(
-                        _tailed(v, tail) for v in per_report
-                    )
+                for norm in normalise:
+                    scaled = [
+                        _normalised(v, t, norm, h) for v, t in zip(per_report, part, strict=True)
+                    ]
+                    for tail in tails:
+                        scores.setdefault(_name(name, h, tail, tails, norm), []).extend(
+                            _tailed(v, tail) for v in scaled
+                        )
     y = labels["label"].to_numpy()
     judged = pd.read_parquet(cell / "scores.parquet")  # the ashore rule's counts, as evaluated
     judged = judged[(judged["detector"] == "dati") & (judged["score"] == "step")]
@@ -119,6 +163,11 @@ def main() -> None:
     ap.add_argument("--ahead", default="1", help="comma-separated h: reports predicted ahead")
     ap.add_argument("--aggregate", default="best,median,mean", help="statistics of the K draws")
     ap.add_argument(
+        "--normalise",
+        default="none",
+        help=f"comma-separated divisors of the errors: {', '.join(NORMALISATIONS)}",
+    )
+    ap.add_argument(
         "--tails",
         default=str(ScoreSettings().tail),
         help="comma-separated shares of a track's largest per-report errors averaged, or max",
@@ -127,13 +176,17 @@ def main() -> None:
     tails = args.tails.split(",")
     ahead = [int(h) for h in args.ahead.split(",")]
     aggregate = args.aggregate.split(",")
-    unknown = set(aggregate) - AGGREGATIONS.keys()
+    normalise = args.normalise.split(",")
+    unknown = set(aggregate) - AGGREGATIONS.keys() | set(normalise) - set(NORMALISATIONS)
     if unknown or min(ahead) < 1 or not all(_valid_tail(t) for t in tails):
         ap.error(
-            f"--aggregate takes {', '.join(AGGREGATIONS)}; --ahead positive integers; "
+            f"--aggregate takes {', '.join(AGGREGATIONS)}; --normalise "
+            f"{', '.join(NORMALISATIONS)}; --ahead positive integers; "
             "--tails shares in (0, 1] or max"
         )
-    columns = [_name(a, h, t, tails) for h in ahead for a in aggregate for t in tails]
+    columns = [
+        _name(a, h, t, tails, n) for h in ahead for a in aggregate for n in normalise for t in tails
+    ]
     columns.append("evaluation")
     print(f"ROC AUC of the one-step score's variants (tail mean of the largest {args.tails}; "
           f"scoring chunks of {SCORE_CHUNK})")  # fmt: skip
@@ -141,7 +194,7 @@ def main() -> None:
     print("|---" * (1 + len(columns)) + "|")
     for grid in args.grids:
         cells = sorted(p.parent for p in grid.glob("*/evaluation.json"))
-        rows = [cell_aucs(c, ahead, aggregate, tails) for c in cells]
+        rows = [cell_aucs(c, ahead, aggregate, tails, normalise) for c in cells]
         for cell, row in zip(cells, rows, strict=True):
             values = " | ".join(f"{row[c]:.3f}" for c in columns)
             print(f"| {grid.parent.name}/{cell.name} | {values} |")

@@ -13,10 +13,13 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+from rich.console import Console
 
+from aisdati.ais import score_text, score_unit
 from aisdati.ais.card import DataCard
 from aisdati.ais.space import PRESETS, AISSpace
 from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, Validator, crossfit_folds
+from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import report_dict
 from aisdati.detection.run import NOT_JUDGED_FAR, DetectSettings, detect, with_own_score
 from aisdati.detectors import ScoreSettings, load_detector
@@ -259,6 +262,16 @@ def test_validation_by_one_step_errors_scores_the_actor_as_the_step_score_does(
         replace(lane, validate_by="loss")
 
 
+def refused_without_its_calibration(model: DATIDetector, how: ScoreSettings, folder) -> None:
+    """Saved with a card from before its score existed, the model refuses to flag by it."""
+    model.save(folder / "all")
+    card = json.loads((folder / "all.json").read_text())
+    card["calibration"].pop(how.score)
+    (folder / "all.json").write_text(json.dumps(card))
+    with pytest.raises(UserError, match=f"no calibration scores for --score {how.score}"):
+        load_detector(folder / "all").threshold(how, 0.05)
+
+
 def test_steplane_adds_the_step_and_lane_scores_over_their_training_medians(
     area_dati, months, tmp_path
 ):
@@ -280,12 +293,7 @@ def test_steplane_adds_the_step_and_lane_scores_over_their_training_medians(
         atol=1e-4,
     )
     assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["steplane"], 0.95))
-    area_dati.save(tmp_path / "all")
-    card = json.loads((tmp_path / "all.json").read_text())
-    card["calibration"].pop("steplane")
-    (tmp_path / "all.json").write_text(json.dumps(card))
-    with pytest.raises(UserError, match="no calibration scores for --score steplane"):
-        load_detector(tmp_path / "all").threshold(how, 0.05)
+    refused_without_its_calibration(area_dati, how, tmp_path)
 
 
 def test_steptraffic_adds_the_step_score_and_the_distance_to_the_training_tracks(
@@ -315,3 +323,41 @@ def test_steptraffic_adds_the_step_score_and_the_distance_to_the_training_tracks
     (tmp_path / "all.json").write_text(json.dumps(card))
     with pytest.raises(UserError, match=r"does not keep its training tracks.*retrain"):
         load_detector(tmp_path / "all").score_tracks(august, how, ())
+
+
+def test_steprate_is_each_one_step_error_over_its_report_interval(area_dati, months, tmp_path):
+    """`--score steprate`: the one-step errors in m/s, each over its report interval (at least
+    the track's median one), the same tail mean; calibrated with the others, shown in its unit,
+    and refused in one line by a card calibrated before it."""
+    august = months[1][:6]
+    how = replace(HOW, score="steprate")
+    got = area_dati.score_tracks(august, how, ("step",))
+    errors, _ = area_dati.policy().step_errors(
+        [t.positions for t in august], [t.dts for t in august], HOW.rollouts, HOW.seed
+    )
+    parts = zip(august, errors, got.score_m, got.parts["step"], strict=True)
+    for track, e, value, metres in parts:
+        seconds = np.maximum(track.dts, np.median(track.dts)) * 3600.0
+        rates = np.sort(e / seconds)[::-1][: int(np.ceil(len(e) * HOW.tail))]
+        assert value == pytest.approx(rates.mean())
+        assert metres == pytest.approx(np.sort(e)[::-1][: len(rates)].mean())
+    gap = august[0]  # the same reports, one interval stretched to 20 times the median
+    dts = gap.dts.copy()
+    dts[len(dts) // 2] = 20 * np.median(dts)
+    stretched = replace(gap, dts=dts)
+    both = area_dati.score_tracks([gap, stretched], how, ("step",))
+    grown = both.parts["step"][1] / both.parts["step"][0]  # the gap's long prediction strays
+    assert grown > 1.05 and both.score_m[1] / both.score_m[0] < grown
+    cal = area_dati.card.calibration
+    assert len(cal["steprate"]) == len(cal["step"])
+    assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["steprate"], 0.95))
+    assert score_unit("steprate") == "m/s" and score_text(1.234, "steprate") == "1.23 m/s"
+    table = Console(width=80, record=True)
+    scores = pd.DataFrame({"track_id": [1], "mmsi": [2], "model": ["all"], "score": [1.5],
+                           "score_m": [3.25], "max_dev_m": [900.0], "max_dev_lat": [53.0],
+                           "max_dev_lon": [-129.0], "flagged": [True], "rank": [1],
+                           "ashore_reports": [0]})  # fmt: skip
+    table.print(detection_table(scores, "steprate"))
+    text = table.export_text()
+    assert "m/s" in text and "3.25" in text and "mean km" not in text
+    refused_without_its_calibration(area_dati, how, tmp_path)

@@ -9,8 +9,11 @@ DEFAULT_PRESET = "lanes"
 AREA_PRESET = "area"
 """The lane preset of a model of a whole area (`--cluster all`) when none is given: calibrated
 by cross-fitting."""
-SCORES = ("rollout", "step", "lane", "both", "steplane", "steptraffic", "area")
+SCORES = ("rollout", "step", "steprate", "lane", "both", "steplane", "steptraffic", "area")
 """The ways a detector scores a track (`aisdati.detectors.scoring.ScoreSettings.score`)."""
+SCORE_UNITS = {"steprate": "m/s"}
+"""The unit of each score not in metres but for `RATIO_SCORES` (multiples of medians):
+`steprate` is the one-step errors over their report intervals."""
 RATIO_SCORES: dict[str, tuple[str, str]] = {
     "both": ("rollout", "step"),
     "steplane": ("step", "lane"),
@@ -22,6 +25,17 @@ training track scores 2). `steplane` joins what the one-step score sees (a move 
 would not make: a jump) to what the lane sees (a place the traffic does not go: a detour);
 `steptraffic` joins it to the distance to the training tracks themselves (`traffic`: where the
 area's vessels went, not where the policy sails)."""
-
 LANE_SCORES = ("lane", "steplane", "steptraffic", "area")
 """Scores whose calibration rests on the lane settings (`ScoreSettings.calibrated_with`)."""
+
+
+def score_unit(score: str) -> str:
+    """The unit of a score's raw values: metres, `SCORE_UNITS`'s, or (a sum of ratios,
+    `RATIO_SCORES`) multiples of the training tracks' medians."""
+    return "x median" if score in RATIO_SCORES else SCORE_UNITS.get(score, "m")
+
+
+def score_text(value: float, score: str) -> str:
+    """A raw score for a person: km for metres, else the value and its unit."""
+    unit = score_unit(score)
+    return f"{value / 1000:,.2f} km" if unit == "m" else f"{value:,.2f} {unit}"

@@ -13,6 +13,7 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
+from aisdati.ais import score_unit
 from aisdati.preprocess.report import REASONS, IngestCounts
 
 if TYPE_CHECKING:
@@ -201,7 +202,7 @@ def results_table(ev: Evaluation, width: int = 120) -> Table:
     caption = (
         "AUC (ROC) and AP (average precision) rank altered against normal held-out tracks; "
         "P/R/F1 at each detector's calibrated threshold; normal/altered: median scores in km "
-        "(both, steplane and steptraffic: multiples of the training tracks' medians)"
+        "(steprate: m/s; both, steplane and steptraffic: multiples of the training tracks' medians)"
     )
     return _evaluation_table(ev.table, title, caption, width)
 
@@ -272,8 +273,9 @@ def _evaluation_table(frame: pd.DataFrame, title: str, caption: str, width: int)
 
 
 # ----------------------------------------------------------------------------------- detect
-def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
-    """The flagged tracks (or, if none, the top of the ranking) with where they deviate most."""
+def detection_table(scores: pd.DataFrame, score: str | None = None, limit: int = 15) -> Table:
+    """The flagged tracks (or, if none, the top of the ranking) with where they deviate most;
+    the raw score in km, or in the unit of `score` where it is not metres (`score_unit`)."""
     flagged = scores[scores["flagged"]].sort_values("rank")
     shown = flagged if len(flagged) else scores.sort_values("rank")
     title = (
@@ -282,7 +284,9 @@ def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
         else f"no track flagged among {len(scores)}; the highest scores"
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    cols = ["rank", "track", "mmsi", "score", "mean km", "max km", "at (lat, lon)"]
+    unit = score_unit(score or "lane")
+    raw = "mean km" if unit == "m" else unit
+    cols = ["rank", "track", "mmsi", "score", raw, "max km", "at (lat, lon)"]
     several = scores["model"].nunique() > 1
     if several:
         cols.insert(3, "model")
@@ -296,7 +300,7 @@ def detection_table(scores: pd.DataFrame, limit: int = 15) -> Table:
             str(r.track_id),
             str(r.mmsi),
             f"{r.score:.3f}",
-            f"{r.score_m / 1000:,.2f}",
+            f"{r.score_m / 1000 if unit == 'm' else r.score_m:,.2f}",
             f"{r.max_dev_m / 1000:,.2f}",
             f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         ]

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from aisdati.ais import score_text
 from aisdati.detection.webmap import html_detection_map
 from aisdati.execution import InProcess, Runner
 from aisdati.outdir import atomic_write_bytes
@@ -317,7 +318,8 @@ def evidence_figures(
     """evidence/track-<id>.png for the highest-ranked flagged tracks, to draw: the track, what
     it was compared with, the stretch of largest deviation and the deviation profile along it."""
     s = result.settings
-    label = "one-step prediction error (m)" if s and s.score == "step" else "deviation (m)"
+    step = s and s.score in ("step", "steprate")
+    label = "one-step prediction error (m)" if step else "deviation (m)"
     if s and s.score == "lane":
         label = "distance to the lane (m)"
     elif s and s.method == "nearest":
@@ -330,7 +332,7 @@ def evidence_figures(
         track = result.tracks[i]
         title = (
             f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
-            f"score {row.score_m / 1000:.2f} km, model {row.model}"
+            f"score {score_text(row.score_m, s.score if s else 'lane')}, model {row.model}"
         )
         args = (track.positions, result.rollouts[i], result.profiles[i], stretches[i], title)
         kwargs = {

@@ -57,6 +57,8 @@ the track from `AshoreCheck.min_reports` on and rank it above every track at sea
 SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
+    "steprate": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
+    "errors, each over its report interval (at least the track's median interval) (m/s)",
     "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
     "lane_rollouts free rollouts of twice the track's steps and, with lane_traffic, of one rollout "
     "from each training track's start (nearest: of the training tracks starting within "

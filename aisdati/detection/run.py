@@ -107,6 +107,7 @@ EVIDENCE = {
     "lane": "best rollout",
     "area": "best rollout",
     "step": "one-step predictions",
+    "steprate": "one-step predictions",
     "nearest": "nearest training track",
 }
 """What a track was compared with, by score (by method for `nearest`)."""

@@ -1,13 +1,14 @@
 """What the detectors that judge tracks with a learnt policy share: `dati` (the paper's) and `bc`.
 
 Both score the same ways (`aisdati.ais.policy`): free rollouts (`rollout`, the paper's),
-teacher-forced one-step errors (`step`), the distance to the lane of the K rollouts (`lane`), or
-`both`, `steplane` and `steptraffic` (`RATIO_SCORES`): two of those, each divided by the median
-of the training tracks' own scores of that kind, summed; `traffic` is the distance to the
-training tracks themselves, which a policy keeps beside its networks (`aisdati.detectors.traffic`,
-as `nearest` keeps them). The step profile stands for the sums on maps. Models whose cards record
-where their training tracks end also score `od` and `area` (`aisdati.detectors.od`): the lane
-score plus how much rarer the track's (start, end) pair is than the training tracks'.
+teacher-forced one-step errors (`step`, metres; `steprate`, each over its report interval, m/s),
+the distance to the lane of the K rollouts (`lane`), or `both`, `steplane` and `steptraffic`
+(`RATIO_SCORES`): two of those, each divided by the median of the training tracks' own scores of
+that kind, summed; `traffic` is the distance to the training tracks themselves, which a policy
+keeps beside its networks (`aisdati.detectors.traffic`, as `nearest` keeps them). The step
+profile stands for the sums on maps. Models whose cards record where their training tracks end
+also score `od` and `area` (`aisdati.detectors.od`): the lane score plus how much rarer the
+track's (start, end) pair is than the training tracks'.
 
 A goal-conditioned model's lane traffic (`ScoreSettings.lane_traffic`) is that of the training
 tracks bound the same way: starting and ending within `near_km` of the track's own start and end.
@@ -30,7 +31,7 @@ from aisdati.ais.policy import Act, AISPolicy
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
 from aisdati.detectors.od import area_scores, od_distances, od_pairs_m, track_ends
-from aisdati.detectors.scoring import Scores, ScoreSettings, ratio_sum, tail_mean
+from aisdati.detectors.scoring import Scores, ScoreSettings, error_rates, ratio_sum, tail_mean
 from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
@@ -95,13 +96,15 @@ class PolicyDetector(Detector):
                 for p, e, b in zip(positions, every, bound, strict=True)
             ]
             parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
-        if "step" in wanted:
-            errors, predicted = policy.step_errors(
-                positions, [t.dts for t in tracks], how.rollouts, how.seed
-            )
+        if wanted & {"step", "steprate"}:
+            dts = [t.dts for t in tracks]
+            errors, predicted = policy.step_errors(positions, dts, how.rollouts, how.seed)
             parts["step"] = np.array([tail_mean(e, how.tail) for e in errors])
-            profiles["step"] = [np.concatenate([[0.0], e]) for e in errors]
-            evidence["step"] = [
+            parts["steprate"] = np.array(
+                [tail_mean(error_rates(e, d), how.tail) for e, d in zip(errors, dts, strict=True)]
+            )
+            profiles["step"] = profiles["steprate"] = [np.concatenate([[0.0], e]) for e in errors]
+            evidence["step"] = evidence["steprate"] = [
                 np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
             ]
         if "traffic" in wanted:
@@ -185,7 +188,7 @@ class PolicyDetector(Detector):
         did not train on them; without, by the whole model that did. The tracks are kept as
         the model's traffic, their traffic scores leave-one-vessel-out."""
         how = replace(how or self.how, score="rollout")
-        kinds = ("rollout", "step", "lane")
+        kinds = ("rollout", "step", "steprate", "lane")
         if folds is None:
             parts = self.score_with(self.policy(), tracks, how, kinds[1:]).parts
         else:
@@ -195,7 +198,7 @@ class PolicyDetector(Detector):
                 got = self.score_with(self.policy(int(m)), [tracks[i] for i in rows], how, kinds)
                 for k in kinds:
                     parts[k][rows] = got.parts[k]
-        cal = {k: [round(float(v), 2) for v in parts[k]] for k in kinds}
+        cal = {k: [round(float(v), 4 if k == "steprate" else 2) for v in parts[k]] for k in kinds}
         self.training_tracks = Traffic.of(tracks, self.card.cluster)
         cal["traffic"] = [round(float(v), 2) for v in self.training_tracks.calibration(how)]
         for name in RATIO_SCORES:

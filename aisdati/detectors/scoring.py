@@ -20,6 +20,17 @@ rollout per training track, at most 170), which 64 tracks of 30 lane rollouts ea
 more than 10 times; smaller chunks would spread a few hundred tracks wider over workers."""
 
 
+def error_rates(errors_m: np.ndarray, dts_h: np.ndarray) -> np.ndarray:
+    """A track's one-step errors (metres; report i predicting report i + 1) as rates, m/s: each
+    over its time step, at least the track's median step. A prediction across a gap strays in
+    proportion to the gap, so in metres a normal track with a few long intervals outranks a
+    position jump of a track reported every minute; per second of the interval it does not. The
+    floor keeps the jitter of reports seconds apart from counting as fast errors. `steprate`;
+    measured forward in time in docs/results/forward.md."""
+    seconds = np.maximum(dts_h, np.median(dts_h)) * 3600.0
+    return errors_m / seconds
+
+
 def score_chunks(count: int) -> list[range]:
     """The tracks (by index) of each scoring task: consecutive chunks of `SCORE_CHUNK`, and
     one empty chunk for no track (a detector still says what an empty set scores)."""

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.ais import DEFAULT_PRESET, RATIO_SCORES
+from aisdati.ais import DEFAULT_PRESET, score_unit
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
 from aisdati.detection.run import ashore_counts, score_settings
@@ -304,7 +304,7 @@ def _score(
             result.evidence[key] = scored.evidence
             for tid, v, f in zip(split.heldout_ids, values, flagged, strict=True):
                 score_rows.append((method, kind, tid, float(v), float(threshold), bool(f)))
-            unit = value_unit(kind)
+            unit = score_unit(kind)
             rows += _rows(
                 method, kind, labels, values, ranked, flagged, threshold, settings.kinds, unit
             )
@@ -318,14 +318,14 @@ def _score(
 
 def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
-    four, `steplane` and `steptraffic` where its card was calibrated with them (cards from
-    before those scores are not), and `od` and `area` where its card records where its
-    training tracks end."""
+    four, `steprate`, `steplane` and `steptraffic` where its card was calibrated with them
+    (cards from before those scores are not), and `od` and `area` where its card records where
+    its training tracks end."""
     if det.method == "nearest":
         return ["nearest", "lane"]
-    ratios = [k for k in ("steplane", "steptraffic") if det.card.calibration.get(k)]
+    since = [k for k in ("steprate", "steplane", "steptraffic") if det.card.calibration.get(k)]
     od = ["od", "area"] if det.end_points is not None else []
-    return ["rollout", "step", "lane", "both", *ratios, *od]
+    return ["rollout", "step", "lane", "both", *since, *od]
 
 
 ALL_ROUTES = "routes"
@@ -424,12 +424,6 @@ POOLED_UNIT = "x threshold"
 """The unit of the pooled routes' values: each track's score over its own model's threshold."""
 
 
-def value_unit(score: str) -> str:
-    """The unit of a score's values: metres, or (a sum of ratios, `RATIO_SCORES`) multiples of
-    the training tracks' medians."""
-    return "x median" if score in RATIO_SCORES else "m"
-
-
 def _rows(
     method: str,
     score: str,
@@ -443,7 +437,7 @@ def _rows(
 ) -> list[dict[str, Any]]:
     """The table's rows of one detector and score: per anomaly kind (and pooled), how `ranked`
     orders and `flagged` flags the altered tracks against the normal ones, and the median
-    `values` of each, in `unit` (`value_unit`)."""
+    `values` of each, in `unit` (`score_unit`)."""
     y = labels["label"].to_numpy()
     kind = labels["kind"].to_numpy()
     normal = y == 0
