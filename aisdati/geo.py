@@ -33,6 +33,12 @@ def haversine_m(lon1, lat1, lon2, lat2):
     return 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
 
 
+def legs_m(polyline: np.ndarray) -> np.ndarray:
+    """The great-circle length of each leg of a [n, 2] (lon, lat) polyline, metres ([n - 1])."""
+    p = polyline
+    return haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
+
+
 @njit(cache=True)
 def haversine_one_m(lon1: float, lat1: float, lon2: float, lat2: float) -> float:
     """`haversine_m` of one pair of points, compiled: for the sequential scans of ingest

@@ -51,7 +51,7 @@ from aisdati.detectors.scoring import (
     score_chunks,
     tail_mean,
 )
-from aisdati.geo import haversine_m
+from aisdati.geo import legs_m
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track, load_tracks
 
@@ -73,8 +73,7 @@ MIN_STEP_M = 10.0
 def _divisor(track: Track, normalise: str) -> float:
     """What a track's per-report errors are divided by: its median step (`track`), or 1."""
     if normalise == "track":
-        lon, lat = track.positions.T
-        return max(MIN_STEP_M, float(np.median(haversine_m(lon[:-1], lat[:-1], lon[1:], lat[1:]))))
+        return max(MIN_STEP_M, float(np.median(legs_m(track.positions))))
     return 1.0
 
 

@@ -64,7 +64,7 @@ from step_traffic import (  # (this folder: run as a script)
 
 from aisdati.ais.card import read_card
 from aisdati.detectors.traffic import Traffic
-from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg, unit_vectors
+from aisdati.geo import EARTH_RADIUS_M, haversine_m, initial_bearing_deg, legs_m, unit_vectors
 
 
 def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -76,7 +76,7 @@ def turns(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if len(p) < 3:
         return np.zeros(0), np.zeros(0), np.zeros((0, 2))
     course = initial_bearing_deg(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
-    along = np.cumsum(_legs_m(p))[:-1]
+    along = np.cumsum(legs_m(p))[:-1]
     return (np.diff(course) + 180.0) % 360.0 - 180.0, along, p[1:-1]
 
 
@@ -139,7 +139,7 @@ class PathExcess:
         self.tracks = tracks
         self.vessels = vessels
         self.split = split
-        self.along = [np.r_[0.0, np.cumsum(_legs_m(t))] for t in tracks]
+        self.along = [np.r_[0.0, np.cumsum(legs_m(t))] for t in tracks]
         self.training = np.array([self.excess(t, v) for t, v in zip(tracks, vessels, strict=True)])
 
     def shortest_m(self, start: np.ndarray, end: np.ndarray, vessel: int = -1) -> float:
@@ -166,14 +166,8 @@ class PathExcess:
     def one_way(self, positions: np.ndarray, vessel: int) -> float:
         if len(positions) < 2:
             return 0.0
-        length = float(_legs_m(positions).sum())
+        length = float(legs_m(positions).sum())
         return length - self.shortest_m(positions[0], positions[-1], vessel)
-
-
-def _legs_m(positions: np.ndarray) -> np.ndarray:
-    """The great-circle length of each leg of a [n, 2] lon/lat track (m)."""
-    p = positions
-    return haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])
 
 
 def leg_speeds_mps(timed: np.ndarray) -> np.ndarray:
@@ -181,7 +175,7 @@ def leg_speeds_mps(timed: np.ndarray) -> np.ndarray:
     reports at the same second are left out (their speed is not defined)."""
     dt = np.diff(timed[:, 2])
     ok = dt > 0
-    return _legs_m(timed[:, :2])[ok] / dt[ok]
+    return legs_m(timed[:, :2])[ok] / dt[ok]
 
 
 def top_speed_mps(timed: np.ndarray) -> float:

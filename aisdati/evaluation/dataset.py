@@ -20,7 +20,7 @@ import shapely
 
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import MIN_POINTS, Injected, inject
-from aisdati.geo import haversine_m, initial_bearing_deg
+from aisdati.geo import initial_bearing_deg, legs_m
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.schema import KNOT_MPS, POINTS_SCHEMA, UTC_US
@@ -90,7 +90,7 @@ def split_by_vessel(
 
 def _sog_cog(pos: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """SOG and COG of each report towards the next (the last repeats the one before)."""
-    d = haversine_m(pos[:-1, 0], pos[:-1, 1], pos[1:, 0], pos[1:, 1])
+    d = legs_m(pos)
     dt = np.maximum(np.diff(t), 1e-3)
     sog = np.r_[d / dt / KNOT_MPS, 0.0]
     cog = np.r_[initial_bearing_deg(pos[:-1, 0], pos[:-1, 1], pos[1:, 0], pos[1:, 1]), 0.0]
@@ -207,7 +207,7 @@ def _points(track_id: int, mmsi: int, t0_us: int, got: Injected) -> pa.Table:
 def _track_row(row: pa.Table, track_id: int, t0_us: int, got: Injected) -> pa.Table:
     """The source track's row (cluster, route, ...) with what the anomaly changed."""
     p = got.positions
-    length = float(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1]).sum()) / 1000.0
+    length = float(legs_m(p).sum()) / 1000.0
     end_us = t0_us + round(float(got.times_s[-1]) * 1e6)
     changes = {
         "track_id": pa.array([track_id], pa.int64()),

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aisdati.errors import UserError
-from aisdati.geo import courses_deg, haversine_m, moved_m
+from aisdati.geo import courses_deg, legs_m, moved_m
 from aisdati.options import parse_names
 
 Range = tuple[float, float]
@@ -121,7 +121,7 @@ def loiter(p, t, rng, prm) -> Injected:
     at = int(rng.integers(int(0.3 * n), int(0.7 * n)))
     radius = _draw(rng, prm["radius_km"]) * 1000.0
     loops = _draw(rng, prm["loops"])
-    step_m = float(np.median(haversine_m(p[:-1, 0], p[:-1, 1], p[1:, 0], p[1:, 1])))
+    step_m = float(np.median(legs_m(p)))
     dt = float(np.median(np.diff(t)))
     m = max(8, round(2 * np.pi * radius * loops / max(step_m, 1.0)))
     start_bearing = courses_deg(p)[at] - 90.0
