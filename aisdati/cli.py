@@ -109,7 +109,9 @@ LANE_OPTION = typer.Option(
     "ranges=max|quantile, noise=gaussian|ou, fourier=6 (octaves of position features; 0 off), "
     "pretrain=50 (epochs of cloning before the adversarial training; 0 off), members=3 (seeds "
     "trained as one lane model), average=0 (decay of a moving-average actor; 0 off), "
-    "critic=decision|state, validation_tracks=8, validation_rollouts=3.",
+    "critic=decision|state, validation_tracks=8, validation_rollouts=3, "
+    "validate_by=rollout|step, goal=true, crossfit=true (members calibrated on folds they did "
+    "not train on), fold_by=vessel|time (those folds by vessel or by stretches of the period).",
 )
 
 

@@ -17,7 +17,7 @@ from rich.console import Console
 
 from aisdati.ais import score_text, score_unit
 from aisdati.ais.card import DataCard
-from aisdati.ais.space import PRESETS, AISSpace
+from aisdati.ais.space import PRESETS, AISSpace, lane_config
 from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, Validator, crossfit_folds
 from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import report_dict
@@ -260,6 +260,23 @@ def test_validation_by_one_step_errors_scores_the_actor_as_the_step_score_does(
     assert got < rollouts(trainer, 0)  # one step errs far less than a whole rollout
     with pytest.raises(UserError, match="validate_by"):
         replace(lane, validate_by="loss")
+
+
+def test_time_folds_are_stretches_of_the_period(months):
+    """`fold_by=time`: each member is calibrated on a stretch of July it did not train on, the
+    folds equal in tracks; a vessel that recurs is met on both sides, as in a later month."""
+    july = months[0]
+    folds = crossfit_folds(july, 3, seed=0, by="time")
+    starts = np.array([t.start.value for t in july])
+    sizes = np.bincount(folds, minlength=3)
+    assert sizes.max() - sizes.min() <= 1
+    for m in range(2):
+        assert starts[folds == m].max() <= starts[folds == m + 1].min()
+    mmsi = np.array([t.mmsi for t in july])
+    assert any(len(set(folds[mmsi == v])) > 1 for v in np.unique(mmsi))
+    assert lane_config("area", ["fold_by=time"]).fold_by == "time"
+    with pytest.raises(UserError, match="fold_by must be one of vessel, time"):
+        lane_config("area", ["fold_by=month"])
 
 
 def refused_without_its_calibration(model: DATIDetector, how: ScoreSettings, folder) -> None:

@@ -53,6 +53,9 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
 - `crossfit=true`: member m of an M-member lane trains on every fold of the training tracks but
   fold m (folds by vessel), validates on fold m, and calibrates the threshold on it, so the
   threshold comes from tracks the member did not fit (`aisdati.detectors.dati`).
+  `fold_by=time` folds by stretches of the period instead (each member calibrated on a stretch
+  it did not train on, its vessels' other trips allowed in its training, as a later month
+  meets the vessels that recur); measured forward in time, not the preset's.
 - `average=B`: validate and keep an exponential moving average (decay B per training batch) of
   the forward actor instead of the live one (`DATIConfig.actor_average`): the validation DTW of
   the live actor jumps by km from one episode to the next, so the kept one was the best of noise.
@@ -107,6 +110,7 @@ class LaneConfig:
     validate_by: str = "rollout"
     goal: bool = False
     crossfit: bool = False
+    fold_by: str = "vessel"
 
     def __post_init__(self) -> None:
         choices = {
@@ -117,6 +121,7 @@ class LaneConfig:
             "noise": ("gaussian", "ou"),
             "critic": ("decision", "state"),
             "validate_by": ("rollout", "step"),
+            "fold_by": ("vessel", "time"),
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:

@@ -275,11 +275,20 @@ def demonstrations(envs: Sequence[TrajectoryImitationEnv]) -> list[tuple[np.ndar
     return out
 
 
-def crossfit_folds(tracks: Sequence[Track], folds: int, seed: int) -> np.ndarray:
-    """Fold (0 .. folds - 1) of each track for cross-fitting (`LaneConfig.crossfit`): vessels
-    in seeded order, each to the fold with the fewest tracks so far, so that no vessel's other
-    tracks teach the member that is calibrated on it; with fewer vessels than folds, tracks in
-    seeded order, dealt round."""
+def crossfit_folds(
+    tracks: Sequence[Track], folds: int, seed: int, by: str = "vessel"
+) -> np.ndarray:
+    """Fold (0 .. folds - 1) of each track for cross-fitting (`LaneConfig.crossfit`). By vessel:
+    vessels in seeded order, each to the fold with the fewest tracks so far, so that no vessel's
+    other tracks teach the member that is calibrated on it; with fewer vessels than folds,
+    tracks in seeded order, dealt round. By time (`LaneConfig.fold_by`): contiguous stretches
+    of the period, equal in tracks, so that each member is calibrated on a stretch it did not
+    train on, as the model is used on a later period."""
+    if by == "time":
+        order = np.argsort([t.start.value for t in tracks], kind="stable")
+        out = np.empty(len(tracks), dtype=np.int64)
+        out[order] = np.arange(len(tracks)) * folds // max(len(tracks), 1)
+        return out
     rng = np.random.default_rng([seed, 11])
     mmsi = np.array([t.mmsi for t in tracks])
     out = np.empty(len(tracks), dtype=np.int64)
@@ -415,7 +424,7 @@ class EnsembleRun:
         self.seeds = self.seeds[first_member:]
         # each member's tracks: its route's, or with cross-fitting all but its own fold
         self.folds = [
-            crossfit_folds(r.tracks, self.members, self.seeds[k * self.members])
+            crossfit_folds(r.tracks, self.members, self.seeds[k * self.members], first.lane.fold_by)
             if first.lane.crossfit
             else np.full(len(r.tracks), -1)
             for k, r in enumerate(self.routes)

@@ -92,7 +92,11 @@ class DATIDetector(PolicyDetector):
         self.card, self.resumed_from = result.card, result.resumed_from
         self.card.training.finished = True
         lane = self.card.lane_config
-        folds = crossfit_folds(tracks, lane.members, self.card.seed) if lane.crossfit else None
+        folds = (
+            crossfit_folds(tracks, lane.members, self.card.seed, lane.fold_by)
+            if lane.crossfit
+            else None
+        )
         self.calibrate(tracks, folds=folds)
 
     def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
