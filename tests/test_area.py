@@ -98,6 +98,7 @@ def test_every_track_is_judged_by_the_area_model_or_listed_with_its_reason(
     assert set(by[sorted(later & set(far))]) == {"all-nearest"}
     report = report_dict(alone)
     assert str(far[0]) in json.dumps(report["coverage"])  # report.json names them
+    assert report["score_unit"] == "m"  # nearest's lane, in metres
     cut = report["thresholds"]["route-1-nearest"]
     lo, hi = cut["spread_5_95"]
     assert lo <= cut["threshold"] <= hi and lo < hi  # the calibration's bootstrap spread

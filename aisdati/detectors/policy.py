@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aisdati.ais import RATIO_SCORES
+from aisdati.ais import RATIO_SCORES, SCORE_UNITS
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy
@@ -198,7 +198,7 @@ class PolicyDetector(Detector):
                 got = self.score_with(self.policy(int(m)), [tracks[i] for i in rows], how, kinds)
                 for k in kinds:
                     parts[k][rows] = got.parts[k]
-        cal = {k: [round(float(v), 4 if k == "steprate" else 2) for v in parts[k]] for k in kinds}
+        cal = {k: [round(float(v), 4 if k in SCORE_UNITS else 2) for v in parts[k]] for k in kinds}
         self.training_tracks = Traffic.of(tracks, self.card.cluster)
         cal["traffic"] = [round(float(v), 2) for v in self.training_tracks.calibration(how)]
         for name in RATIO_SCORES:
