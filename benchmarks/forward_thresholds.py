@@ -1,0 +1,139 @@
+"""Do the one-step scores' thresholds hold forward in time? Two allowances measured (not a test).
+
+`--score steprate` (the one-step errors over their report intervals) ranks the later tracks
+best of every score, but its threshold, the 95th percentile of the training tracks' own
+cross-fitted scores, does not hold forward: it flags no anomaly at sea on Kitimat and 12 % of
+Virginia Beach's normal tracks (docs/results/forward.md). On the cells of
+`benchmarks/detection_quality.py --forward` (DATI models trained since `steprate` exists), for
+`step` and `steprate`, beside the evaluation's own figures:
+
+- `adjusted`: the areas' reporting intervals changed between the periods (Kitimat's median
+  240 -> 300 s, Virginia Beach's 79 -> 70 s), so each track's score times (its median report
+  interval / the training tracks' median of it)^g, g the least-squares slope of log(score) on
+  log(median interval) over the training tracks' calibration scores, against the 95th
+  percentile of the training tracks' adjusted scores;
+- `member-wise`: a training track's calibration score comes from one member (K draws of the
+  member that did not train on its vessel), a later track's from the ensemble (K draws spread
+  over the members, the best kept, a lower statistic); so each later track scored by each
+  member alone, its score the mean over the members, against the card's own threshold.
+
+Tracks the ashore rule flagged in the evaluation are flagged and rank first, as there. The table
+gives, per grid and variant, the mean over the cells of ROC AUC, the shares of normal (FA) and
+altered (recall) tracks flagged, the later normal tracks' median score against the training
+tracks', and g.
+
+Run: python benchmarks/forward_thresholds.py runs/grid2/*/forward-* [--contamination 0.05]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from sklearn.metrics import roc_auc_score
+
+from aisdati.detectors import load_detector
+from aisdati.detectors.base import Detector
+from aisdati.detectors.scoring import error_rates, score_chunks, tail_mean
+from aisdati.tracks.ashore import AshoreCheck
+from aisdati.tracks.store import Track, load_tracks
+
+RULE = AshoreCheck()
+SCORES = ("step", "steprate")
+
+
+def member_wise(detector: Detector, tracks: list[Track], draws: int, seed: int) -> dict:
+    """Each track's `SCORES` from each member alone (K draws of it), averaged over members."""
+    members = detector.card.lane_config.members
+    out = {k: np.zeros((members, len(tracks))) for k in SCORES}
+    for m in range(members):
+        policy = detector.policy(m)
+        for chunk in score_chunks(len(tracks)):
+            part = tracks[chunk.start : chunk.stop]
+            dts = [t.dts for t in part]
+            errors, _ = policy.step_errors([t.positions for t in part], dts, draws, seed)
+            rows = slice(chunk.start, chunk.stop)
+            out["step"][m, rows] = [tail_mean(e, 0.1) for e in errors]
+            out["steprate"][m, rows] = [
+                tail_mean(error_rates(e, d), 0.1) for e, d in zip(errors, dts, strict=True)
+            ]
+    return {k: v.mean(axis=0) for k, v in out.items()}
+
+
+def interval_adjusted(cal, cal_dt, values, dt) -> tuple[np.ndarray, np.ndarray, float]:
+    """The training and later scores times (interval / the training median)^g, and g."""
+    g = float(np.polyfit(np.log(cal_dt), np.log(cal), 1)[0])
+    ref = float(np.median(cal_dt))
+    return cal * (cal_dt / ref) ** g, values * (dt / ref) ** g, g
+
+
+def median_intervals(tracks: list[Track]) -> np.ndarray:
+    """Each track's median report interval, seconds."""
+    return np.array([np.median(t.dts) * 3600.0 for t in tracks])
+
+
+def cell_rows(cell: Path, contamination: float) -> list[dict]:
+    """Each score's figures on one cell: as evaluated, interval-adjusted and member-wise."""
+    doc = json.loads((cell / "evaluation.json").read_text())
+    settings = doc["settings"]
+    detector = load_detector(Path(settings["models_dir"] or cell / "models") / "all")
+    labels = pd.read_csv(cell / "data" / "labels.csv")
+    later = load_tracks(cell / "data", labels["track_id"].tolist())
+    train_dt = median_intervals(load_tracks(cell / "data", doc["split"]["training_track_ids"]))
+    later_dt = median_intervals(later)
+    mean = member_wise(detector, later, settings["rollouts"], settings["seed"])
+    scores = pd.read_parquet(cell / "scores.parquet")
+    y = labels["label"].to_numpy()
+    rows = []
+    for score in SCORES:
+        got = scores[(scores["detector"] == "dati") & (scores["score"] == score)]
+        got = got.set_index("track_id").loc[labels["track_id"]]
+        ashore, lengths = got["ashore_reports"].to_numpy(), got["n_points"].to_numpy()
+        cal = np.asarray(detector.card.calibration[score], np.float64)
+        values = got["value"].to_numpy()
+        cal_adj, values_adj, g = interval_adjusted(cal, train_dt, values, later_dt)
+        ways = (
+            (score, cal, values, np.nan),
+            (f"{score} adjusted", cal_adj, values_adj, g),
+            (f"{score} member-wise", cal, mean[score], np.nan),
+        )
+        for name, c, v, slope in ways:
+            flagged = (v > np.quantile(c, 1.0 - contamination)) | RULE.flags(ashore)
+            rows.append(
+                {
+                    "score": name,
+                    "auc": roc_auc_score(y, RULE.ranked(v, ashore, lengths)),
+                    "fa": flagged[y == 0].mean(),
+                    "recall": flagged[y == 1].mean(),
+                    "normal": float(np.median(v[y == 0])),
+                    "training": float(np.median(c)),
+                    "g": slope,
+                }
+            )
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("grids", nargs="+", type=Path, help="folders of evaluate cells")
+    ap.add_argument("--contamination", type=float, default=0.05)
+    args = ap.parse_args()
+    print(f"One-step thresholds forward in time at --contamination {args.contamination}")
+    print("| grid | score | ROC AUC | FA | recall | later normal median | training median | g |")
+    print("|---|---|---|---|---|---|---|---|")
+    for grid in args.grids:
+        cells = sorted(p.parent for p in grid.glob("*/evaluation.json"))
+        frame = pd.DataFrame([r for c in cells for r in cell_rows(c, args.contamination)])
+        for name, m in frame.groupby("score", sort=False):
+            print(
+                f"| {grid.parent.name}/{grid.name} | {name} | {m['auc'].mean():.3f} | "
+                f"{m['fa'].mean():.3f} | {m['recall'].mean():.2f} | {m['normal'].mean():.3g} | "
+                f"{m['training'].mean():.3g} | {m['g'].mean():.2f} |"
+            )
+
+
+if __name__ == "__main__":
+    main()
