@@ -35,7 +35,12 @@ def score_unit(score: str) -> str:
     return "x median" if score in RATIO_SCORES else SCORE_UNITS.get(score, "m")
 
 
+def readable_value(value: float, unit: str) -> float:
+    """A raw value of `unit` as a person reads it: metres in km, any other unit as it is."""
+    return value / 1000 if unit == "m" else value
+
+
 def score_text(value: float, score: str) -> str:
     """A raw score for a person: km for metres, else the value and its unit."""
     unit = score_unit(score)
-    return f"{value / 1000:,.2f} km" if unit == "m" else f"{value:,.2f} {unit}"
+    return f"{readable_value(value, unit):,.2f} {'km' if unit == 'm' else unit}"

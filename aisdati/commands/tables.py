@@ -13,7 +13,7 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from aisdati.ais import score_unit
+from aisdati.ais import readable_value, score_unit
 from aisdati.preprocess.report import REASONS, IngestCounts
 
 if TYPE_CHECKING:
@@ -229,7 +229,7 @@ def _distance(value: float | None, unit: str) -> str:
     """A median of the table: km for metres, else the ratio itself."""
     if value is None or value != value:
         return "-"
-    return f"{value / 1000:.2f}" if unit == "m" else f"{value:.2f}"
+    return f"{readable_value(value, unit):.2f}"
 
 
 def _figure(v: float | None, digits: int = 3) -> str:
@@ -300,7 +300,7 @@ def detection_table(scores: pd.DataFrame, score: str | None = None, limit: int =
             str(r.track_id),
             str(r.mmsi),
             f"{r.score:.3f}",
-            f"{r.score_m / 1000 if unit == 'm' else r.score_m:,.2f}",
+            f"{readable_value(r.score_m, unit):,.2f}",
             f"{r.max_dev_m / 1000:,.2f}",
             f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         ]
