@@ -35,9 +35,9 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import roc_auc_score
 
-from aisdati.detectors import load_detector
-from aisdati.detectors.base import Detector
-from aisdati.detectors.scoring import error_rates, score_chunks, tail_mean
+from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors.policy import PolicyDetector
+from aisdati.detectors.scoring import score_chunks
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track, load_tracks
 
@@ -45,21 +45,19 @@ RULE = AshoreCheck()
 SCORES = ("step", "steprate")
 
 
-def member_wise(detector: Detector, tracks: list[Track], draws: int, seed: int) -> dict:
-    """Each track's `SCORES` from each member alone (K draws of it), averaged over members."""
+def member_wise(detector: PolicyDetector, tracks: list[Track], draws: int, seed: int) -> dict:
+    """Each track's `SCORES` from each member alone (K draws of it, as the calibration scores
+    a training track: `PolicyDetector.score_with`), averaged over the members; in the
+    evaluation's scoring chunks."""
+    how = ScoreSettings(score="step", rollouts=draws, seed=seed)
     members = detector.card.lane_config.members
     out = {k: np.zeros((members, len(tracks))) for k in SCORES}
     for m in range(members):
         policy = detector.policy(m)
         for chunk in score_chunks(len(tracks)):
-            part = tracks[chunk.start : chunk.stop]
-            dts = [t.dts for t in part]
-            errors, _ = policy.step_errors([t.positions for t in part], dts, draws, seed)
-            rows = slice(chunk.start, chunk.stop)
-            out["step"][m, rows] = [tail_mean(e, 0.1) for e in errors]
-            out["steprate"][m, rows] = [
-                tail_mean(error_rates(e, d), 0.1) for e, d in zip(errors, dts, strict=True)
-            ]
+            parts = detector.score_with(policy, tracks[chunk.start : chunk.stop], how, ()).parts
+            for k in SCORES:
+                out[k][m, chunk.start : chunk.stop] = parts[k]
     return {k: v.mean(axis=0) for k, v in out.items()}
 
 
