@@ -15,6 +15,11 @@ keeps the best of K rollouts). Two questions, each answered without retraining:
   fast ferry's metres of error weigh as a slow tug's; `velocity` divides each report's error by
   its time step, at least the track's median one (an error in m/s), so a gap's long prediction
   weighs no more than a typical report's: the tool's `--score steprate` (`error_rates`).
+  `spread` divides each report's best error by the K draws' own spread (the root mean square of
+  their distances from their centroid, plus 10 m, an AIS position's accuracy): the surprise of
+  the report under the model's predictive spread, which is wide where the members disagree or a
+  fast vessel's next report is uncertain; `centre` the same for the report's distance from the
+  draws' centroid instead of the best draw's error.
 - `--ahead`: does predicting h reports ahead (the policy moved h times from the real report,
   over the real time steps, its own moves feeding its state) see more than one step? A loiter
   comes back to where it was while the policy sails on, and a detour bends away from where the
@@ -29,7 +34,7 @@ per variant: per cell, and the mean over each grid's cells.
 
 Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
      [--ahead 1,2,3,5] [--aggregate best,median,mean] [--tails 0.02,0.05,0.1,0.2,max]
-     [--normalise none,track,velocity]
+     [--normalise none,track,velocity,spread,centre]
 """
 
 from __future__ import annotations
@@ -51,7 +56,7 @@ from aisdati.detectors.scoring import (
     score_chunks,
     tail_mean,
 )
-from aisdati.geo import legs_m
+from aisdati.geo import arc_m, legs_m, unit_vectors
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track, load_tracks
 
@@ -77,15 +82,35 @@ def _divisor(track: Track, normalise: str) -> float:
     return 1.0
 
 
-def _normalised(errors: np.ndarray, track: Track, normalise: str, h: int) -> np.ndarray:
+POSITION_ACCURACY_M = 10.0
+"""`spread` and `centre`: added to the draws' spread, an AIS position's accuracy, so a report
+the draws agree on to a metre is not judged against a metre."""
+
+
+def draw_spread(predicted: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per report, the K draws' spread (root mean square distance from their centroid, m) and
+    the real report's distance from that centroid (m): predicted [n, K, 2], targets [n, 2]."""
+    u = unit_vectors(predicted)
+    centre = u.mean(axis=1)
+    centre /= np.linalg.norm(centre, axis=1, keepdims=True)
+    spread = np.sqrt((arc_m(np.linalg.norm(u - centre[:, None], axis=2)) ** 2).mean(axis=1))
+    return spread, arc_m(np.linalg.norm(unit_vectors(targets) - centre, axis=1))
+
+
+def _normalised(
+    errors: np.ndarray, track: Track, normalise: str, h: int, predicted: np.ndarray
+) -> np.ndarray:
     """A track's per-report errors in the unit `normalise` asks for; `velocity` is the tool's
     `steprate` (`error_rates`), over the h time steps from each anchor to its target."""
     if normalise == "velocity":
         return error_rates(errors, np.convolve(track.dts, np.ones(h), "valid"))
+    if normalise in ("spread", "centre"):
+        spread, off = draw_spread(predicted, track.positions[h:])
+        return (errors if normalise == "spread" else off) / (spread + POSITION_ACCURACY_M)
     return errors / _divisor(track, normalise)
 
 
-NORMALISATIONS = ("none", "track", "velocity")
+NORMALISATIONS = ("none", "track", "velocity", "spread", "centre")
 
 
 def _tailed(values: np.ndarray, tail: str) -> float:
@@ -117,7 +142,7 @@ def cell_aucs(
     for h in ahead:
         for chunk in score_chunks(len(tracks)):
             part = tracks[chunk.start : chunk.stop]
-            errors, _ = policy.step_draws(
+            errors, predicted = policy.step_draws(
                 [t.positions for t in part], [t.dts for t in part], settings["rollouts"],
                 settings["seed"], ahead=h,
             )  # fmt: skip
@@ -125,7 +150,8 @@ def cell_aucs(
                 per_report = [AGGREGATIONS[name](e) for e in errors]
                 for norm in normalise:
                     scaled = [
-                        _normalised(v, t, norm, h) for v, t in zip(per_report, part, strict=True)
+                        _normalised(v, t, norm, h, q)
+                        for v, t, q in zip(per_report, part, predicted, strict=True)
                     ]
                     for tail in tails:
                         scores.setdefault(_name(name, h, tail, tails, norm), []).extend(
