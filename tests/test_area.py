@@ -15,13 +15,20 @@ import pandas as pd
 import pytest
 from rich.console import Console
 
-from aisdati.ais import score_text, score_unit
+from aisdati.ais import SCORES, score_text, score_unit
 from aisdati.ais.card import DataCard
 from aisdati.ais.space import PRESETS, AISSpace, lane_config
 from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, Validator, crossfit_folds
 from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import report_dict
-from aisdati.detection.run import NOT_JUDGED_FAR, DetectSettings, detect, with_own_score
+from aisdati.detection.run import (
+    NOT_JUDGED_FAR,
+    PROFILES,
+    STEP_ERRORS,
+    DetectSettings,
+    detect,
+    with_own_score,
+)
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
@@ -312,6 +319,21 @@ def test_steplane_adds_the_step_and_lane_scores_over_their_training_medians(
     )
     assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["steplane"], 0.95))
     refused_without_its_calibration(area_dati, how, tmp_path)
+
+
+def test_each_scores_profile_is_what_its_label_says(area_dati, months):
+    """The evidence figures' lower panel is labelled by `PROFILES`: the sums of two scores draw
+    the one-step errors and `area` its lane's distances, as those scores' own profiles are."""
+    august = months[1][:3]
+    assert set(PROFILES) == {*SCORES, "nearest"}
+
+    def profiles(score: str) -> list[np.ndarray]:
+        return area_dati.score_tracks(august, replace(HOW, score=score), ()).profiles
+
+    own = {STEP_ERRORS: profiles("step"), "distance to the lane (m)": profiles("lane")}
+    for score in ("steprate", "both", "steplane", "steptraffic", "area"):
+        for got, expected in zip(profiles(score), own[PROFILES[score]], strict=True):
+            np.testing.assert_array_equal(got, expected)
 
 
 def test_steptraffic_adds_the_step_score_and_the_distance_to_the_training_tracks(

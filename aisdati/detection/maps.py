@@ -318,12 +318,6 @@ def evidence_figures(
     """evidence/track-<id>.png for the highest-ranked flagged tracks, to draw: the track, what
     it was compared with, the stretch of largest deviation and the deviation profile along it."""
     s = result.settings
-    step = s and s.score in ("step", "steprate")
-    label = "one-step prediction error (m)" if step else "deviation (m)"
-    if s and s.score == "lane":
-        label = "distance to the lane (m)"
-    elif s and s.method == "nearest":
-        label = "distance to the nearest training track (m)"
     rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
     index = {t.track_id: i for i, t in enumerate(result.tracks)}
     figures = []
@@ -337,7 +331,7 @@ def evidence_figures(
         args = (track.positions, result.rollouts[i], result.profiles[i], stretches[i], title)
         kwargs = {
             "hours": np.r_[0.0, np.cumsum(track.dts)],
-            "profile_label": label,
+            "profile_label": result.profile_kind,
             "evidence_label": result.evidence_kind,
         }
         path = folder / f"track-{int(row.track_id)}.png"

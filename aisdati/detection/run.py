@@ -111,6 +111,21 @@ EVIDENCE = {
     "nearest": "nearest training track",
 }
 """What a track was compared with, by score (by method for `nearest`)."""
+STEP_ERRORS = "one-step prediction error (m)"
+PROFILES = {
+    "rollout": "distance to the best rollout (m)",
+    "both": STEP_ERRORS,
+    "steplane": STEP_ERRORS,
+    "steptraffic": STEP_ERRORS,
+    "lane": "distance to the lane (m)",
+    "area": "distance to the lane (m)",
+    "step": STEP_ERRORS,
+    "steprate": STEP_ERRORS,
+    "nearest": "distance to the nearest training track (m)",
+}
+"""What a track's profile (profiles.parquet, the evidence figures' lower panel) measures at
+each report, by score (by method for `nearest`): the sums of two scores show the one-step
+errors (`aisdati.detectors.policy`), `area` its lane's distances."""
 
 
 NOT_JUDGED_TRAINING = "a training track of every model in reach"
@@ -158,8 +173,18 @@ class Detection:
     @property
     def evidence_kind(self) -> str:
         """What `rollouts` holds, in words (`EVIDENCE`), for legends and the GeoJSON."""
+        return EVIDENCE.get(self._judged_by, "")
+
+    @property
+    def profile_kind(self) -> str:
+        """What `profiles` hold, in words with their unit (`PROFILES`), for the figures."""
+        return PROFILES.get(self._judged_by, "deviation (m)")
+
+    @property
+    def _judged_by(self) -> str:
+        """The score the tracks were judged by, or `nearest` for that method."""
         s = self.settings
-        return EVIDENCE.get(s.method if s and s.method == "nearest" else s.score if s else "", "")
+        return s.method if s and s.method == "nearest" else s.score if s else ""
 
 
 # ------------------------------------------------------------------------------------ models
