@@ -123,19 +123,20 @@ def cell_rows(cell: Path, contamination: float, ways: list[str]) -> list[dict]:
         cal = np.asarray(detector.card.calibration[score], np.float64)
         values = got["value"].to_numpy()
         cut = np.quantile(cal, 1.0 - contamination)
-        variants = [(score, values, cut, np.nan)]
+        variants = {score: (values, cut, np.nan)}
         if "adjusted" in ways:
             c, v, g = power_adjusted(cal, train_dt, values, later_dt)
-            variants.append((f"{score} adjusted", v, np.quantile(c, 1.0 - contamination), g))
+            variants["adjusted"] = (v, np.quantile(c, 1.0 - contamination), g)
         if "member-wise" in ways:
-            variants.append((f"{score} member-wise", mean[score], cut, np.nan))
+            variants["member-wise"] = (mean[score], cut, np.nan)
         if "speed-adjusted" in ways:
             c, v, g = power_adjusted(cal, train_v, values, later_v)
-            variants.append((f"{score} speed-adjusted", v, np.quantile(c, 1.0 - contamination), g))
+            variants["speed-adjusted"] = (v, np.quantile(c, 1.0 - contamination), g)
         if "speed-classes" in ways:
             cuts = class_thresholds(cal, train_v, later_v, contamination)
-            variants.append((f"{score} speed classes", values, cuts, np.nan))
-        for name, v, threshold, slope in variants:
+            variants["speed-classes"] = (values, cuts, np.nan)
+        for way, (v, threshold, slope) in variants.items():
+            name = score if way == score else f"{score} {way}"
             flagged = (v > threshold) | RULE.flags(ashore)
             rows.append(
                 {
