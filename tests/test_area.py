@@ -30,6 +30,7 @@ from aisdati.detection.run import (
     with_own_score,
 )
 from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.od import OD_QUANTILE, od_distances, od_excess
@@ -188,6 +189,36 @@ def test_cross_fitting_calibrates_each_track_with_a_member_that_did_not_train_on
     assert len(cal["area"]) == len(cal["lane"]) == len(july)
     # a model trained before end points were recorded still loads, without the OD term
     assert area_dati.end_points is not None
+
+
+def test_cross_fitted_bc_calibrates_each_track_with_the_member_that_did_not_fit_it(
+    lane_tracks, tmp_path
+):
+    """`bc` with the area preset's cross-fitting: one member per fold, each track's calibration
+    scores from the member that did not fit its fold (its threshold from unseen tracks, as
+    DATI's); the ensemble saves and loads; without cross-fitting BC stays one model."""
+    july = list(lane_tracks)
+    lane = replace(area_lane(), goal=False)
+    settings = TrainSettings(cluster="all", episodes=4, lane=lane, preset="area")
+    bc = BCDetector(settings, HOW).fit(july)
+    assert len(bc.trained().seeds) == lane.members == 2
+    folds = crossfit_folds(july, 2, settings.seed)
+    how = replace(HOW, score="rollout")
+    for m in range(2):
+        rows = np.nonzero(folds == m)[0]
+        got = bc.score_with(bc.policy(m), [july[i] for i in rows], how, ("step",)).parts
+        np.testing.assert_allclose(
+            np.asarray(bc.card.calibration["step"])[rows], got["step"], atol=0.01
+        )
+    bc.save(tmp_path / "all")
+    august = july[:3]
+    loaded = load_detector(tmp_path / "all")
+    np.testing.assert_allclose(
+        loaded.score_tracks(august, replace(HOW, score="step"), ()).score_m,
+        bc.score_tracks(august, replace(HOW, score="step"), ()).score_m,
+    )
+    single = replace(settings, lane=replace(lane, crossfit=False))
+    assert len(BCDetector(single, HOW).fit(july).trained().seeds) == 1
 
 
 def test_old_cards_without_end_points_still_load_and_refuse_the_area_score(

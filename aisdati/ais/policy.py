@@ -236,33 +236,47 @@ class AISPolicy:
         )
 
 
+def member_rows(n: int, members: int, member: int | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Which of n batch rows each member of an ensemble acts on: an [M, width] grid of row
+    indices (clamped to the batch) and its mask of real rows. With None row i is member i mod
+    M's (member m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid: K draws spread over
+    the members, each computing its own rows only); with `member` every member takes every row
+    (the ensemble's layers take all members) and `member`'s are kept (`member_decisions`)."""
+    if member is None:
+        width = -(-n // members)
+        grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
+    else:
+        grid = torch.arange(n)[None].expand(members, n)
+    return grid.clamp(max=n - 1), grid < n
+
+
+def member_decisions(
+    out: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor, member: int | None
+) -> np.ndarray:
+    """The n rows' decisions [n, k] from an ensemble's [M, width, k] over `member_rows`."""
+    if member is not None:
+        return out[member].numpy()
+    decided = torch.empty(int(valid.sum()), out.shape[-1], dtype=out.dtype)
+    decided[grid[valid]] = out[valid]
+    return decided.numpy()
+
+
 def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) -> MakeAct:
     """DATI's forward actor as a batched policy: member `member` of the ensemble, or with None
-    every member in turn (row i acts with member i mod M: a seed ensemble's K draws spread
-    over its members; each member computes its own rows only). Each row draws its own latent
-    noise, Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
+    every member in turn (`member_rows`). Each row draws its own latent noise, Gaussian or
+    (with temporal noise) Ornstein-Uhlenbeck."""
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
     device = nets.device
 
     def make(n: int, seed: int, temporal: bool) -> Act:
         process = config.noise_process if temporal else NoiseProcess("gaussian")
         noise = config.latent_noise([torch.Generator().manual_seed(int(seed))], [process], rows=n)
-        if member is None:  # member m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid
-            width = -(-n // members)
-            grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
-        else:  # the ensemble's layers take every member; only `member`'s rows are kept
-            grid = torch.arange(n)[None].expand(members, n)
-        valid = grid < n
-        grid = grid.clamp(max=n - 1)
+        grid, valid = member_rows(n, members, member)
 
         def act(obs: np.ndarray) -> np.ndarray:
             eta = noise.sample()[0]
             out = nets.decide(torch.as_tensor(obs)[grid].to(device), eta[grid].to(device)).cpu()
-            if member is not None:
-                return out[member].numpy()
-            decided = torch.empty(n, out.shape[-1], dtype=out.dtype)
-            decided[grid[valid]] = out[valid]
-            return decided.numpy()
+            return member_decisions(out, grid, valid, member)
 
         return act
 

@@ -347,6 +347,17 @@ class MemberValidators:
         return self.validators[trainer.active[k]](trainer, k)
 
 
+def check_crossfit(lane: LaneConfig, tracks_of: dict[str, int]) -> None:
+    """Cross-fitting M members needs two tracks a fold in every model (`tracks_of`: its
+    tracks by name), so that each member fits some and is calibrated on others."""
+    short = [name for name, count in tracks_of.items() if count < 2 * lane.members]
+    if lane.crossfit and short:
+        raise UserError(
+            f"cross-fitting {lane.members} members needs at least {2 * lane.members} tracks "
+            f"per model ({', '.join(short)} has fewer): pass --lane crossfit=false"
+        )
+
+
 def member_seeds(seed: int, members: int) -> list[int]:
     """Seeds of a lane's members: the first is the run's own seed, so one member is a plain run."""
     return [seed + 1000 * m for m in range(members)]
@@ -411,12 +422,7 @@ class EnsembleRun:
         self.routes = list(routes)
         first = self.routes[0].settings
         self.members = first.lane.members
-        short = [r.settings.cluster for r in self.routes if len(r.tracks) < 2 * self.members]
-        if first.lane.crossfit and short:
-            raise UserError(
-                f"cross-fitting {self.members} members needs at least {2 * self.members} tracks "
-                f"per model ({', '.join(short)} has fewer): pass --lane crossfit=false"
-            )
+        check_crossfit(first.lane, {r.settings.cluster: len(r.tracks) for r in self.routes})
         self.sources = [build_source(r.tracks, r.settings.lane) for r in self.routes]
         # the members' seeds count from `first_member`: a route's seeds are the same whether it
         # trains alone or beside others (`aisdati.detectors.train.route_tasks`)

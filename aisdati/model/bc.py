@@ -150,7 +150,7 @@ class BCTrainer(Trainer[BCPolicy]):
         state_dim = envs[0].observation_space.shape[0] - 1
         self.policy = BCPolicy(state_dim, envs[0].action_space.shape[0], self.cfg, self.seeds)
         self.opt = torch.optim.Adam(self.policy.parameters(), lr=self.cfg.lr, fused=True)
-        capacity = self.cfg.episodes * envs[0].source.max_steps
+        capacity = self.cfg.episodes * max(env.source.max_steps for env in envs)
         self.data = DemonstrationBuffer(
             len(envs), capacity, state_dim, envs[0].action_space.shape[0]
         )
