@@ -358,6 +358,17 @@ def check_crossfit(lane: LaneConfig, tracks_of: dict[str, int]) -> None:
         )
 
 
+def member_sources(source: AISTrackSource, folds: np.ndarray, members: int) -> list[AISTrackSource]:
+    """Each member's training tracks: all but its own cross-fitting fold (`crossfit_folds`;
+    all of them where the folds are -1), in the source's space."""
+    return [
+        AISTrackSource(
+            [r for r, f in zip(source.references, folds, strict=True) if f != m], source.space
+        )
+        for m in range(members)
+    ]
+
+
 def member_seeds(seed: int, members: int) -> list[int]:
     """Seeds of a lane's members: the first is the run's own seed, so one member is a plain run."""
     return [seed + 1000 * m for m in range(members)]
@@ -436,15 +447,9 @@ class EnsembleRun:
             for k, r in enumerate(self.routes)
         ]
         envs = [  # each member draws its own episode order from its tracks
-            make_env(
-                AISTrackSource(
-                    [ref for ref, f in zip(src.references, folds, strict=True) if f != m],
-                    src.space,
-                ),
-                r.settings.epsilon_m,
-            )
+            make_env(member_source, r.settings.epsilon_m)
             for r, src, folds in zip(self.routes, self.sources, self.folds, strict=True)
-            for m in range(self.members)
+            for member_source in member_sources(src, folds, self.members)
         ]
         # one configuration for all members (OU noise at the median dt of all routes' tracks)
         self.config = dati_config(first, [t for r in self.routes for t in r.tracks])

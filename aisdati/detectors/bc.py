@@ -18,7 +18,7 @@ import torch
 
 from aisdati.ais.card import DataCard, ModelCard, NetworkCard, TrainingReport
 from aisdati.ais.policy import Act, member_decisions, member_rows
-from aisdati.ais.source import AISTrackSource, build_source, make_env
+from aisdati.ais.source import build_source, make_env
 from aisdati.ais.space import AISSpace
 from aisdati.ais.training import (
     TrainSettings,
@@ -26,6 +26,7 @@ from aisdati.ais.training import (
     check_crossfit,
     crossfit_folds,
     member_seeds,
+    member_sources,
 )
 from aisdati.detectors.policy import PolicyDetector, save_traffic, saved_corridor, saved_traffic
 from aisdati.detectors.scoring import ScoreSettings
@@ -72,17 +73,8 @@ class BCDetector(PolicyDetector):
             if lane.crossfit
             else np.full(len(tracks), -1)
         )
-        envs = [
-            make_env(
-                AISTrackSource(
-                    [r for r, f in zip(source.references, folds, strict=True) if f != m],
-                    source.space,
-                )
-            )
-            for m in range(members)
-        ]
         trainer = BCTrainer(
-            envs,
+            [make_env(s) for s in member_sources(source, folds, members)],
             member_seeds(self.settings.seed, members),
             BCConfig(episodes=self.settings.episodes),
         )
