@@ -394,8 +394,11 @@ def detect(
     model: list[str] = typer.Option(
         None, "--model", "-m", help="Model name in --models (repeatable); default: all."
     ),
-    method: str = typer.Option(
-        "dati", "--method", help="Use the models of this detector: dati, bc or nearest."
+    method: str | None = typer.Option(
+        None,
+        "--method",
+        help="Use the models of this detector: dati, bc or nearest. Default: the first of "
+        "these the folder has models of.",
     ),
     score: str | None = typer.Option(
         None,

@@ -27,6 +27,7 @@ from aisdati.detection.run import (
     STEP_ERRORS,
     DetectSettings,
     detect,
+    with_own_method,
     with_own_score,
 )
 from aisdati.detectors import ScoreSettings, load_detector
@@ -432,3 +433,25 @@ def test_steprate_is_each_one_step_error_over_its_report_interval(area_dati, mon
     text = table.export_text()
     assert "m/s" in text and "3.25" in text and "mean km" not in text
     refused_without_its_calibration(area_dati, how, tmp_path)
+
+
+def test_detect_without_method_uses_the_models_the_folder_has(cli, kitimat, months, tmp_path):
+    """`detect` without --method judges with the first detector (dati, bc, nearest) the folder,
+    or the named models, have: what `train --method bc` wrote is used without being told."""
+    models = tmp_path / "models"
+    r = cli("train", "--cluster", "all", "--method", "bc", "--data", kitimat, "--out", models,
+            "--episodes", "3", "--max-tracks", "12", "--lane", "members=2", "-q")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    settings = DetectSettings(data_dir=kitimat, models_dir=models, out_dir=tmp_path / "out",
+                              cluster="all")  # fmt: skip
+    assert with_own_method(settings).method == "bc"
+    assert with_own_method(replace(settings, method="dati")).method == "dati"  # told: kept
+    save_nearest(months[0][:10], "route-1", models)
+    named = replace(settings, models=("route-1-nearest",))
+    assert with_own_method(named).method == "nearest"  # the named model's own
+    out = tmp_path / "report"
+    r = cli("detect", "--data", kitimat, "--models", models, "--cluster", "all", "--rollouts",
+            "2", "--lane-rollouts", "4", "--out", out, "-q")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    scores = pd.read_parquet(out / "scores.parquet")
+    assert set(scores["model"]) == {"all-bc"}  # bc before nearest; the route model not used

@@ -568,6 +568,20 @@ def card_warnings(card: ModelCard, name: str) -> list[str]:
     ]
 
 
+def card_methods(models_dir: Path, names: Sequence[str] = ()) -> set[str]:
+    """The detectors of the named models' cards, or of every card in the folder (`detect`'s
+    default --method). Cards that cannot be read are skipped here: loading them gives the
+    error."""
+    paths = [models_dir / f"{n}.json" for n in names] or models_dir.glob("*.json")
+    methods = set()
+    for path in paths:
+        try:
+            methods.add(read_card(path).method)
+        except UserError:
+            continue
+    return methods
+
+
 def unfinished_models(
     models_dir: Path, names: Sequence[str], method: str | None = None
 ) -> list[str]:

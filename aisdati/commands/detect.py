@@ -14,7 +14,14 @@ from aisdati.ais.card import unfinished_models
 from aisdati.commands.common import console, err_console, spinner, warn
 from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
-from aisdati.detection.run import Coverage, Detection, DetectSettings, check_settings, detect
+from aisdati.detection.run import (
+    Coverage,
+    Detection,
+    DetectSettings,
+    check_settings,
+    detect,
+    with_own_method,
+)
 from aisdati.detectors import parse_detectors
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.options import check_options
@@ -27,7 +34,7 @@ def run(
     data: Path,
     models_dir: str,
     model: list[str] | None,
-    method: str,
+    method: str | None,
     score: str | None,
     out: Path | None,
     cluster: str,
@@ -65,7 +72,7 @@ def run(
         models_dir=Path(models_dir),
         out_dir=out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
         models=tuple(model or ()),
-        method=parse_detectors(method)[0],
+        method=parse_detectors(method)[0] if method else None,
         cluster=cluster.strip().lower(),
         track_ids=tuple(track or ()),
         score=score.strip().lower() if score is not None else None,
@@ -89,7 +96,8 @@ def run(
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
         open_runner(execution) as runner,
     ):
-        settings = replace(settings, models_dir=local, models_shown=shown_folder(models_dir))
+        shown = shown_folder(models_dir)
+        settings = with_own_method(replace(settings, models_dir=local, models_shown=shown))
         for message in unfinished_models(local, settings.models, settings.method):
             warn(message)
         where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"
@@ -98,8 +106,7 @@ def run(
             files = [outputs.final(f) for f in write_outputs(result, outputs.folder, runner)]
         outputs.commit()
     if as_json:
-        doc = report_dict(result)
-        doc["files"] = [str(f) for f in files]
+        doc = {**report_dict(result), "files": [str(f) for f in files]}
         print(json.dumps(doc, default=str))
     elif not quiet:
         print_detection(result, files, settings.out_dir)

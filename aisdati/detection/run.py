@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.ais.card import training_mask
+from aisdati.ais.card import card_methods, training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
-from aisdati.detectors import SCORES, Detector, ScoreSettings, load_detectors
+from aisdati.detectors import DETECTORS, SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import score_each
 from aisdati.detectors.od import track_ends
 from aisdati.errors import UserError
@@ -65,7 +65,8 @@ class DetectSettings:
     models_shown: str | None = None
     """How messages name the model folder: the URL its models were copied from
     (`aisdati.storage.fetched_models`); None: `models_dir`."""
-    method: str = "dati"
+    method: str | None = None
+    """The detector whose models judge; None: the folder's own (`with_own_method`)."""
     cluster: str = "other"
     """Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all."""
     track_ids: tuple[int, ...] = ()
@@ -188,6 +189,17 @@ class Detection:
 
 
 # ------------------------------------------------------------------------------------ models
+def with_own_method(settings: DetectSettings) -> DetectSettings:
+    """Settings with a method: the given one, else the first detector (dati, bc, nearest) the
+    named models, or the folder's, are of, so that `detect` uses what `train --method` wrote
+    without being told again, and names what judged a track by the models that did."""
+    if settings.method is not None:
+        return settings
+    present = card_methods(settings.models_dir, settings.models)
+    method = next((m for m in DETECTORS if m in present), next(iter(DETECTORS)))
+    return replace(settings, method=method)
+
+
 def load_models(settings: DetectSettings) -> list[Detector]:
     models = load_detectors(settings.models_dir, settings.models)
     if not settings.models:
@@ -340,6 +352,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
         read_labels(settings.labels)  # fail on a bad file before the scoring
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    settings = with_own_method(settings)
     models = load_models(settings)
     table = candidate_table(settings)
     candidates = load_tracks(settings.data_dir, [int(i) for i in table["track_id"]])
