@@ -26,15 +26,16 @@ keeps the best of K rollouts). Two questions, each answered without retraining:
   policy goes for several reports; one step sees each as a small turn.
 
 It reads the cells of `benchmarks/detection_quality.py --forward` (or any `aisdati evaluate`
-folders), rescores their judged tracks with the DATI model that judged them (one scoring chunk
-per 64 tracks with the evaluation's seed, so `best h=1` reproduces the evaluation's own step
+folders), rescores their judged tracks with the model that judged them (`--detector`: dati,
+or bc, whose draws come from its Gaussian, wide where it learnt a report is uncertain; one
+scoring chunk per 64 tracks with the evaluation's seed, so `best h=1` reproduces the evaluation's own step
 AUC, printed beside it), aggregates each track's per-report values by the score's tail mean,
 ranks the tracks the ashore rule flagged in the evaluation first (as it did), and prints ROC AUC
 per variant: per cell, and the mean over each grid's cells.
 
 Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
      [--ahead 1,2,3,5] [--aggregate best,median,mean] [--tails 0.02,0.05,0.1,0.2,max]
-     [--normalise none,track,velocity,spread,centre]
+     [--normalise none,track,velocity,spread,centre] [--detector dati|bc]
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import roc_auc_score
 
-from aisdati.detectors import load_detector
+from aisdati.detectors import load_detector, model_name
 from aisdati.detectors.scoring import (
     SCORE_CHUNK,
     ScoreSettings,
@@ -128,13 +129,18 @@ def _name(aggregate: str, h: int, tail: str, tails: list[str], normalise: str = 
 
 
 def cell_aucs(
-    cell: Path, ahead: list[int], aggregate: list[str], tails: list[str], normalise: list[str]
+    cell: Path,
+    ahead: list[int],
+    aggregate: list[str],
+    tails: list[str],
+    normalise: list[str],
+    method: str = "dati",
 ) -> dict[str, float]:
     """ROC AUC of each variant on one evaluate folder, and the evaluation's own step AUC."""
     doc = json.loads((cell / "evaluation.json").read_text())
     settings = doc["settings"]
     models = Path(settings["models_dir"] or cell / "models")
-    detector = load_detector(models / "all")
+    detector = load_detector(models / model_name("all", method))
     labels = pd.read_csv(cell / "data" / "labels.csv")
     tracks = load_tracks(cell / "data", labels["track_id"].tolist())
     scores: dict[str, list[float]] = {}
@@ -159,7 +165,7 @@ def cell_aucs(
                         )
     y = labels["label"].to_numpy()
     judged = pd.read_parquet(cell / "scores.parquet")  # the ashore rule's counts, as evaluated
-    judged = judged[(judged["detector"] == "dati") & (judged["score"] == "step")]
+    judged = judged[(judged["detector"] == method) & (judged["score"] == "step")]
     judged = judged.set_index("track_id").loc[labels["track_id"]]
     ashore = judged["ashore_reports"].to_numpy()  # zero where the evaluation ran --no-ashore
     out = {
@@ -169,7 +175,7 @@ def cell_aucs(
     own = next(
         r["roc_auc"]
         for r in doc["results"]
-        if (r["detector"], r["score"], r["kind"]) == ("dati", "step", "all")
+        if (r["detector"], r["score"], r["kind"]) == (method, "step", "all")
     )
     out["evaluation"] = float(own)
     return out
@@ -197,6 +203,7 @@ def main() -> None:
         default=str(ScoreSettings().tail),
         help="comma-separated shares of a track's largest per-report errors averaged, or max",
     )
+    ap.add_argument("--detector", default="dati", choices=("dati", "bc"), help="whose model")
     args = ap.parse_args()
     tails = args.tails.split(",")
     ahead = [int(h) for h in args.ahead.split(",")]
@@ -219,7 +226,7 @@ def main() -> None:
     print("|---" * (1 + len(columns)) + "|")
     for grid in args.grids:
         cells = sorted(p.parent for p in grid.glob("*/evaluation.json"))
-        rows = [cell_aucs(c, ahead, aggregate, tails, normalise) for c in cells]
+        rows = [cell_aucs(c, ahead, aggregate, tails, normalise, args.detector) for c in cells]
         for cell, row in zip(cells, rows, strict=True):
             values = " | ".join(f"{row[c]:.3f}" for c in columns)
             print(f"| {grid.parent.name}/{cell.name} | {values} |")
