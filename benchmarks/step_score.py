@@ -28,10 +28,10 @@ keeps the best of K rollouts). Two questions, each answered without retraining:
 It reads the cells of `benchmarks/detection_quality.py --forward` (or any `aisdati evaluate`
 folders), rescores their judged tracks with the model that judged them (`--detector`: dati,
 or bc, whose draws come from its Gaussian, wide where it learnt a report is uncertain; one
-scoring chunk per 64 tracks with the evaluation's seed, so `best h=1` reproduces the evaluation's own step
-AUC, printed beside it), aggregates each track's per-report values by the score's tail mean,
-ranks the tracks the ashore rule flagged in the evaluation first (as it did), and prints ROC AUC
-per variant: per cell, and the mean over each grid's cells.
+scoring chunk per 64 tracks with the evaluation's seed, so `best h=1` reproduces the
+evaluation's own step AUC, printed beside it), aggregates each track's per-report values by the
+score's tail mean, ranks the tracks the ashore rule flagged in the evaluation first (as it did),
+and prints ROC AUC per variant: per cell, and the mean over each grid's cells.
 
 Run: python benchmarks/step_score.py runs/quality/kitimat/forward-s1-at-sea [more grid folders]
      [--ahead 1,2,3,5] [--aggregate best,median,mean] [--tails 0.02,0.05,0.1,0.2,max]
