@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 from rich.console import Console
 
 from aisdati.ais import SCORES, score_text, score_unit
@@ -36,6 +37,8 @@ from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.od import OD_QUANTILE, od_distances, od_excess
 from aisdati.errors import UserError
+from aisdati.model.dati import nearest_draws
+from aisdati.model.networks import DATINetworks, NetworkConfig
 from aisdati.tracks.store import Track, load_tracks, read_track_table
 
 AUGUST = pd.Timestamp("2018-08-01", tz="UTC")
@@ -455,3 +458,27 @@ def test_detect_without_method_uses_the_models_the_folder_has(cli, kitimat, mont
     assert r.exit_code == 0, r.output
     scores = pd.read_parquet(out / "scores.parquet")
     assert set(scores["model"]) == {"all-bc"}  # bc before nearest; the route model not used
+
+
+def test_the_variety_warm_start_pulls_the_draw_nearest_each_perfect_decision(lane_tracks):
+    """`--lane variety=K`: of K noise draws per (state, perfect decision) pair the warm start
+    pulls the one whose decision is nearest (Social GAN's variety loss), found by the actor
+    itself; the area model trains with it on real tracks, and 0 draws is one line."""
+    nets = DATINetworks(5, 3, NetworkConfig(), seeds=[0, 1])
+    gen = torch.Generator().manual_seed(0)
+    s, a = torch.rand(2, 7, 5, generator=gen), torch.rand(2, 7, 3, generator=gen) * 2 - 1
+    t = nets.time_features(torch.rand(2, 7, 1, generator=gen))
+    eta = torch.randn(2, 4 * 7, NetworkConfig().latent_dim, generator=gen)
+    picked = nearest_draws(nets.forward_actor, s, t, a, eta, 4)
+    with torch.no_grad():
+        miss = [(nets.forward_actor(s, eta[:, j * 7 : (j + 1) * 7], t) - a).abs().mean(-1)
+                for j in range(4)]  # fmt: skip
+        got = (nets.forward_actor(s, picked, t) - a).abs().mean(-1)
+    torch.testing.assert_close(got, torch.stack(miss).min(dim=0).values)
+    one = eta[:, :7]
+    assert nearest_draws(nets.forward_actor, s, t, a, one, 1) is one  # one draw: itself
+    lane = replace(area_lane(), goal=False, variety=4)
+    det = DATIDetector(TrainSettings(cluster="all", episodes=1, lane=lane, preset="area"), HOW)
+    assert det.fit(lane_tracks).card.lane_config.variety == 4
+    with pytest.raises(UserError, match="variety"):
+        lane_config("area", ("variety=0",))

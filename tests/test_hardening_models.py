@@ -348,6 +348,10 @@ def test_resume_without_the_lane_options_names_the_ones_that_differ(trained, che
     )
     result = resume(trained, models, "fourier=0", "pretrain=0")
     one_line_error(result, r"written with --lane members=1, this run has members=3")
+    # a checkpoint from before a lane setting existed ran as its default does: it resumes
+    edit_checkpoint(lambda d: d["identity"]["lane"].pop("variety"))(models / "down.ckpt")
+    result = resume(trained, models, *RESUME_LANE)
+    assert result.exit_code == 0, result.output
 
 
 def edit_checkpoint(edit):

@@ -32,7 +32,14 @@ import pandas as pd
 
 from aisdati.ais import SCORES
 from aisdati.ais.card_fields import CardFields, is_number
-from aisdati.ais.space import MAX_FOURIER, MAX_MEMBERS, MAX_PRETRAIN, LaneConfig, state_width
+from aisdati.ais.space import (
+    MAX_FOURIER,
+    MAX_MEMBERS,
+    MAX_PRETRAIN,
+    MAX_VARIETY,
+    LaneConfig,
+    state_width,
+)
 from aisdati.errors import UserError
 from aisdati.model.persistence import MAX_LAYERS, MAX_UNITS, NETWORKS_FORMAT
 from aisdati.model.readers import read_json
@@ -346,7 +353,8 @@ def _read_lane(f: CardFields) -> LaneConfig:
         if key in lane:
             f.integer(f"lane_config.{key}", 1, most)
     for key, least, most in (
-        ("fourier", 0, MAX_FOURIER), ("pretrain", 0, MAX_PRETRAIN), ("members", 1, MAX_MEMBERS)
+        ("fourier", 0, MAX_FOURIER), ("pretrain", 0, MAX_PRETRAIN), ("members", 1, MAX_MEMBERS),
+        ("variety", 1, MAX_VARIETY),
     ):  # fmt: skip
         if key in lane:
             f.integer(f"lane_config.{key}", least, most)

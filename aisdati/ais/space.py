@@ -40,6 +40,10 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
   near its reference, so the pull pairs the reference's decisions with states near the
   reference's own. The paper starts from random actors. With validation the pretrained actor is
   a candidate for the kept one (episode 0), which an episode's actor must beat.
+- `variety=K`: the warm start pulls, of K latent-noise draws per (state, perfect decision) pair,
+  only the draw nearest the perfect decision (Social GAN's variety loss, Gupta et al. 2018), so
+  the actor spreads its draws over the decisions a state allows instead of learning to ignore
+  its noise, as the one-step score's best-of-K draws assume. 1 (the default): every draw pulled.
 - `validate_by="step"`: validation scores an actor by its mean one-step error on the
   validation tracks (teacher-forced, as the `step` score) instead of its rollouts' DTW: the
   actor kept is the one best at what a model judging by one-step errors is used for.
@@ -87,6 +91,7 @@ PROGRESS_SCALE = 100.0
 MAX_MEMBERS = 16
 MAX_PRETRAIN = 1000
 MAX_FOURIER = 12
+MAX_VARIETY = 100
 
 
 @dataclass(frozen=True)
@@ -105,6 +110,7 @@ class LaneConfig:
     members: int = 1
     critic: str = "decision"
     pretrain: int = 0
+    variety: int = 1
     fourier: int = 0
     average: float = 0.0
     validate_by: str = "rollout"
@@ -132,6 +138,8 @@ class LaneConfig:
             raise UserError(f"fourier must be in [0, {MAX_FOURIER}] octaves, got {self.fourier}")
         if not 0 <= self.pretrain <= MAX_PRETRAIN:
             raise UserError(f"pretrain must be in [0, {MAX_PRETRAIN}] epochs, got {self.pretrain}")
+        if not 1 <= self.variety <= MAX_VARIETY:
+            raise UserError(f"variety must be in [1, {MAX_VARIETY}] draws, got {self.variety}")
         if not 0.0 <= self.average < 1.0:
             raise UserError(f"average must be in [0, 1), got {self.average}")
         if not 1 <= self.members <= MAX_MEMBERS:

@@ -261,7 +261,10 @@ def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
     if settings.lane.critic == "state":
         config = config.with_network(conditional_critic=True)
     return replace(
-        config, pretrain_epochs=settings.lane.pretrain, actor_average=settings.lane.average
+        config,
+        pretrain_epochs=settings.lane.pretrain,
+        pretrain_variety=settings.lane.variety,
+        actor_average=settings.lane.average,
     )
 
 
@@ -649,6 +652,8 @@ def check_identity(path: Path, theirs: Any, mine: dict[str, Any]) -> None:
             "same --seed/--max-tracks/--data, or train without --resume"
         )
     lane = theirs.get("lane")  # None: a checkpoint from before lane settings were recorded
+    if lane is not None:  # a setting it predates ran as its default does
+        lane = {**LaneConfig().to_dict(), **lane}
     if lane is not None and lane != mine["lane"]:
         keys = [k for k in {**lane, **mine["lane"]} if lane.get(k) != mine["lane"].get(k)]
         raise UserError(

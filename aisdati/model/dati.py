@@ -80,6 +80,12 @@ class DATIConfig:
     pairs before the adversarial training (`DATITrainer.pretrain`). 0 is the paper's way, random
     actors; a warm start is a departure (as GAIL is often started from BC) that the AIS lanes
     measure."""
+    pretrain_variety: int = 1
+    """Latent-noise draws per pair in the warm start, the pull going to the best of them (the
+    variety loss of Social GAN, Gupta et al. 2018): with more than 1 the actor learns to spread
+    its draws over the decisions a state allows, as a score that keeps the best of K draws
+    assumes; 1 pulls every draw to the perfect decision, so the actor learns to ignore its
+    noise."""
     adversarial_time2vec: bool = True
     """Whether the actors' adversarial loss also updates the shared Time2Vec (through the
     critics' time features). The paper's code freezes it there (critic.trainable = False when
@@ -140,6 +146,27 @@ def gradient_penalty(
     x = (u * real + (1 - u) * fake).requires_grad_(True)
     (grad,) = torch.autograd.grad(critic(x, reward, t).sum(), x, create_graph=True)
     return ((grad.norm(dim=-1) - 1) ** 2).mean(dim=1)
+
+
+def nearest_draws(
+    actor: Callable[[Tensor, Tensor, list[Tensor]], Tensor],
+    s: Tensor,
+    t: list[Tensor],
+    a: Tensor,
+    eta: Tensor,
+    variety: int,
+) -> Tensor:
+    """Of `variety` latent-noise draws per (state, perfect decision) pair (`eta` [E, K * B,
+    latent], draw j of pair b at row j * B + b), the one whose decision is nearest (L1) the
+    perfect one [E, B, latent]: the variety loss's pick (`DATIConfig.pretrain_variety`)."""
+    e, b = s.shape[:2]
+    if variety == 1:
+        return eta
+    with torch.no_grad():
+        out = actor(s.repeat(1, variety, 1), eta, [x.repeat(1, variety, 1) for x in t])
+        miss = (out - a.repeat(1, variety, 1)).abs().mean(-1).view(e, variety, b)
+        rows = miss.argmin(dim=1) * b + torch.arange(b, device=eta.device)
+    return torch.gather(eta, 1, rows[..., None].expand(-1, -1, eta.shape[-1]))
 
 
 class DATITrainer(Trainer[DATINetworks]):
@@ -341,9 +368,10 @@ class DATITrainer(Trainer[DATINetworks]):
             s, step, a = (
                 torch.stack([d[i][p] for d, p in zip(data, picks, strict=True)]) for i in range(3)
             )
-            eta = torch.stack([self.noise.draw(k, c.batch_size) for k in range(len(data))])
-            eta = eta.to(self.device)
             t = nets.time_features(step[..., None])
+            k = c.pretrain_variety
+            eta = torch.stack([self.noise.draw(m, c.batch_size * k) for m in range(len(data))])
+            eta = nearest_draws(nets.forward_actor, s, t, a, eta.to(self.device), k)
             pull = (nets.forward_actor(s, eta, t) - a).abs().mean(dim=(1, 2))
             self.opt_l1.zero_grad(set_to_none=True)
             (pull.sum() * c.l1_weight).backward()
