@@ -26,6 +26,7 @@ from aisdati.detection.run import (
     NOT_JUDGED_FAR,
     PROFILES,
     STEP_ERRORS,
+    Detection,
     DetectSettings,
     detect,
     with_own_method,
@@ -111,6 +112,7 @@ def test_every_track_is_judged_by_the_area_model_or_listed_with_its_reason(
     report = report_dict(alone)
     assert str(far[0]) in json.dumps(report["coverage"])  # report.json names them
     assert report["score_unit"] == "m"  # nearest's lane, in metres
+    assert alone.score == "lane" and Detection(pd.DataFrame(), [], [], []).score == "lane"
     cut = report["thresholds"]["route-1-nearest"]
     lo, hi = cut["spread_5_95"]
     assert lo <= cut["threshold"] <= hi and lo < hi  # the calibration's bootstrap spread

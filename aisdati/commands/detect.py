@@ -131,8 +131,7 @@ def coverage_line(coverage: Coverage) -> str:
 
 def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     """The flagged tracks, the scores against hand labels if given, and what was written."""
-    score = result.settings.score if result.settings else None
-    console.print(detection_table(result.scores, score))
+    console.print(detection_table(result.scores, result.score))
     if result.coverage is not None:
         console.print(coverage_line(result.coverage), highlight=False)
     check = AshoreCheck()

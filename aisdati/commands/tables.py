@@ -273,7 +273,7 @@ def _evaluation_table(frame: pd.DataFrame, title: str, caption: str, width: int)
 
 
 # ----------------------------------------------------------------------------------- detect
-def detection_table(scores: pd.DataFrame, score: str | None = None, limit: int = 15) -> Table:
+def detection_table(scores: pd.DataFrame, score: str = "lane", limit: int = 15) -> Table:
     """The flagged tracks (or, if none, the top of the ranking) with where they deviate most;
     the raw score in km, or in the unit of `score` where it is not metres (`score_unit`)."""
     flagged = scores[scores["flagged"]].sort_values("rank")
@@ -284,7 +284,7 @@ def detection_table(scores: pd.DataFrame, score: str | None = None, limit: int =
         else f"no track flagged among {len(scores)}; the highest scores"
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    unit = score_unit(score or "lane")
+    unit = score_unit(score)
     raw = "mean km" if unit == "m" else unit
     cols = ["rank", "track", "mmsi", "score", raw, "max km", "at (lat, lon)"]
     several = scores["model"].nunique() > 1

@@ -317,7 +317,6 @@ def evidence_figures(
 ) -> list[tuple[Path, FigureJob]]:
     """evidence/track-<id>.png for the highest-ranked flagged tracks, to draw: the track, what
     it was compared with, the stretch of largest deviation and the deviation profile along it."""
-    s = result.settings
     rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
     index = {t.track_id: i for i, t in enumerate(result.tracks)}
     figures = []
@@ -326,7 +325,7 @@ def evidence_figures(
         track = result.tracks[i]
         title = (
             f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
-            f"score {score_text(row.score_m, s.score if s else 'lane')}, model {row.model}"
+            f"score {score_text(row.score_m, result.score)}, model {row.model}"
         )
         args = (track.positions, result.rollouts[i], result.profiles[i], stretches[i], title)
         kwargs = {

@@ -217,7 +217,7 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "flagged": int(sc["flagged"].sum()),
         "flagged_ashore": int(AshoreCheck().flags(sc["ashore_reports"]).sum()),
         "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
-        "score_unit": score_unit(s.score or "lane") if s else None,
+        "score_unit": score_unit(result.score) if s else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,
         "score_definition": SCORE_DEFINITIONS[

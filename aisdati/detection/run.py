@@ -172,6 +172,12 @@ class Detection:
     coverage: Coverage | None = None
 
     @property
+    def score(self) -> str:
+        """The score the tracks were judged by (`with_own_score`); `lane` for a detection made
+        without settings, the score of models from before cards recorded theirs."""
+        return self.settings.score if self.settings and self.settings.score else "lane"
+
+    @property
     def evidence_kind(self) -> str:
         """What `rollouts` holds, in words (`EVIDENCE`), for legends and the GeoJSON."""
         return EVIDENCE.get(self._judged_by, "")
