@@ -576,38 +576,37 @@ def card_warnings(card: ModelCard, name: str) -> list[str]:
     ]
 
 
-def card_methods(models_dir: Path, names: Sequence[str] = ()) -> set[str]:
-    """The detectors of the named models' cards, or of every card in the folder (`detect`'s
-    default --method). Cards that cannot be read are skipped here: loading them gives the
-    error."""
-    paths = [models_dir / f"{n}.json" for n in names] or models_dir.glob("*.json")
-    methods = set()
-    for path in paths:
+def readable_cards(models_dir: Path, names: Sequence[str]) -> list[tuple[str, ModelCard]]:
+    """The cards of the named models, or of every model in the folder, with their model names,
+    read alone so that what they say comes before any work. Cards that cannot be read are left
+    out here: loading them gives the error."""
+    if names:
+        stems = [models_dir / n for n in names]
+    else:
+        stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
+    cards = []
+    for stem in stems:
         try:
-            methods.add(read_card(path).method)
+            cards.append((stem.name, read_card(stem.with_suffix(".json"))))
         except UserError:
             continue
-    return methods
+    return cards
+
+
+def card_methods(models_dir: Path, names: Sequence[str] = ()) -> set[str]:
+    """The detectors of the named models, or of every model in the folder (`detect`'s default
+    --method)."""
+    return {card.method for _, card in readable_cards(models_dir, names)}
 
 
 def unfinished_models(
     models_dir: Path, names: Sequence[str], method: str | None = None
 ) -> list[str]:
     """`card_warnings` of the models `detect` is about to load (the named ones, or every model of
-    `method` in the folder), read from their cards alone so that they are shown before any work.
-    Cards that cannot be read are skipped here: loading them gives the error."""
-    if names:
-        stems = [models_dir / n for n in names]
-    else:
-        stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
-    warnings = []
-    for stem in stems:
-        path = stem.with_suffix(".json")
-        try:
-            card = read_card(path)
-        except UserError:
-            continue
-        if not names and method and card.method != method:
-            continue
-        warnings += card_warnings(card, stem.name)
-    return warnings
+    `method` in the folder), shown before any work."""
+    return [
+        warning
+        for name, card in readable_cards(models_dir, names)
+        if names or not method or card.method == method
+        for warning in card_warnings(card, name)
+    ]

@@ -651,10 +651,10 @@ def check_identity(path: Path, theirs: Any, mine: dict[str, Any]) -> None:
             f"{path} belongs to another run (cluster, seed or training tracks differ); use the "
             "same --seed/--max-tracks/--data, or train without --resume"
         )
-    lane = theirs.get("lane")  # None: a checkpoint from before lane settings were recorded
-    if lane is not None:  # a setting it predates ran as its default does
-        lane = {**LaneConfig().to_dict(), **lane}
-    if lane is not None and lane != mine["lane"]:
+    if theirs.get("lane") is None:  # a checkpoint from before lane settings were recorded
+        return
+    lane = {**LaneConfig().to_dict(), **theirs["lane"]}  # what it predates ran as the default
+    if lane != mine["lane"]:
         keys = [k for k in {**lane, **mine["lane"]} if lane.get(k) != mine["lane"].get(k)]
         raise UserError(
             f"the checkpoint {path} was written with --lane {lane_options(lane, keys)}, this run "
