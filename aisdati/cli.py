@@ -80,7 +80,8 @@ ASHORE_OPTION = typer.Option(
     "--ashore/--no-ashore",
     help=f"Flag every track with at least {ASHORE.min_reports} reports {ASHORE.margin_m:g} m or "
     "more inland, whatever its score, and rank those first (a vessel cannot sail there); "
-    "--no-ashore judges by the model alone, as the paper does.",
+    "--no-ashore judges by the model alone, as the paper does (use it on lakes and rivers "
+    "above the tidal limit, which the coastline holds as land).",
 )
 WORKERS_OPTION = typer.Option(
     1,

@@ -139,8 +139,9 @@ def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     if ashore:
         console.print(
             f"{ashore} flagged for reports ashore (at least {check.min_reports} reports "
-            f"{check.margin_m:g} m or more inland, whatever the score; --no-ashore: the model "
-            "alone)",
+            f"{check.margin_m:g} m or more inland, whatever the score; lakes and rivers above "
+            "the tidal limit count as land unless the training tracks sailed there; "
+            "--no-ashore: the model alone)",
             highlight=False,
         )
     if result.metrics is not None:

@@ -1,0 +1,83 @@
+"""The busiest waters of the shipped US coastal day (`US_coastal_2020_06_30_points.csv.gz`) as
+forward areas: how the fourth forward area (Puget Sound) was chosen, by counts alone, before any
+detector ran on it (docs/results/forward.md), and what the ashore rule (`aisdati.tracks.ashore`)
+makes of each box's later tracks when the coastline holds its water as land.
+
+For each box in `benchmarks/areas/*.geojson`: `aisdati ingest --roi BOX --min-points 20` (Virginia
+Beach's setting), the tracks and vessels, the share of reports on land by the coastline
+(`aisdati.coastline.on_land`), the whole hour at which about two thirds of the tracks have started
+(the split), the tracks before and after it, and how many later tracks the ashore rule flags
+without and with the water the earlier tracks sailed (`AshoreCheck.seen`, as a model's card
+records it). No model is trained.
+
+Run: python benchmarks/coastal_areas.py [--out runs/coastal-areas]
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from aisdati.coastline import on_land
+from aisdati.tracks.ashore import AshoreCheck
+from aisdati.tracks.store import load_tracks, read_track_table
+
+ROOT = Path(__file__).resolve().parents[1]
+DAY = ROOT / "tests" / "data" / "US_coastal_2020_06_30_points.csv.gz"
+AREAS = Path(__file__).resolve().parent / "areas"
+TRAINING_SHARE = 2 / 3
+"""The share of tracks before the split: about the other forward areas' training share."""
+
+
+def ingest(box: Path, out: Path) -> None:
+    if not (out / "tracks.parquet").is_file():
+        cmd = [sys.executable, "-m", "aisdati.cli", "ingest", "--input", str(DAY), "--roi",
+               str(box), "--min-points", "20", "--out", str(out), "--quiet"]  # fmt: skip
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+
+
+def split_hour(starts: pd.Series) -> pd.Timestamp:
+    """The whole hour nearest the start of the track at `TRAINING_SHARE` of them."""
+    ordered = starts.sort_values().reset_index(drop=True)
+    return ordered.iloc[int(len(ordered) * TRAINING_SHARE)].round("h")
+
+
+def row(box: Path, data: Path) -> str:
+    table = read_track_table(data)
+    tracks = load_tracks(data, table["track_id"].tolist())
+    positions = [t.positions for t in tracks]
+    reports = np.concatenate(positions)
+    land = float(on_land(reports[:, 0], reports[:, 1]).mean())
+    split = split_hour(table["start"])
+    before = (table["start"] < split).to_numpy()
+    rule = AshoreCheck()
+    earlier = [p for p, b in zip(positions, before, strict=True) if b]
+    later = [p for p, b in zip(positions, before, strict=True) if not b]
+    seen = np.asarray(rule.seen(earlier), np.float64).reshape(-1, 2)
+    plain = int(rule.flags(rule.counts(later)).sum())
+    excused = int(rule.flags(rule.counts(later, seen)).sum())
+    cells = [box.stem, len(table), table["mmsi"].nunique(), f"{land:.3f}", f"{split:%H:%M}"]
+    cells += [int(before.sum()), len(later), plain, excused]
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("runs/coastal-areas"))
+    args = ap.parse_args()
+    print("| box | tracks | vessels | reports on land | split (UTC) | before | after | "
+          "later tracks ashore | with the earlier tracks' water |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|")
+    for box in sorted(AREAS.glob("*.geojson")):
+        data = args.out / box.stem
+        ingest(box, data)
+        print(row(box, data), flush=True)
+
+
+if __name__ == "__main__":
+    main()
