@@ -35,6 +35,11 @@ CONNECT_TIMEOUT_S = 10
 """How long `--scheduler` waits for the scheduler to answer before giving up, in one line."""
 WORKER_MEMORY = "auto"
 """Each local worker's memory limit: the machine's memory shared equally (Dask's `auto`)."""
+CLUSTER_LOG_LEVEL = logging.CRITICAL
+"""What a local cluster's processes print: nothing short of critical. What matters reaches the
+command as a task's exception (a lost worker's tasks are retried, then fail in one line); the
+rest is Dask's own logging, which on Ctrl-C printed a worker's heartbeat traceback when the
+scheduler closed first."""
 
 
 @dataclass(frozen=True)
@@ -182,7 +187,7 @@ def open_runner(execution: Execution) -> Iterator[Runner]:
                     processes=True,
                     dashboard_address=":0",  # any free port, never the 8787 of another cluster
                     memory_limit=WORKER_MEMORY,
-                    silence_logs=logging.ERROR,
+                    silence_logs=CLUSTER_LOG_LEVEL,
                 )
             )
             client = stack.enter_context(Client(cluster))
