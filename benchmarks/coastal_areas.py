@@ -16,29 +16,20 @@ Run: python benchmarks/coastal_areas.py [--out runs/coastal-areas]
 from __future__ import annotations
 
 import argparse
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from detection_quality import AREAS, FORWARD, ingest  # (this folder: run as a script)
 
 from aisdati.coastline import on_land
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import load_tracks, read_track_table
 
-ROOT = Path(__file__).resolve().parents[1]
-DAY = ROOT / "tests" / "data" / "US_coastal_2020_06_30_points.csv.gz"
-AREAS = Path(__file__).resolve().parent / "areas"
+DAY, MIN_POINTS = FORWARD["pugetsound"][:2]
+"""The US coastal day and the fourth area's --min-points, for every box alike."""
 TRAINING_SHARE = 2 / 3
 """The share of tracks before the split: about the other forward areas' training share."""
-
-
-def ingest(box: Path, out: Path) -> None:
-    if not (out / "tracks.parquet").is_file():
-        cmd = [sys.executable, "-m", "aisdati.cli", "ingest", "--input", str(DAY), "--roi",
-               str(box), "--min-points", "20", "--out", str(out), "--quiet"]  # fmt: skip
-        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
 def split_hour(starts: pd.Series) -> pd.Timestamp:
@@ -75,7 +66,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for box in sorted(AREAS.glob("*.geojson")):
         data = args.out / box.stem
-        ingest(box, data)
+        ingest(DAY, MIN_POINTS, data, str(box))
         print(row(box, data), flush=True)
 
 
