@@ -109,6 +109,17 @@ def arc_m(chord: np.ndarray) -> np.ndarray:
     return 2 * EARTH_RADIUS_M * np.arcsin(np.minimum(chord / 2, 1.0))
 
 
+def draw_spread(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of K drawn positions ([n, K, 2] lon/lat degrees): their centroid (unit vectors
+    [n, 3]) and their spread, the root mean square great-circle distance from it (m [n]): how
+    sure a model is where the next report lies (`stepspread`)."""
+    u = unit_vectors(draws)
+    centre = u.mean(axis=1)
+    centre /= np.linalg.norm(centre, axis=1, keepdims=True)
+    spread = np.sqrt((arc_m(np.linalg.norm(u - centre[:, None], axis=2)) ** 2).mean(axis=1))
+    return centre, spread
+
+
 def _neighbours(sizes: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
     """Indices of each point's previous and next point in polylines of `sizes` points laid end
     to end (each polyline's ends stand in for the missing)."""

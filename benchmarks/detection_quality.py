@@ -9,8 +9,8 @@ Run: python benchmarks/detection_quality.py [--seeds 0,1,2] [--data kitimat] [--
      [--detectors dati,nearest,bc] [--kinds detour,jump,loiter] [--lane KEY=VALUE ...]
      [--no-ashore] [--out runs/quality]
      python benchmarks/detection_quality.py --forward
-     [--data kitimat|nyharbor|virginiabeach|pugetsound|both] [--strength 1] [--seeds 0,1,2]
-     [--train-seeds 0,1,2] [--no-ashore] [--at-sea] ...
+     [--data kitimat|nyharbor|virginiabeach|pugetsound|losangeles|sanfrancisco|both]
+     [--strength 1] [--seeds 0,1,2] [--train-seeds 0,1,2] [--no-ashore] [--at-sea] ...
 
 `--forward` is the analyst's protocol instead (`aisdati evaluate --cluster all --split time`):
 train one model of the whole area on the tracks before the split date (Kitimat: July -> August;
@@ -64,6 +64,18 @@ FORWARD = {
         "2020-06-30T18:00:00",
         str(AREAS / "puget-sound.geojson"),
     ),
+    "losangeles": (
+        DATA / "US_coastal_2020_06_30_points.csv.gz",
+        "20",
+        "2020-06-30T20:00:00",
+        str(AREAS / "los-angeles.geojson"),
+    ),
+    "sanfrancisco": (
+        DATA / "US_coastal_2020_06_30_points.csv.gz",
+        "20",
+        "2020-06-30T17:00:00",
+        str(AREAS / "san-francisco.geojson"),
+    ),
 }
 """The forward protocol's areas: input, --min-points (NY Harbor at 50 and Virginia Beach at 20:
 an area of ~150 training tracks, the issue's size; NY Harbor at 10 has 1,538, Virginia Beach at
@@ -71,7 +83,9 @@ an area of ~150 training tracks, the issue's size; NY Harbor at 10 has 1,538, Vi
 -> June 6: 131 training tracks, 66 judged) is the third area, added after the area preset's
 choices were made on the other two; Puget Sound (one day's US coastal file, 00-18 h -> 18-24 h
 UTC: 60 training tracks, 34 judged) the fourth, chosen by counts before any detector ran on it
-(docs/results/forward.md)."""
+(docs/results/forward.md); Los Angeles (00-20 h -> 20-24 h: 37 and 22) and San Francisco
+(00-17 h -> 17-24 h: 29 and 15), counted with it, the fifth and sixth.
+"""
 
 
 def aisdati(*args: str) -> None:

@@ -18,8 +18,9 @@ keeps the best of K rollouts). Two questions, each answered without retraining:
   `spread` divides each report's best error by the K draws' own spread (the root mean square of
   their distances from their centroid, plus 10 m, an AIS position's accuracy): the surprise of
   the report under the model's predictive spread, which is wide where the members disagree or a
-  fast vessel's next report is uncertain; `centre` the same for the report's distance from the
-  draws' centroid instead of the best draw's error.
+  fast vessel's next report is uncertain (the tool's `--score stepspread`, `error_surprises`);
+  `centre` the same for the report's distance from the draws' centroid instead of the best
+  draw's error.
 - `--ahead`: does predicting h reports ahead (the policy moved h times from the real report,
   over the real time steps, its own moves feeding its state) see more than one step? A loiter
   comes back to where it was while the policy sails on, and a detour bends away from where the
@@ -51,13 +52,15 @@ from sklearn.metrics import roc_auc_score
 
 from aisdati.detectors import load_detector, model_name
 from aisdati.detectors.scoring import (
+    POSITION_ACCURACY_M,
     SCORE_CHUNK,
     ScoreSettings,
     error_rates,
+    error_surprises,
     score_chunks,
     tail_mean,
 )
-from aisdati.geo import arc_m, legs_m, unit_vectors
+from aisdati.geo import arc_m, draw_spread, legs_m, unit_vectors
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track, load_tracks
 
@@ -83,21 +86,6 @@ def _divisor(track: Track, normalise: str) -> float:
     return 1.0
 
 
-POSITION_ACCURACY_M = 10.0
-"""`spread` and `centre`: added to the draws' spread, an AIS position's accuracy, so a report
-the draws agree on to a metre is not judged against a metre."""
-
-
-def draw_spread(predicted: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per report, the K draws' spread (root mean square distance from their centroid, m) and
-    the real report's distance from that centroid (m): predicted [n, K, 2], targets [n, 2]."""
-    u = unit_vectors(predicted)
-    centre = u.mean(axis=1)
-    centre /= np.linalg.norm(centre, axis=1, keepdims=True)
-    spread = np.sqrt((arc_m(np.linalg.norm(u - centre[:, None], axis=2)) ** 2).mean(axis=1))
-    return spread, arc_m(np.linalg.norm(unit_vectors(targets) - centre, axis=1))
-
-
 def _normalised(
     errors: np.ndarray, track: Track, normalise: str, h: int, predicted: np.ndarray
 ) -> np.ndarray:
@@ -105,9 +93,12 @@ def _normalised(
     `steprate` (`error_rates`), over the h time steps from each anchor to its target."""
     if normalise == "velocity":
         return error_rates(errors, np.convolve(track.dts, np.ones(h), "valid"))
-    if normalise in ("spread", "centre"):
-        spread, off = draw_spread(predicted, track.positions[h:])
-        return (errors if normalise == "spread" else off) / (spread + POSITION_ACCURACY_M)
+    if normalise == "spread":
+        return error_surprises(errors, predicted)
+    if normalise == "centre":
+        centre, spread = draw_spread(predicted)
+        off = arc_m(np.linalg.norm(unit_vectors(track.positions[h:]) - centre, axis=1))
+        return off / (spread + POSITION_ACCURACY_M)
     return errors / _divisor(track, normalise)
 
 

@@ -38,6 +38,7 @@ from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.od import OD_QUANTILE, od_distances, od_excess
 from aisdati.errors import UserError
+from aisdati.geo import draw_spread, haversine_m, moved_m, unit_vectors
 from aisdati.model.dati import nearest_draws
 from aisdati.model.networks import DATINetworks, NetworkConfig
 from aisdati.tracks.store import Track, load_tracks, read_track_table
@@ -368,7 +369,7 @@ def test_each_scores_profile_is_what_its_label_says(area_dati, months):
         return area_dati.score_tracks(august, replace(HOW, score=score), ()).profiles
 
     own = {STEP_ERRORS: profiles("step"), "distance to the lane (m)": profiles("lane")}
-    for score in ("steprate", "both", "steplane", "steptraffic", "area"):
+    for score in ("steprate", "stepspread", "both", "steplane", "steptraffic", "area"):
         for got, expected in zip(profiles(score), own[PROFILES[score]], strict=True):
             np.testing.assert_array_equal(got, expected)
 
@@ -437,6 +438,36 @@ def test_steprate_is_each_one_step_error_over_its_report_interval(area_dati, mon
     table.print(detection_table(scores, "steprate"))
     text = table.export_text()
     assert "m/s" in text and "3.25" in text and "mean km" not in text
+    refused_without_its_calibration(area_dati, how, tmp_path)
+
+
+def test_stepspread_is_each_one_step_error_over_the_spread_of_the_models_draws(
+    area_dati, months, tmp_path
+):
+    """`--score stepspread`: each report's best-of-K error over the K draws' root mean square
+    distance from their centroid plus 10 m, the same tail mean; calibrated with the others,
+    shown in its unit, and refused in one line by a card calibrated before it."""
+    east, north = moved_m(-128.7, 53.5, np.array([90.0, 0.0, 270.0, 180.0]), 100.0)
+    centre, spread = draw_spread(np.stack([east, north], axis=-1)[None])
+    assert spread[0] == pytest.approx(100.0, rel=1e-3)  # four draws 100 m around a point
+    assert np.allclose(centre[0], unit_vectors(np.array([-128.7, 53.5])), atol=1e-9)
+    august = months[1][:6]
+    how = replace(HOW, score="stepspread")
+    got = area_dati.score_tracks(august, how, ("step",))
+    positions, dts = [t.positions for t in august], [t.dts for t in august]
+    errors, draws = area_dati.policy().step_draws(positions, dts, HOW.rollouts, HOW.seed)
+    for e, q, value, metres in zip(errors, draws, got.score_m, got.parts["step"], strict=True):
+        best = e.min(axis=1)
+        c = q.mean(axis=1)  # near enough the centroid for draws a few hundred metres apart
+        d = haversine_m(c[:, None, 0], c[:, None, 1], q[..., 0], q[..., 1])
+        rms = np.sqrt((d**2).mean(axis=1))
+        surprise = np.sort(best / (rms + 10.0))[::-1][: int(np.ceil(len(best) * HOW.tail))]
+        assert value == pytest.approx(surprise.mean(), rel=1e-3)
+        assert metres == pytest.approx(np.sort(best)[::-1][: len(surprise)].mean())
+    cal = area_dati.card.calibration
+    assert len(cal["stepspread"]) == len(cal["step"])
+    assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["stepspread"], 0.95))
+    assert score_text(1.234, "stepspread") == "1.23 x spread"
     refused_without_its_calibration(area_dati, how, tmp_path)
 
 

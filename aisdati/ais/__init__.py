@@ -9,11 +9,22 @@ DEFAULT_PRESET = "lanes"
 AREA_PRESET = "area"
 """The lane preset of a model of a whole area (`--cluster all`) when none is given: calibrated
 by cross-fitting."""
-SCORES = ("rollout", "step", "steprate", "lane", "both", "steplane", "steptraffic", "area")
+SCORES = (
+    "rollout",
+    "step",
+    "steprate",
+    "stepspread",
+    "lane",
+    "both",
+    "steplane",
+    "steptraffic",
+    "area",
+)
 """The ways a detector scores a track (`aisdati.detectors.scoring.ScoreSettings.score`)."""
-SCORE_UNITS = {"steprate": "m/s"}
+SCORE_UNITS = {"steprate": "m/s", "stepspread": "x spread"}
 """The unit of each score not in metres but for `RATIO_SCORES` (multiples of medians):
-`steprate` is the one-step errors over their report intervals."""
+`steprate` is the one-step errors over their report intervals, `stepspread` over the spread of
+the model's own draws."""
 RATIO_SCORES: dict[str, tuple[str, str]] = {
     "both": ("rollout", "step"),
     "steplane": ("step", "lane"),
@@ -25,6 +36,8 @@ training track scores 2). `steplane` joins what the one-step score sees (a move 
 would not make: a jump) to what the lane sees (a place the traffic does not go: a detour);
 `steptraffic` joins it to the distance to the training tracks themselves (`traffic`: where the
 area's vessels went, not where the policy sails)."""
+STEP_SCORES = ("step", "steprate", "stepspread")
+"""Scores of the teacher-forced one-step errors: computed together from the same K draws."""
 LANE_SCORES = ("lane", "steplane", "steptraffic", "area")
 """Scores whose calibration rests on the lane settings (`ScoreSettings.calibrated_with`)."""
 

@@ -228,12 +228,19 @@ class AISPolicy:
         """Per track, the best-of-K one-step prediction error (metres) at each report after the
         first ([n - 1] for n reports; `step_draws`), and the best predicted positions
         [n - 1, 2]."""
-        errors, predicted = self.step_draws(tracks, dts, draws, seed)
-        best = [e.argmin(axis=1) for e in errors]
-        return (
-            [e[np.arange(len(b)), b] for e, b in zip(errors, best, strict=True)],
-            [q[np.arange(len(b)), b] for q, b in zip(predicted, best, strict=True)],
-        )
+        return best_draws(*self.step_draws(tracks, dts, draws, seed))
+
+
+def best_draws(
+    errors: Sequence[np.ndarray], predicted: Sequence[np.ndarray]
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per track, of `step_draws`' K draws at each report, the smallest error ([n - 1]) and
+    its predicted position ([n - 1, 2])."""
+    best = [e.argmin(axis=1) for e in errors]
+    return (
+        [e[np.arange(len(b)), b] for e, b in zip(errors, best, strict=True)],
+        [q[np.arange(len(b)), b] for q, b in zip(predicted, best, strict=True)],
+    )
 
 
 def member_rows(n: int, members: int, member: int | None) -> tuple[torch.Tensor, torch.Tensor]:

@@ -60,6 +60,9 @@ SCORE_DEFINITIONS = {
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
     "steprate": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
     "errors, each over its report interval (at least the track's median interval) (m/s)",
+    "stepspread": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
+    "errors, each over the K draws' spread (root mean square distance from their centroid) "
+    "plus 10 m (multiples of the spread)",
     "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
     "lane_rollouts free rollouts of twice the track's steps and, with lane_traffic, of one rollout "
     "from each training track's start (nearest: of the training tracks starting within "

@@ -109,6 +109,7 @@ EVIDENCE = {
     "area": "best rollout",
     "step": "one-step predictions",
     "steprate": "one-step predictions",
+    "stepspread": "one-step predictions",
     "nearest": "nearest training track",
 }
 """What a track was compared with, by score (by method for `nearest`)."""
@@ -122,6 +123,7 @@ PROFILES = {
     "area": "distance to the lane (m)",
     "step": STEP_ERRORS,
     "steprate": STEP_ERRORS,
+    "stepspread": STEP_ERRORS,
     "nearest": "distance to the nearest training track (m)",
 }
 """What a track's profile (profiles.parquet, the evidence figures' lower panel) measures at

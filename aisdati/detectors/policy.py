@@ -24,14 +24,21 @@ from pathlib import Path
 
 import numpy as np
 
-from aisdati.ais import RATIO_SCORES, SCORE_UNITS
+from aisdati.ais import RATIO_SCORES, SCORE_UNITS, STEP_SCORES
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
-from aisdati.ais.policy import Act, AISPolicy
+from aisdati.ais.policy import Act, AISPolicy, best_draws
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
 from aisdati.detectors.od import area_scores, od_distances, od_pairs_m, track_ends
-from aisdati.detectors.scoring import Scores, ScoreSettings, error_rates, ratio_sum, tail_mean
+from aisdati.detectors.scoring import (
+    Scores,
+    ScoreSettings,
+    error_rates,
+    error_surprises,
+    ratio_sum,
+    tail_mean,
+)
 from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import matched_distances
 from aisdati.errors import UserError
@@ -96,17 +103,25 @@ class PolicyDetector(Detector):
                 for p, e, b in zip(positions, every, bound, strict=True)
             ]
             parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
-        if wanted & {"step", "steprate"}:
+        if wanted & set(STEP_SCORES):
             dts = [t.dts for t in tracks]
-            errors, predicted = policy.step_errors(positions, dts, how.rollouts, how.seed)
+            draws = policy.step_draws(positions, dts, how.rollouts, how.seed)
+            errors, predicted = best_draws(*draws)
             parts["step"] = np.array([tail_mean(e, how.tail) for e in errors])
             parts["steprate"] = np.array(
                 [tail_mean(error_rates(e, d), how.tail) for e, d in zip(errors, dts, strict=True)]
             )
-            profiles["step"] = profiles["steprate"] = [np.concatenate([[0.0], e]) for e in errors]
-            evidence["step"] = evidence["steprate"] = [
-                np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
-            ]
+            parts["stepspread"] = np.array(
+                [
+                    tail_mean(error_surprises(e, q), how.tail)
+                    for e, q in zip(errors, draws[1], strict=True)
+                ]
+            )
+            for name in STEP_SCORES:
+                profiles[name] = [np.concatenate([[0.0], e]) for e in errors]
+                evidence[name] = [
+                    np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
+                ]
         if "traffic" in wanted:
             kept = self.kept_training_tracks()
             parts["traffic"], profiles["traffic"] = kept.lane_scores(positions, how)
@@ -188,7 +203,7 @@ class PolicyDetector(Detector):
         did not train on them; without, by the whole model that did. The tracks are kept as
         the model's traffic, their traffic scores leave-one-vessel-out."""
         how = replace(how or self.how, score="rollout")
-        kinds = ("rollout", "step", "steprate", "lane")
+        kinds = ("rollout", *STEP_SCORES, "lane")
         if folds is None:
             parts = self.score_with(self.policy(), tracks, how, kinds[1:]).parts
         else:

@@ -12,6 +12,7 @@ import numpy as np
 
 from aisdati.ais import RATIO_SCORES
 from aisdati.ais.card import CalibratedWith
+from aisdati.geo import draw_spread
 
 SCORE_CHUNK = 64
 """Tracks one scoring task holds (`Detector.score`): chunks of the test set, in its order, so
@@ -31,6 +32,21 @@ def error_rates(errors_m: np.ndarray, dts_h: np.ndarray) -> np.ndarray:
     return errors_m / seconds
 
 
+POSITION_ACCURACY_M = 10.0
+"""`error_surprises`: added to the draws' spread, an AIS position's accuracy, so that a report
+the draws agree on to a metre is not judged against a metre."""
+
+
+def error_surprises(errors_m: np.ndarray, draws: np.ndarray) -> np.ndarray:
+    """A track's best-of-K one-step errors (metres [n - 1]) each over the spread of its K draws
+    ([n - 1, K, 2] lon/lat; `aisdati.geo.draw_spread`) plus `POSITION_ACCURACY_M`: how far the
+    report lies from where the model expected it, in units of how sure the model was. Where the
+    members disagree or a fast vessel's next report fans out, an error of a few hundred metres
+    is no surprise; where they agree it is. `stepspread`; measured forward in time in
+    docs/results/forward.md."""
+    return errors_m / (draw_spread(draws)[1] + POSITION_ACCURACY_M)
+
+
 def score_chunks(count: int) -> list[range]:
     """The tracks (by index) of each scoring task: consecutive chunks of `SCORE_CHUNK`, and
     one empty chunk for no track (a detector still says what an empty set scores)."""
@@ -47,7 +63,8 @@ def tail_mean(values: np.ndarray, fraction: float) -> float:
 @dataclass(frozen=True, kw_only=True)
 class ScoreSettings:
     score: str = "lane"
-    """lane, rollout (the paper's), step (teacher-forced), both (rollout + step), steplane
+    """lane, rollout (the paper's), step (teacher-forced; steprate and stepspread the same
+    errors over their report intervals or the draws' spread), both (rollout + step), steplane
     (step + lane) or area (lane plus the origin-destination term, `aisdati.detectors.od`); see
     `aisdati.ais.policy` and `RATIO_SCORES`."""
     rollouts: int = 10

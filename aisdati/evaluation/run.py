@@ -318,12 +318,16 @@ def _score(
 
 def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
-    four, `steprate`, `steplane` and `steptraffic` where its card was calibrated with them
-    (cards from before those scores are not), and `od` and `area` where its card records where
-    its training tracks end."""
+    four, `steprate`, `stepspread`, `steplane` and `steptraffic` where its card was calibrated
+    with them (cards from before those scores are not), and `od` and `area` where its card
+    records where its training tracks end."""
     if det.method == "nearest":
         return ["nearest", "lane"]
-    since = [k for k in ("steprate", "steplane", "steptraffic") if det.card.calibration.get(k)]
+    since = [
+        k
+        for k in ("steprate", "stepspread", "steplane", "steptraffic")
+        if det.card.calibration.get(k)
+    ]
     od = ["od", "area"] if det.end_points is not None else []
     return ["rollout", "step", "lane", "both", *since, *od]
 
