@@ -4,8 +4,9 @@
 best of every score, but its threshold, the 95th percentile of the training tracks' own
 cross-fitted scores, does not hold forward: it flags no anomaly at sea on Kitimat and 12 % of
 Virginia Beach's normal tracks (docs/results/forward.md). On the cells of
-`benchmarks/detection_quality.py --forward` (DATI models trained since `steprate` exists), for
-`step` and `steprate`, beside the evaluation's own figures:
+`benchmarks/detection_quality.py --forward` (DATI's or, `--detector bc`, cross-fitted BC's
+models), for `step`, `steprate` and `stepspread` where the models' cards were calibrated with
+them, beside the evaluation's own figures:
 
 - `adjusted`: the areas' reporting intervals changed between the periods (Kitimat's median
   240 -> 300 s, Virginia Beach's 79 -> 70 s), so each track's score times (its median report
@@ -29,7 +30,7 @@ altered (recall) tracks flagged, the later normal tracks' median score against t
 tracks', and g.
 
 Run: python benchmarks/forward_thresholds.py runs/grid2/*/forward-* [--contamination 0.05]
-     [--ways adjusted,member-wise,speed-adjusted,speed-classes]
+     [--ways adjusted,member-wise,speed-adjusted,speed-classes] [--detector dati|bc]
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track, load_tracks
 
 RULE = AshoreCheck()
-SCORES = ("step", "steprate")
+SCORES = ("step", "steprate", "stepspread")
+"""The scores measured, where the models' cards were calibrated with them."""
 
 
 def member_wise(detector: PolicyDetector, tracks: list[Track], draws: int, seed: int) -> dict:
@@ -101,11 +103,12 @@ def median_speeds(tracks: list[Track]) -> np.ndarray:
 WAYS = ("adjusted", "member-wise", "speed-adjusted", "speed-classes")
 
 
-def cell_rows(cell: Path, contamination: float, ways: list[str]) -> list[dict]:
+def cell_rows(cell: Path, contamination: float, ways: list[str], method: str) -> list[dict]:
     """Each score's figures on one cell: as evaluated, and each of `ways`."""
     doc = json.loads((cell / "evaluation.json").read_text())
     settings = doc["settings"]
-    detector = load_detector(Path(settings["models_dir"] or cell / "models") / "all")
+    models = Path(settings["models_dir"] or cell / "models")
+    detector = load_detector(models / ("all" if method == "dati" else f"all-{method}"))
     labels = pd.read_csv(cell / "data" / "labels.csv")
     later = load_tracks(cell / "data", labels["track_id"].tolist())
     training = load_tracks(cell / "data", doc["split"]["training_track_ids"])
@@ -116,8 +119,8 @@ def cell_rows(cell: Path, contamination: float, ways: list[str]) -> list[dict]:
     scores = pd.read_parquet(cell / "scores.parquet")
     y = labels["label"].to_numpy()
     rows = []
-    for score in SCORES:
-        got = scores[(scores["detector"] == "dati") & (scores["score"] == score)]
+    for score in [k for k in SCORES if k in detector.card.calibration]:
+        got = scores[(scores["detector"] == method) & (scores["score"] == score)]
         got = got.set_index("track_id").loc[labels["track_id"]]
         ashore, lengths = got["ashore_reports"].to_numpy(), got["n_points"].to_numpy()
         cal = np.asarray(detector.card.calibration[score], np.float64)
@@ -157,6 +160,7 @@ def main() -> None:
     ap.add_argument("grids", nargs="+", type=Path, help="folders of evaluate cells")
     ap.add_argument("--contamination", type=float, default=0.05)
     ap.add_argument("--ways", default=",".join(WAYS), help="comma-separated: " + ", ".join(WAYS))
+    ap.add_argument("--detector", default="dati", choices=("dati", "bc"), help="whose models")
     args = ap.parse_args()
     ways = args.ways.split(",")
     if set(ways) - set(WAYS):
@@ -166,7 +170,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|")
     for grid in args.grids:
         cells = sorted(p.parent for p in grid.glob("*/evaluation.json"))
-        frame = pd.DataFrame([r for c in cells for r in cell_rows(c, args.contamination, ways)])
+        rows = [r for c in cells for r in cell_rows(c, args.contamination, ways, args.detector)]
+        frame = pd.DataFrame(rows)
         for name, m in frame.groupby("score", sort=False):
             print(
                 f"| {grid.parent.name}/{grid.name} | {name} | {m['auc'].mean():.3f} | "
