@@ -445,7 +445,8 @@ def test_stepspread_is_each_one_step_error_over_the_spread_of_the_models_draws(
     area_dati, months, tmp_path
 ):
     """`--score stepspread`: each report's best-of-K error over the K draws' root mean square
-    distance from their centroid plus 10 m, the same tail mean; calibrated with the others,
+    distance from their centroid plus 10 m, the same tail mean, by each member alone and
+    averaged on a cross-fitted model (as its calibration scores); calibrated with the others,
     shown in its unit, and refused in one line by a card calibrated before it."""
     east, north = moved_m(-128.7, 53.5, np.array([90.0, 0.0, 270.0, 180.0]), 100.0)
     centre, spread = draw_spread(np.stack([east, north], axis=-1)[None])
@@ -455,15 +456,26 @@ def test_stepspread_is_each_one_step_error_over_the_spread_of_the_models_draws(
     how = replace(HOW, score="stepspread")
     got = area_dati.score_tracks(august, how, ("step",))
     positions, dts = [t.positions for t in august], [t.dts for t in august]
-    errors, draws = area_dati.policy().step_draws(positions, dts, HOW.rollouts, HOW.seed)
-    for e, q, value, metres in zip(errors, draws, got.score_m, got.parts["step"], strict=True):
-        best = e.min(axis=1)
-        c = q.mean(axis=1)  # near enough the centroid for draws a few hundred metres apart
-        d = haversine_m(c[:, None, 0], c[:, None, 1], q[..., 0], q[..., 1])
-        rms = np.sqrt((d**2).mean(axis=1))
-        surprise = np.sort(best / (rms + 10.0))[::-1][: int(np.ceil(len(best) * HOW.tail))]
-        assert value == pytest.approx(surprise.mean(), rel=1e-3)
-        assert metres == pytest.approx(np.sort(best)[::-1][: len(surprise)].mean())
+
+    def surprises(policy) -> np.ndarray:
+        errors, draws = policy.step_draws(positions, dts, HOW.rollouts, HOW.seed)
+        out = []
+        for e, q in zip(errors, draws, strict=True):
+            c = q.mean(axis=1)  # near enough the centroid for draws a few hundred metres apart
+            d = haversine_m(c[:, None, 0], c[:, None, 1], q[..., 0], q[..., 1])
+            s = e.min(axis=1) / (np.sqrt((d**2).mean(axis=1)) + 10.0)
+            out.append(np.sort(s)[::-1][: int(np.ceil(len(s) * HOW.tail))].mean())
+        return np.array(out)
+
+    # cross-fitted (the area preset): each member's K draws, as calibration scores a track
+    members = area_dati.card.lane_config.members
+    expected = np.mean([surprises(area_dati.policy(m)) for m in range(members)], axis=0)
+    np.testing.assert_allclose(got.score_m, expected, rtol=1e-3)
+    ensemble = surprises(area_dati.policy())  # draws spread over members that disagree
+    assert np.median(ensemble) < np.median(expected)
+    assert got.parts["step"] == pytest.approx(
+        area_dati.score_tracks(august, replace(HOW, score="step"), ()).score_m
+    )
     cal = area_dati.card.calibration
     assert len(cal["stepspread"]) == len(cal["step"])
     assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["stepspread"], 0.95))

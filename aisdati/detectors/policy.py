@@ -69,7 +69,27 @@ class PolicyDetector(Detector):
     def score_tracks(
         self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
     ) -> Scores:
-        return self.score_with(self.policy(), tracks, how, also)
+        """Every score by the whole ensemble, but `stepspread` of a cross-fitted model: member
+        by member (`member_wise`), as its threshold was calibrated."""
+        scores = self.score_with(self.policy(), tracks, how, also)
+        if "stepspread" in {how.score, *also} and self.card.lane_config.crossfit:
+            scores.parts["stepspread"] = self.member_wise(tracks, how, "stepspread")
+            if how.score == "stepspread":
+                scores.score_m = scores.parts["stepspread"]
+        return scores
+
+    def member_wise(self, tracks: Sequence[Track], how: ScoreSettings, kind: str) -> np.ndarray:
+        """[N] `kind` of each track by each member alone (its K draws), the mean over the
+        members. A cross-fitted calibration scores each training track with one member; the
+        ensemble's K draws spread over members that disagree, so for `stepspread` (an error
+        over the draws' spread) a track scored by the ensemble scored 5-11x lower than one
+        member would score it, and the threshold flagged almost nothing forward in time
+        (docs/results/forward.md)."""
+        one = replace(how, score=kind)
+        members = range(self.card.lane_config.members)
+        return np.mean(
+            [self.score_with(self.policy(m), tracks, one, ()).parts[kind] for m in members], axis=0
+        )
 
     def score_with(
         self, policy: AISPolicy, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
