@@ -249,10 +249,13 @@ def train(
         help="Tracks to learn: a cluster (up, down, other), a route (route-<n>, unrouted), or "
         "routes: every route with enough tracks (DATI trains them as one batched ensemble).",
     ),
-    method: str = typer.Option(
-        "dati",
+    method: str | None = typer.Option(
+        None,
         "--method",
-        help="Detector: dati (the paper's), bc (behavioural cloning) or nearest (no learning).",
+        help="Detector: dati (the paper's), bc (behavioural cloning) or nearest (no learning). "
+        "Default: bc for --cluster all (cross-fitted, judged by stepspread: it measured best "
+        "forward in time), dati for a cluster or route.",
+        show_default=False,
     ),
     data: Path = typer.Option(Path("data/processed"), "--data", help="Ingest output folder."),
     out: str = typer.Option(
@@ -415,8 +418,8 @@ def detect(
         "themselves; models trained since it exists) or area (lane + how much rarer the "
         "track's start-end pair is than the training tracks'; models trained since 0.2.0). "
         "Default: the model's own, "
-        "recorded when it was trained: step for a model of a whole area (the area preset), "
-        "else lane.",
+        "recorded when it was trained: for a model of a whole area (the area preset) "
+        "stepspread (bc) or step (dati), else lane.",
     ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(

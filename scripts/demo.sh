@@ -4,20 +4,22 @@
 # 2 CPU cores:
 #
 #   1. ingest: clean, segment and cluster the reports of July and August 2018;
-#   2. evaluate --split time: train one model of the whole area (DATI with the area preset, which
-#      judges by its one-step predictions, and the nearest-track baseline) on July, write
-#      detours, position jumps and loitering circles into 30 % of the August tracks, and judge
-#      every August track;
+#   2. evaluate --split time: train one model of the whole area (the area's default: behaviour
+#      cloning cross-fitted over three vessel folds, which judges each report by its one-step
+#      prediction error over the spread of its own draws, and the nearest-track baseline) on
+#      July, write detours, position jumps and loitering circles into 30 % of the August tracks,
+#      and judge every August track;
 #   3. detect: judge August with the July model, flag what scores above the threshold calibrated
 #      on July tracks the model did not fit (--contamination 0.05) and every track with reports
 #      well inland, check the flags against the injected labels and draw the map.
 #
-#   scripts/demo.sh            # outputs under runs/demo (OUT=dir, EPISODES=n to change)
+#   scripts/demo.sh            # outputs under runs/demo (OUT=dir, EPISODES=n: the training
+#                              # tracks BC learns from per member, 170 by default)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 OUT=${OUT:-runs/demo}
-EPISODES=${EPISODES:-5}
+EPISODES=${EPISODES:-170}
 BEFORE=2018-08-01
 SAMPLE=tests/data/AIS_2018_07-08_Kitimat.csv.gz
 
@@ -37,7 +39,7 @@ echo "== 1/3 ingest: $SAMPLE"
 
 echo "== 2/3 evaluate: train on July, judge every August track (30 % altered)"
 "$AISDATI" evaluate --data "$OUT/processed" --cluster all --split time --before "$BEFORE" \
-  --altered 0.3 --detectors dati,nearest --kinds detour,jump,loiter --episodes "$EPISODES" \
+  --altered 0.3 --detectors bc,nearest --kinds detour,jump,loiter --episodes "$EPISODES" \
   --out "$OUT/evaluate"
 
 echo "== 3/3 detect: every August track, judged by the July model of the area"

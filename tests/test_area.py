@@ -484,12 +484,18 @@ def test_stepspread_is_each_one_step_error_over_the_spread_of_the_models_draws(
 
 
 def test_detect_without_method_uses_the_models_the_folder_has(cli, kitimat, months, tmp_path):
-    """`detect` without --method judges with the first detector (dati, bc, nearest) the folder,
-    or the named models, have: what `train --method bc` wrote is used without being told."""
+    """`train --cluster all` without --method fits the area's detector (cross-fitted BC,
+    judged by `stepspread`); `detect` without --method judges with the first detector (dati,
+    bc, nearest) the folder, or the named models, have: what train wrote is used without being
+    told."""
     models = tmp_path / "models"
-    r = cli("train", "--cluster", "all", "--method", "bc", "--data", kitimat, "--out", models,
+    r = cli("train", "--cluster", "all", "--data", kitimat, "--out", models,
             "--episodes", "3", "--max-tracks", "12", "--lane", "members=2", "-q")  # fmt: skip
     assert r.exit_code == 0, r.output
+    card = json.loads((models / "all-bc.json").read_text())
+    expected = ("bc", "stepspread", "area + members=2")  # the preset's score, overrides or not
+    assert (card["method"], card["score"], card["preset"]) == expected
+    assert card["lane_config"]["crossfit"] and not (models / "all.json").exists()
     settings = DetectSettings(data_dir=kitimat, models_dir=models, out_dir=tmp_path / "out",
                               cluster="all")  # fmt: skip
     assert with_own_method(settings).method == "bc"

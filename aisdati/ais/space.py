@@ -183,12 +183,25 @@ do not improve on for one-step predictions of a whole area). The goal lever (`go
 measured worse than without on Kitimat, forward in time, so the area preset leaves it off
 (docs/results/forward.md). Their names are
 `aisdati.ais.DEFAULT_PRESET` and `AREA_PRESET`."""
-PRESET_SCORES: dict[str, str] = {AREA_PRESET: "step"}
-"""The score a policy of a preset judges by unless `--score` says otherwise (`ModelCard.score`;
-every other preset, and `nearest`: lane). The area preset's one-step predictions ranked the
-anomalies a vessel could sail better than its lane on both areas, forward in time (Kitimat
-0.737 against 0.597, NY Harbor 0.786 against 0.674; docs/results/forward.md): one model of a
-whole area predicts the next report far better than it generates a whole track."""
+PRESET_SCORES: dict[tuple[str, str], str] = {
+    (AREA_PRESET, "dati"): "step",
+    (AREA_PRESET, "bc"): "stepspread",
+}
+"""The score a policy of a preset and method judges by unless `--score` says otherwise
+(`ModelCard.score`; every other preset, and `nearest`: lane). The area preset's one-step
+predictions ranked the anomalies a vessel could sail better than its lane on both areas,
+forward in time (Kitimat 0.737 against 0.597, NY Harbor 0.786 against 0.674;
+docs/results/forward.md): one model of a whole area predicts the next report far better than it
+generates a whole track. BC's draws come from its Gaussian, wide where it learnt a report is
+uncertain, so its errors over their spread (`stepspread`) ranked and flagged best of every
+score measured on three areas (the same page)."""
+
+
+def preset_score(preset: str | None, method: str) -> str:
+    """`PRESET_SCORES`' score of a card's preset name, which carries its overrides ("area +
+    members=5"): the preset's own, whatever was overridden."""
+    base = (preset or "").split(" + ")[0]
+    return PRESET_SCORES.get((base, method), "lane")
 
 
 def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:

@@ -43,7 +43,7 @@ from aisdati.ais.card import DataCard, ModelCard, NetworkCard, Region, RuleCard,
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import AISPolicy, dati_act
 from aisdati.ais.source import EPSILON_M, AISTrackSource, build_source, make_env
-from aisdati.ais.space import PRESET_SCORES, PRESETS, AISSpace, LaneConfig
+from aisdati.ais.space import PRESETS, AISSpace, LaneConfig, preset_score
 from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import TrajectoryImitationEnv
@@ -173,7 +173,7 @@ def base_card(method: str, settings: TrainSettings, space: AISSpace, data: DataC
         seed=settings.seed,
         data=data,
         preset=settings.preset,
-        score="lane" if method == "nearest" else PRESET_SCORES.get(settings.preset, "lane"),
+        score=preset_score(settings.preset, method),
         region=Region.from_bounds(space.bounds),
         rule=RuleCard.from_rule(space.rule),
         lane_config=space.config,

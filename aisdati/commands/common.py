@@ -71,6 +71,17 @@ def spinner(where: Console, text: str, show: bool = True) -> contextlib.Abstract
     return where.status(text, spinner="dots") if show else contextlib.nullcontext()
 
 
+def default_method(method: str | None, cluster: str) -> str:
+    """`--method`, else the area's detector for a whole area (`--cluster all`:
+    `aisdati.ais.AREA_METHOD`) and the paper's DATI for a cluster or route."""
+    from aisdati.ais import AREA_METHOD, DEFAULT_METHOD
+    from aisdati.tracks.schema import AREA
+
+    if method is not None:
+        return method
+    return AREA_METHOD if cluster.strip().lower() == AREA else DEFAULT_METHOD
+
+
 def lane_settings(preset: str | None, lane: list[str] | None, cluster: str) -> dict[str, Any]:
     """The `preset` (its name and overrides, for the model card) and `lane` (the resolved
     LaneConfig) of the train and evaluate settings, from --preset and --lane; without

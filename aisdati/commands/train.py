@@ -17,6 +17,7 @@ from aisdati.commands.common import (
     EXIT_INTERRUPTED,
     EXIT_TERMINATED,
     console,
+    default_method,
     err_console,
     lane_settings,
     warn,
@@ -39,7 +40,7 @@ MODEL_SUFFIXES = (".pt", ".json", ".npz", ".corridor.npz", ".log.jsonl", ".ckpt"
 
 def run(
     cluster: str,
-    method: str,
+    method: str | None,
     data: Path,
     out: str,
     preset: str | None,
@@ -58,7 +59,7 @@ def run(
 ) -> None:
     """`aisdati train` with its options (see `aisdati.cli.train`)."""
     check_options({"--seed": seed, "--routes-per-task": routes_per_task})
-    (method,) = parse_detectors(method)[:1]
+    (method,) = parse_detectors(default_method(method, cluster))[:1]
     execution = Execution(workers=workers, scheduler=scheduler)
     device = resolve_device(device)
     if cluster.strip().lower() == "routes":
