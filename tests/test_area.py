@@ -490,8 +490,10 @@ def test_detect_without_method_uses_the_models_the_folder_has(cli, kitimat, mont
     told."""
     models = tmp_path / "models"
     r = cli("train", "--cluster", "all", "--data", kitimat, "--out", models,
-            "--episodes", "3", "--max-tracks", "12", "--lane", "members=2", "-q")  # fmt: skip
+            "--episodes", "3", "--max-tracks", "12", "--lane", "members=2")  # fmt: skip
     assert r.exit_code == 0, r.output
+    assert "bc model of cluster 'all' on 12 tracks" in " ".join(r.output.split())
+    assert "judging by stepspread" in " ".join(r.output.split())
     card = json.loads((models / "all-bc.json").read_text())
     expected = ("bc", "stepspread", "area + members=2")  # the preset's score, overrides or not
     assert (card["method"], card["score"], card["preset"]) == expected

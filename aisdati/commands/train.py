@@ -94,8 +94,8 @@ def run(
     elif method != "dati":
         console.print(
             f"{method} model of cluster {escape(repr(settings.cluster))} on "
-            f"{result.card['data']['tracks_used']} tracks in {result.wall_seconds:.1f} s: "
-            f"wrote [bold]{escape(str(result.model))}[/]",
+            f"{result.card['data']['tracks_used']} tracks in {result.wall_seconds:.1f} s, "
+            f"judging by {result.card['score']}: wrote [bold]{escape(str(result.model))}[/]",
             highlight=False,
         )
     else:
