@@ -43,7 +43,7 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import roc_auc_score
 
-from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors import ScoreSettings, load_detector, model_name
 from aisdati.detectors.policy import PolicyDetector
 from aisdati.detectors.scoring import score_chunks
 from aisdati.geo import legs_m
@@ -57,18 +57,15 @@ SCORES = ("step", "steprate", "stepspread")
 
 def member_wise(detector: PolicyDetector, tracks: list[Track], draws: int, seed: int) -> dict:
     """Each track's `SCORES` from each member alone (K draws of it, as the calibration scores
-    a training track: `PolicyDetector.score_with`), averaged over the members; in the
+    a training track: `PolicyDetector.member_wise`), averaged over the members; in the
     evaluation's scoring chunks."""
     how = ScoreSettings(score="step", rollouts=draws, seed=seed)
-    members = detector.card.lane_config.members
-    out = {k: np.zeros((members, len(tracks))) for k in SCORES}
-    for m in range(members):
-        policy = detector.policy(m)
-        for chunk in score_chunks(len(tracks)):
-            parts = detector.score_with(policy, tracks[chunk.start : chunk.stop], how, ()).parts
-            for k in SCORES:
-                out[k][m, chunk.start : chunk.stop] = parts[k]
-    return {k: v.mean(axis=0) for k, v in out.items()}
+    out = {k: np.zeros(len(tracks)) for k in SCORES}
+    for chunk in score_chunks(len(tracks)):
+        got = detector.member_wise(tracks[chunk.start : chunk.stop], how, SCORES)
+        for k in SCORES:
+            out[k][chunk.start : chunk.stop] = got[k]
+    return out
 
 
 def power_adjusted(cal, cal_x, values, x) -> tuple[np.ndarray, np.ndarray, float]:
@@ -108,7 +105,7 @@ def cell_rows(cell: Path, contamination: float, ways: list[str], method: str) ->
     doc = json.loads((cell / "evaluation.json").read_text())
     settings = doc["settings"]
     models = Path(settings["models_dir"] or cell / "models")
-    detector = load_detector(models / ("all" if method == "dati" else f"all-{method}"))
+    detector = load_detector(models / model_name("all", method))
     labels = pd.read_csv(cell / "data" / "labels.csv")
     later = load_tracks(cell / "data", labels["track_id"].tolist())
     training = load_tracks(cell / "data", doc["split"]["training_track_ids"])

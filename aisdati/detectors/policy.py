@@ -73,23 +73,24 @@ class PolicyDetector(Detector):
         by member (`member_wise`), as its threshold was calibrated."""
         scores = self.score_with(self.policy(), tracks, how, also)
         if "stepspread" in {how.score, *also} and self.card.lane_config.crossfit:
-            scores.parts["stepspread"] = self.member_wise(tracks, how, "stepspread")
+            scores.parts |= self.member_wise(tracks, how, ("stepspread",))
             if how.score == "stepspread":
                 scores.score_m = scores.parts["stepspread"]
         return scores
 
-    def member_wise(self, tracks: Sequence[Track], how: ScoreSettings, kind: str) -> np.ndarray:
-        """[N] `kind` of each track by each member alone (its K draws), the mean over the
-        members. A cross-fitted calibration scores each training track with one member; the
+    def member_wise(
+        self, tracks: Sequence[Track], how: ScoreSettings, kinds: Sequence[str]
+    ) -> dict[str, np.ndarray]:
+        """[N] each of `kinds` of each track by each member alone (its K draws), the mean over
+        the members. A cross-fitted calibration scores each training track with one member; the
         ensemble's K draws spread over members that disagree, so for `stepspread` (an error
         over the draws' spread) a track scored by the ensemble scored 5-11x lower than one
         member would score it, and the threshold flagged almost nothing forward in time
         (docs/results/forward.md)."""
-        one = replace(how, score=kind)
+        one = replace(how, score=kinds[0])
         members = range(self.card.lane_config.members)
-        return np.mean(
-            [self.score_with(self.policy(m), tracks, one, ()).parts[kind] for m in members], axis=0
-        )
+        got = [self.score_with(self.policy(m), tracks, one, kinds[1:]).parts for m in members]
+        return {k: np.mean([g[k] for g in got], axis=0) for k in kinds}
 
     def score_with(
         self, policy: AISPolicy, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
@@ -137,11 +138,10 @@ class PolicyDetector(Detector):
                     for e, q in zip(errors, draws[1], strict=True)
                 ]
             )
+            profile = [np.concatenate([[0.0], e]) for e in errors]
+            shown = [np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)]
             for name in STEP_SCORES:
-                profiles[name] = [np.concatenate([[0.0], e]) for e in errors]
-                evidence[name] = [
-                    np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)
-                ]
+                profiles[name], evidence[name] = profile, shown
         if "traffic" in wanted:
             kept = self.kept_training_tracks()
             parts["traffic"], profiles["traffic"] = kept.lane_scores(positions, how)
