@@ -37,6 +37,7 @@ from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.od import OD_QUANTILE, od_distances, od_excess
+from aisdati.detectors.rarity import rarity
 from aisdati.errors import UserError
 from aisdati.geo import draw_spread, haversine_m, moved_m, unit_vectors
 from aisdati.model.dati import nearest_draws
@@ -480,6 +481,40 @@ def test_stepspread_is_each_one_step_error_over_the_spread_of_the_models_draws(
     assert len(cal["stepspread"]) == len(cal["step"])
     assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["stepspread"], 0.95))
     assert score_text(1.234, "stepspread") == "1.23 x spread"
+    refused_without_its_calibration(area_dati, how, tmp_path)
+
+
+def test_rarity_is_the_share_of_training_values_as_high_and_goes_on_beyond_the_highest():
+    cal = np.arange(1.0, 11.0)  # ten training values 1..10
+    got = rarity(np.array([0.5, 5.0, 10.0, 20.0, 40.0]), cal)
+    shares = np.array([11 / 11, 7 / 11, 2 / 11, 0.5 / 11, 0.25 / 11])
+    np.testing.assert_allclose(got, -np.log10(shares))
+    assert np.all(np.diff(got) > 0)  # beyond every training value, still in order
+
+
+def test_stepod_flags_the_middle_of_a_training_track_that_stepspread_judges_by_its_moves(
+    area_dati, lane_tracks, tmp_path
+):
+    """`--score stepod`: the rarer of a track's `stepspread` and its OD distance among the
+    training tracks' own, the OD term only beyond their 95th percentile. A training track's
+    own pair costs nothing; its middle third (ends mid-channel, beyond every training pair) is
+    flagged at 5 %, the threshold calibrated on the training tracks' own `stepod`."""
+    track = lane_tracks[0]
+    n = len(track.positions)
+    middle = replace(track, positions=track.positions[n // 3 : 2 * n // 3],
+                     dts=track.dts[n // 3 : 2 * n // 3 - 1])  # fmt: skip
+    how = replace(HOW, score="stepod")
+    got = area_dati.score_tracks([track, middle], how, ("stepspread", "od"))
+    cal = area_dati.card.calibration
+    by_moves = rarity(got.parts["stepspread"], cal["stepspread"])
+    assert got.score_m[0] == pytest.approx(by_moves[0])  # its own pair: the OD term is 0
+    assert got.parts["od"][1] > max(cal["od"])  # starts and ends where no training track does
+    assert got.score_m[1] == pytest.approx(rarity(got.parts["od"][1:], cal["od"])[0])
+    assert got.score_m[1] > area_dati.threshold(how, 0.05) == pytest.approx(
+        np.quantile(cal["stepod"], 0.95)
+    )
+    assert len(cal["stepod"]) == len(cal["stepspread"])
+    assert score_text(1.234, "stepod") == "1.23 rarity"
     refused_without_its_calibration(area_dati, how, tmp_path)
 
 

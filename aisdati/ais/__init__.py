@@ -21,6 +21,7 @@ SCORES = (
     "step",
     "steprate",
     "stepspread",
+    "stepod",
     "lane",
     "both",
     "steplane",
@@ -28,10 +29,11 @@ SCORES = (
     "area",
 )
 """The ways a detector scores a track (`aisdati.detectors.scoring.ScoreSettings.score`)."""
-SCORE_UNITS = {"steprate": "m/s", "stepspread": "x spread"}
+SCORE_UNITS = {"steprate": "m/s", "stepspread": "x spread", "stepod": "rarity"}
 """The unit of each score not in metres but for `RATIO_SCORES` (multiples of medians):
 `steprate` is the one-step errors over their report intervals, `stepspread` over the spread of
-the model's own draws."""
+the model's own draws, `stepod` the rarer of `stepspread` and the origin-destination term
+among the training tracks' own (-log10 of a share, `aisdati.detectors.rarity`)."""
 RATIO_SCORES: dict[str, tuple[str, str]] = {
     "both": ("rollout", "step"),
     "steplane": ("step", "lane"),

@@ -202,8 +202,8 @@ def results_table(ev: Evaluation, width: int = 120) -> Table:
     caption = (
         "AUC (ROC) and AP (average precision) rank altered against normal held-out tracks; "
         "P/R/F1 at each detector's calibrated threshold; normal/altered: median scores in km "
-        "(steprate: m/s; stepspread: multiples of the model's spread; both, steplane and "
-        "steptraffic: multiples of the training tracks' medians)"
+        "(steprate: m/s; stepspread: multiples of the model's spread; stepod: rarity; both, "
+        "steplane and steptraffic: multiples of the training tracks' medians)"
     )
     return _evaluation_table(ev.table, title, caption, width)
 

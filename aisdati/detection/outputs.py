@@ -63,6 +63,10 @@ SCORE_DEFINITIONS = {
     "stepspread": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
     "errors, each over the K draws' spread (root mean square distance from their centroid) "
     "plus 10 m (multiples of the spread)",
+    "stepod": "the larger of two rarities among the training tracks' own scores, -log10((1 + "
+    "training tracks scoring as high) / (training tracks + 1)): of stepspread, and of the "
+    "origin-destination distance where it is beyond the 95th percentile of the training "
+    "tracks' own (else 0)",
     "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
     "lane_rollouts free rollouts of twice the track's steps and, with lane_traffic, of one rollout "
     "from each training track's start (nearest: of the training tracks starting within "

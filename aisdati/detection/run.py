@@ -110,6 +110,7 @@ EVIDENCE = {
     "step": "one-step predictions",
     "steprate": "one-step predictions",
     "stepspread": "one-step predictions",
+    "stepod": "one-step predictions",
     "nearest": "nearest training track",
 }
 """What a track was compared with, by score (by method for `nearest`)."""
@@ -124,6 +125,7 @@ PROFILES = {
     "step": STEP_ERRORS,
     "steprate": STEP_ERRORS,
     "stepspread": STEP_ERRORS,
+    "stepod": STEP_ERRORS,
     "nearest": "distance to the nearest training track (m)",
 }
 """What a track's profile (profiles.parquet, the evidence figures' lower panel) measures at

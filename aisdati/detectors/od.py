@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from aisdati.detectors.rarity import rarity
 from aisdati.geo import haversine_m
 
 OD_QUANTILE = 0.95
@@ -77,3 +78,21 @@ def od_excess(od_m: np.ndarray, calibration_od_m: np.ndarray) -> np.ndarray:
 def area_scores(lane_m: np.ndarray, od_m: np.ndarray, calibration_od_m: np.ndarray) -> np.ndarray:
     """The `area` score: the lane score plus the OD excess (module docstring)."""
     return np.asarray(lane_m, np.float64) + od_excess(od_m, calibration_od_m)
+
+
+def stepod_scores(
+    stepspread: np.ndarray,
+    od_m: np.ndarray,
+    calibration_stepspread: np.ndarray,
+    calibration_od_m: np.ndarray,
+) -> np.ndarray:
+    """The `stepod` score: the larger of a track's `stepspread` rarity and its OD rarity among
+    the training tracks' own (`aisdati.detectors.rarity`), the OD term counting only beyond
+    `OD_QUANTILE` of them, as in `area`. `stepspread` judges how a track moves, not where it
+    goes: the middle third of a training track moves as its whole track does. The two are in
+    different units (multiples of the draws' spread, metres), so they are joined by how rare
+    each is, and a track is as abnormal as its rarer term."""
+    od_m = np.asarray(od_m, np.float64)
+    free = float(np.quantile(np.asarray(calibration_od_m, np.float64), OD_QUANTILE))
+    od_rarity = np.where(od_m > free, rarity(od_m, calibration_od_m), 0.0)
+    return np.maximum(rarity(stepspread, calibration_stepspread), od_rarity)

@@ -30,7 +30,13 @@ from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy, best_draws
 from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
-from aisdati.detectors.od import area_scores, od_distances, od_pairs_m, track_ends
+from aisdati.detectors.od import (
+    area_scores,
+    od_distances,
+    od_pairs_m,
+    stepod_scores,
+    track_ends,
+)
 from aisdati.detectors.scoring import (
     Scores,
     ScoreSettings,
@@ -69,14 +75,23 @@ class PolicyDetector(Detector):
     def score_tracks(
         self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
     ) -> Scores:
-        """Every score by the whole ensemble, but `stepspread` of a cross-fitted model: member
-        by member (`member_wise`), as its threshold was calibrated."""
+        """Every score by the whole ensemble, but `stepspread` of a cross-fitted model (and
+        `stepod`, which rests on it): member by member (`member_wise`), as its threshold was
+        calibrated."""
         scores = self.score_with(self.policy(), tracks, how, also)
-        if "stepspread" in {how.score, *also} and self.card.lane_config.crossfit:
+        wanted = {how.score, *also}
+        if wanted & {"stepspread", "stepod"} and self.card.lane_config.crossfit:
             scores.parts |= self.member_wise(tracks, how, ("stepspread",))
-            if how.score == "stepspread":
-                scores.score_m = scores.parts["stepspread"]
+            if "stepod" in wanted:
+                scores.parts["stepod"] = self.stepod(scores.parts)
+            if how.score in ("stepspread", "stepod"):
+                scores.score_m = scores.parts[how.score]
         return scores
+
+    def stepod(self, parts: dict[str, np.ndarray]) -> np.ndarray:
+        """`stepod` of the scored `stepspread` and `od` (`aisdati.detectors.od.stepod_scores`)."""
+        cal = self.calibration_of("stepspread"), self.calibration_of("od")
+        return stepod_scores(parts["stepspread"], parts["od"], *cal)
 
     def member_wise(
         self, tracks: Sequence[Track], how: ScoreSettings, kinds: Sequence[str]
@@ -102,6 +117,8 @@ class PolicyDetector(Detector):
             wanted |= set(RATIO_SCORES[name])
         if wanted & {"area", "od"}:
             wanted |= {"lane", "od"}
+        if "stepod" in wanted:
+            wanted |= {"stepspread"}
         parts: dict[str, np.ndarray] = {}
         profiles: dict[str, list[np.ndarray]] = {}
         evidence: dict[str, list[np.ndarray]] = {}
@@ -145,9 +162,13 @@ class PolicyDetector(Detector):
         if "traffic" in wanted:
             kept = self.kept_training_tracks()
             parts["traffic"], profiles["traffic"] = kept.lane_scores(positions, how)
-        if "od" in wanted:
+        if wanted & {"od", "stepod"}:
             parts["od"] = self.od_scores(positions)
+        if "od" in wanted:
             profiles["od"], evidence["od"] = profiles["lane"], evidence["lane"]
+        if "stepod" in wanted:
+            parts["stepod"] = self.stepod(parts)
+            profiles["stepod"], evidence["stepod"] = profiles["step"], evidence["step"]
         if "area" in wanted:
             parts["area"] = area_scores(parts["lane"], parts["od"], self.calibration_of("od"))
             profiles["area"], evidence["area"] = profiles["lane"], evidence["lane"]
@@ -245,6 +266,8 @@ class PolicyDetector(Detector):
             area = area_scores(cal["lane"], od, od)
             cal["od"] = [round(float(v), 2) for v in od]
             cal["area"] = [round(float(v), 2) for v in area]
+            stepod = stepod_scores(cal["stepspread"], od, cal["stepspread"], od)
+            cal["stepod"] = [round(float(v), 4) for v in stepod]
         self.card.calibration = cal
         self.card.calibrated_with = how.calibrated_with()
 

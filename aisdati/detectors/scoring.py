@@ -65,7 +65,8 @@ class ScoreSettings:
     score: str = "lane"
     """lane, rollout (the paper's), step (teacher-forced; steprate and stepspread the same
     errors over their report intervals or the draws' spread), both (rollout + step), steplane
-    (step + lane) or area (lane plus the origin-destination term, `aisdati.detectors.od`); see
+    (step + lane), area (lane plus the origin-destination term, `aisdati.detectors.od`) or
+    stepod (the rarer of stepspread and that term, `aisdati.detectors.od.stepod_scores`); see
     `aisdati.ais.policy` and `RATIO_SCORES`."""
     rollouts: int = 10
     """K: free rollouts per track (the rollout score is the best of K), and one-step draws

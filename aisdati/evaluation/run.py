@@ -320,7 +320,7 @@ def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
     four, `steprate`, `stepspread`, `steplane` and `steptraffic` where its card was calibrated
     with them (cards from before those scores are not), and `od` and `area` where its card
-    records where its training tracks end."""
+    records where its training tracks end (`stepod` too where it was calibrated)."""
     if det.method == "nearest":
         return ["nearest", "lane"]
     since = [
@@ -329,6 +329,7 @@ def scored_kinds(det: Detector) -> list[str]:
         if det.card.calibration.get(k)
     ]
     od = ["od", "area"] if det.end_points is not None else []
+    od += ["stepod"] if det.card.calibration.get("stepod") else []
     return ["rollout", "step", "lane", "both", *since, *od]
 
 

@@ -1,0 +1,106 @@
+"""`stepod` (`aisdati.detectors.od.stepod_scores`: `stepspread` joined with the origin-destination
+term by rarity) on stored forward grids, without scoring a track again: each cell's
+`scores.parquet` holds every track's `stepspread` and `od`, and the cross-fitted BC card that
+judged it holds the training tracks' own, so `stepod` and its threshold follow from them alone.
+
+For each grid (folders written by `benchmarks/detection_quality.py --forward --detectors bc`):
+ROC AUC (mean over the cells), and the share of normal tracks and of anomalies flagged at
+`--contamination 0.05`, pooled over the cells' tracks (as `benchmarks/pooled_grid.py`), the ashore
+rule as the cells were run. `stepspread` is recomputed the same way beside it and checked against
+the cell's own evaluation.json, so the two rows differ only by the OD term.
+
+Run: python benchmarks/stepod.py runs/grid13/kitimat/forward-s1-at-sea [more grids] [--pool]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from aisdati.detection.labels import label_metrics
+from aisdati.detectors.od import stepod_scores
+from aisdati.tracks.ashore import AshoreCheck
+
+CONTAMINATION = 0.05
+
+
+def card_of(cell: Path) -> dict:
+    """The card of the BC model that judged a cell: trained in the cell of its training's own
+    seed, in this grid or the one its models came from (`--models-from`)."""
+    t = cell.name.split("-")[0].removeprefix("train")
+    cards = sorted(cell.parent.parent.glob(f"*/train{t}-seed{t}/models/all-bc.json"))
+    if not cards:
+        raise SystemExit(f"no BC card for {cell}")
+    return json.loads(cards[0].read_text())
+
+
+def cell_metrics(cell: Path) -> dict[str, dict]:
+    """`label_metrics` of stepspread and stepod in one cell, and its evaluation.json row."""
+    scores = pd.read_parquet(cell / "scores.parquet")
+    scores = scores[scores["detector"] == "bc"]
+    wide = scores.pivot(index="track_id", columns="score", values="value")
+    meta = scores.drop_duplicates("track_id").set_index("track_id").loc[wide.index]
+    cal = card_of(cell)["calibration"]
+    rule = AshoreCheck()
+    ashore = rule.flags(meta["ashore_reports"].to_numpy())
+    values = {
+        "stepspread": (wide["stepspread"].to_numpy(), np.asarray(cal["stepspread"])),
+        "stepod": (
+            stepod_scores(wide["stepspread"], wide["od"], cal["stepspread"], cal["od"]),
+            stepod_scores(cal["stepspread"], cal["od"], cal["stepspread"], cal["od"]),
+        ),
+    }
+    out = {}
+    for name, (value, own) in values.items():
+        flagged = (value > np.quantile(own, 1.0 - CONTAMINATION)) | ashore
+        ranked = rule.ranked(value, meta["ashore_reports"], meta["n_points"])
+        out[name] = label_metrics(meta["label"].to_numpy(), flagged, ranked)
+    doc = json.loads((cell / "evaluation.json").read_text())
+    out["logged"] = next(
+        r for r in doc["results"]
+        if (r["detector"], r["score"], r["kind"]) == ("bc", "stepspread", "all")
+    )  # fmt: skip
+    return out
+
+
+def pooled(cells: list[dict], name: str) -> tuple[float, float, float]:
+    """Mean ROC AUC; false alarms and recall pooled over the cells' tracks."""
+    normal = sum(c[name]["labelled_tracks"] - c[name]["anomalies_labelled"] for c in cells)
+    altered = sum(c[name]["anomalies_labelled"] for c in cells)
+    fa = sum(c[name]["false_alarm_rate"] * (c[name]["labelled_tracks"]
+             - c[name]["anomalies_labelled"]) for c in cells)  # fmt: skip
+    caught = sum(c[name]["recall"] * c[name]["anomalies_labelled"] for c in cells)
+    auc = float(np.mean([c[name]["roc_auc"] for c in cells]))
+    return auc, fa / max(normal, 1), caught / max(altered, 1)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("grids", nargs="+", type=Path, help="grid folders of forward BC cells")
+    ap.add_argument("--pool", action="store_true", help="also a row for all grids together")
+    args = ap.parse_args()
+    by_grid = {g: [cell_metrics(c) for c in sorted(g.glob("train*-seed*"))] for g in args.grids}
+    for grid, cells in by_grid.items():
+        for c in cells:
+            logged, mine = c["logged"], c["stepspread"]
+            if not np.isclose(logged["roc_auc"], mine["roc_auc"]) or not np.isclose(
+                logged["recall"], mine["recall"]
+            ):
+                raise SystemExit(f"{grid}: stepspread recomputed differs from evaluation.json")
+    print("| grid | score | cells | ROC AUC | normal flagged | anomalies flagged |")
+    print("|---|---|---|---|---|---|")
+    groups = list(by_grid.items())
+    if args.pool:
+        groups.append((f"all {len(by_grid)}", [c for cs in by_grid.values() for c in cs]))
+    for grid, cells in groups:
+        for name in ("stepspread", "stepod"):
+            auc, fa, recall = pooled(cells, name)
+            print(f"| {grid} | {name} | {len(cells)} | {auc:.3f} | {fa:.3f} | {recall:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
