@@ -518,11 +518,13 @@ def test_stepod_flags_the_middle_of_a_training_track_that_stepspread_judges_by_i
     refused_without_its_calibration(area_dati, how, tmp_path)
 
 
-def test_detect_without_method_uses_the_models_the_folder_has(cli, kitimat, months, tmp_path):
+def test_detect_without_method_uses_the_models_the_folder_has(
+    cli, kitimat, months, area_dati, tmp_path
+):
     """`train --cluster all` without --method fits the area's detector (cross-fitted BC,
     judged by `stepspread`); `detect` without --method judges with the first detector (dati,
-    bc, nearest) the folder, or the named models, have: what train wrote is used without being
-    told."""
+    bc, nearest; for `--cluster all` the area's default, bc, first) the folder, or the named
+    models, have: what train wrote is used without being told."""
     models = tmp_path / "models"
     r = cli("train", "--cluster", "all", "--data", kitimat, "--out", models,
             "--episodes", "3", "--max-tracks", "12", "--lane", "members=2")  # fmt: skip
@@ -536,6 +538,9 @@ def test_detect_without_method_uses_the_models_the_folder_has(cli, kitimat, mont
     settings = DetectSettings(data_dir=kitimat, models_dir=models, out_dir=tmp_path / "out",
                               cluster="all")  # fmt: skip
     assert with_own_method(settings).method == "bc"
+    area_dati.save(models / "all")  # DATI's area model beside it (`train --method dati`)
+    assert with_own_method(settings).method == "bc"  # the area's default judges the area
+    assert with_own_method(replace(settings, cluster="route-1")).method == "dati"
     assert with_own_method(replace(settings, method="dati")).method == "dati"  # told: kept
     save_nearest(months[0][:10], "route-1", models)
     named = replace(settings, models=("route-1-nearest",))

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from aisdati.ais import AREA_METHOD
 from aisdati.ais.card import card_methods, training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import DETECTORS, SCORES, Detector, ScoreSettings, load_detectors
@@ -200,13 +201,16 @@ class Detection:
 
 # ------------------------------------------------------------------------------------ models
 def with_own_method(settings: DetectSettings) -> DetectSettings:
-    """Settings with a method: the given one, else the first detector (dati, bc, nearest) the
-    named models, or the folder's, are of, so that `detect` uses what `train --method` wrote
-    without being told again, and names what judged a track by the models that did."""
+    """Settings with a method: the given one, else the first detector the named models, or
+    the folder's, are of, so that `detect` uses what `train --method` wrote without being told
+    again, and names what judged a track by the models that did. The order is (dati, bc,
+    nearest), but for `--cluster all` the area's default (`AREA_METHOD`) comes first: `train
+    --cluster all` fits it beside routes trained by DATI, and judging the area is its job."""
     if settings.method is not None:
         return settings
     present = card_methods(settings.models_dir, settings.models)
-    method = next((m for m in DETECTORS if m in present), next(iter(DETECTORS)))
+    order = sorted(DETECTORS, key=lambda m: settings.cluster == AREA and m != AREA_METHOD)
+    method = next((m for m in order if m in present), order[0])
     return replace(settings, method=method)
 
 
