@@ -1,8 +1,10 @@
 """Speed of scoring at the issue's scale: teacher-forced step scoring of 1,000 tracks of 500 reports
-with K = 10 draws (target <= 20 s on 2 cores), lane scoring of the same tracks (30 free rollouts,
-`ScoreSettings.lane_rollouts`, of twice the track's steps; the best of the first K = 10 by DTW
-for the map; each report's distance to the lane), and the exact nearest-track search of 1,000
-test tracks among 1,000 training tracks of 500 points (target <= 60 s on 2 cores).
+with K = 10 draws (target <= 20 s on 2 cores), the area default's score (cross-fitted BC by
+`stepspread`, member by member) of the same tracks, lane scoring of the same tracks (30 free
+rollouts, `ScoreSettings.lane_rollouts`, of twice the track's steps; the best of the first
+K = 10 by DTW for the map; each report's distance to the lane), and the exact nearest-track
+search of 1,000 test tracks among 1,000 training tracks of 500 points (target <= 60 s on 2
+cores).
 
 The tracks are synthetic lanes (a few shared routes, each track jittered around its route, ~12 kn,
 3-minute reports), so that many training tracks start near every test track, as in real traffic;
@@ -30,10 +32,12 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from aisdati.ais import DEFAULT_PRESET
+from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
 from aisdati.ais.policy import AISPolicy, dati_act
 from aisdati.ais.source import build_source
 from aisdati.ais.space import PRESETS, LaneConfig
+from aisdati.ais.training import TrainSettings
+from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.scoring import ScoreSettings, tail_mean
 from aisdati.detectors.traffic import Traffic
@@ -92,6 +96,21 @@ def bench_step(tracks: list[Track], draws: int) -> float:
     t0 = time.perf_counter()
     errors, _ = policy.step_errors([t.positions for t in tracks], [t.dts for t in tracks], draws)
     [tail_mean(e, ScoreSettings().tail) for e in errors]
+    return time.perf_counter() - t0
+
+
+def bench_area(train: list[Track], test: list[Track], draws: int) -> float:
+    """The area's default score: cross-fitted BC (the area preset's members) judged by
+    `stepspread`, member by member, as `detect` runs it (`PolicyDetector.score_tracks`). BC is
+    fitted for a few episodes to 30 training tracks: scoring's cost does not depend on the
+    weights."""
+    lane = PRESETS[AREA_PRESET]
+    settings = TrainSettings(cluster="all", episodes=5, lane=lane, preset=AREA_PRESET)
+    how = ScoreSettings(score="stepspread", rollouts=draws)
+    det = BCDetector(settings, how).fit(train[:30])
+    det.score_tracks(test[:2], how, ())  # compile
+    t0 = time.perf_counter()
+    det.score_tracks(test, how, ())
     return time.perf_counter() - t0
 
 
@@ -181,6 +200,7 @@ def main() -> None:
     if args.only_scale:
         return
     step_s = bench_step(test, args.draws)
+    area_s = bench_area(train, test, args.draws)
     lane_s = bench_lane(test, args.draws)
     near_s, med = bench_nearest(train, test)
     n, p = args.tracks, args.points
@@ -189,6 +209,10 @@ def main() -> None:
     print("|---|---|---|")
     k = args.draws
     print(f"| step scoring: {n} tracks x {p} reports, K = {k} | {step_s:.1f} s | <= 20 s |")
+    print(
+        f"| the area's default: cross-fitted BC ({PRESETS[AREA_PRESET].members} members) by "
+        f"`stepspread`, member by member: {n} tracks x {p} reports, K = {k} | {area_s:.1f} s | |"
+    )
     print(
         f"| lane scoring: {n} tracks x {p} reports, {ScoreSettings().lane_rollouts} rollouts "
         f"of 2x the steps (best of the first K = {k}) | "

@@ -7,9 +7,10 @@ from dataclasses import replace
 import pytest
 import torch
 
+from aisdati.model.bc import BCConfig, BCPolicy
 from aisdati.model.dati import DATIConfig, DATITrainer, gradient_penalty
 from aisdati.model.env import TrajectoryImitationEnv
-from aisdati.model.networks import DATINetworks, NetworkConfig, NonNegativeLinear
+from aisdati.model.networks import DATINetworks, NetworkConfig, NonNegativeLinear, one_member
 from aisdati.selftest.families import get_family
 from aisdati.selftest.sources import FamilySource
 
@@ -64,6 +65,26 @@ def test_members_do_not_see_each_other():
     out2 = nets.forward_actor(x2, eta2, nets.time_features(t2))
     torch.testing.assert_close(out2[0], out[0], rtol=0, atol=0)
     assert not torch.allclose(out2[1], out[1])
+
+
+def test_one_member_acts_as_that_member_of_the_ensemble_bit_for_bit():
+    """A one-member copy (how a cross-fitted model's member scores and calibrates) gives
+    member m's outputs of the whole ensemble exactly, for DATI's actor and BC's policy, and
+    leaves the ensemble as it was."""
+    cfg = NetworkConfig()
+    nets = DATINetworks(STATE, DECISION, cfg, seeds=range(E))
+    bc = BCPolicy(STATE, DECISION, BCConfig(), seeds=range(E))
+    x, _, eta, t, _ = _inputs(cfg)
+    whole = nets.forward_actor(x, eta, nets.time_features(t))
+    whole_bc = bc(x, t)
+    for m in range(E):
+        single = one_member(nets, m)
+        assert single.members == 1 and nets.members == E
+        got = single.forward_actor(x[m : m + 1], eta[m : m + 1], single.time_features(t[m : m + 1]))
+        torch.testing.assert_close(got[0], whole[m], rtol=0, atol=0)
+        mean, log_std = one_member(bc, m)(x[m : m + 1], t[m : m + 1])
+        torch.testing.assert_close(mean[0], whole_bc[0][m], rtol=0, atol=0)
+        torch.testing.assert_close(log_std[0], whole_bc[1][m], rtol=0, atol=0)
 
 
 # ---------------------------------------------------------------------------- non-negativity

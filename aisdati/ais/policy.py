@@ -38,7 +38,7 @@ from aisdati.ais.space import AISSpace
 from aisdati.dtw import batch_mean_dtw_m
 from aisdati.geo import haversine_m
 from aisdati.model.dati import DATIConfig
-from aisdati.model.networks import DATINetworks
+from aisdati.model.networks import DATINetworks, one_member
 from aisdati.model.noise import NoiseProcess
 from aisdati.model.rules import SphericalRule
 
@@ -243,26 +243,19 @@ def best_draws(
     )
 
 
-def member_rows(n: int, members: int, member: int | None) -> tuple[torch.Tensor, torch.Tensor]:
+def member_rows(n: int, members: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Which of n batch rows each member of an ensemble acts on: an [M, width] grid of row
-    indices (clamped to the batch) and its mask of real rows. With None row i is member i mod
-    M's (member m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid: K draws spread over
-    the members, each computing its own rows only); with `member` every member takes every row
-    (the ensemble's layers take all members) and `member`'s are kept (`member_decisions`)."""
-    if member is None:
-        width = -(-n // members)
-        grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
-    else:
-        grid = torch.arange(n)[None].expand(members, n)
+    indices (clamped to the batch) and its mask of real rows. Row i is member i mod M's (member
+    m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid: K draws spread over the
+    members, each computing its own rows only). One member acts on every row through a
+    one-member copy of the networks (`aisdati.model.networks.one_member`), M = 1."""
+    width = -(-n // members)
+    grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
     return grid.clamp(max=n - 1), grid < n
 
 
-def member_decisions(
-    out: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor, member: int | None
-) -> np.ndarray:
+def member_decisions(out: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor) -> np.ndarray:
     """The n rows' decisions [n, k] from an ensemble's [M, width, k] over `member_rows`."""
-    if member is not None:
-        return out[member].numpy()
     decided = torch.empty(int(valid.sum()), out.shape[-1], dtype=out.dtype)
     decided[grid[valid]] = out[valid]
     return decided.numpy()
@@ -272,18 +265,20 @@ def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) 
     """DATI's forward actor as a batched policy: member `member` of the ensemble, or with None
     every member in turn (`member_rows`). Each row draws its own latent noise, Gaussian or
     (with temporal noise) Ornstein-Uhlenbeck."""
+    if member is not None:
+        nets = one_member(nets, member)
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
     device = nets.device
 
     def make(n: int, seed: int, temporal: bool) -> Act:
         process = config.noise_process if temporal else NoiseProcess("gaussian")
         noise = config.latent_noise([torch.Generator().manual_seed(int(seed))], [process], rows=n)
-        grid, valid = member_rows(n, members, member)
+        grid, valid = member_rows(n, members)
 
         def act(obs: np.ndarray) -> np.ndarray:
             eta = noise.sample()[0]
             out = nets.decide(torch.as_tensor(obs)[grid].to(device), eta[grid].to(device)).cpu()
-            return member_decisions(out, grid, valid, member)
+            return member_decisions(out, grid, valid)
 
         return act
 

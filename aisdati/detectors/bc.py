@@ -32,6 +32,7 @@ from aisdati.detectors.policy import PolicyDetector, save_traffic, saved_corrido
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.model.bc import BCConfig, BCPolicy, BCTrainer, sample_decisions
+from aisdati.model.networks import one_member
 from aisdati.model.persistence import load_weights
 from aisdati.model.readers import first_line
 from aisdati.model.trainer import Callback
@@ -91,18 +92,25 @@ class BCDetector(PolicyDetector):
         return self
 
     def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
-        """BC's Gaussian policy, member `member` or every member in turn (`member_rows`)."""
+        """BC's Gaussian policy, member `member` (a one-member copy, `one_member`) or every
+        member in turn (`member_rows`). One member draws its noise as its row of the whole
+        ensemble's would be drawn, so its decisions are the ones it made when every member
+        computed every row."""
         policy = self.trained()
+        members = len(policy.seeds)
         gen = torch.Generator().manual_seed(int(seed))
-        grid, valid = member_rows(n, len(policy.seeds), member)
+        acting = policy if member is None else one_member(policy, member)
+        grid, valid = member_rows(n, members if member is None else 1)
         rows = grid.numpy()
 
         def draw(shape: torch.Size) -> torch.Tensor:
-            return torch.randn(shape, generator=gen)
+            if member is None:
+                return torch.randn(shape, generator=gen)
+            return torch.randn((members, *shape[1:]), generator=gen)[member : member + 1]
 
         def act(obs: np.ndarray) -> np.ndarray:
-            out = torch.as_tensor(sample_decisions(policy, obs[rows], draw))
-            return member_decisions(out, grid, valid, member)
+            out = torch.as_tensor(sample_decisions(acting, obs[rows], draw))
+            return member_decisions(out, grid, valid)
 
         return act
 

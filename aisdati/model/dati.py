@@ -35,11 +35,11 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch import Tensor, nn
+from torch import Tensor
 
 from aisdati.model.buffers import EnsembleReplayBuffer
 from aisdati.model.env import Reference, TrajectoryImitationEnv
-from aisdati.model.networks import DATINetworks, NetworkConfig
+from aisdati.model.networks import DATINetworks, NetworkConfig, slice_members
 from aisdati.model.noise import LatentNoise, NoiseProcess
 from aisdati.model.trainer import EpisodeLog, Trainer
 
@@ -498,7 +498,7 @@ class DATITrainer(Trainer[DATINetworks]):
         self.active = [self.active[k] for k in keep]
         if not keep:
             return
-        sliced = _slice_members(self.nets, keep)
+        sliced = slice_members(self.nets, keep)
         for opt in (self.opt_critic, self.opt_actor, self.opt_l1):
             for group in opt.param_groups:
                 group["params"] = [sliced[p] for p in group["params"]]
@@ -509,7 +509,7 @@ class DATITrainer(Trainer[DATINetworks]):
                         st[key] = st[key][keep].clone()
                     opt.state[new] = st
         if self.average is not None:
-            _slice_members(self.average, keep)
+            slice_members(self.average, keep)
         self.envs = [self.envs[k] for k in keep]
         self._obs = [self._obs[k] for k in keep]
         self.generators = [self.generators[k] for k in keep]
@@ -605,20 +605,6 @@ class DATITrainer(Trainer[DATINetworks]):
     def model(self) -> DATINetworks:
         """The networks holding each member's kept (best or final) forward actor."""
         return self.final
-
-
-def _slice_members(nets: nn.Module, keep: list[int]) -> dict[nn.Parameter, nn.Parameter]:
-    """Replace every parameter of `nets` by a new one holding members `keep`; returns old ->
-    new. New parameter objects, not `p.data = ...`: a parameter keeps its gradient accumulator
-    (with the shape it had) while any autograd graph still refers to it, and a graph left
-    alive by a reference cycle would make the next backward fail on the old member count."""
-    sliced = {}
-    for module in nets.modules():
-        for name, p in list(module.named_parameters(recurse=False)):
-            new = nn.Parameter(p.detach()[keep].clone(), requires_grad=p.requires_grad)
-            setattr(module, name, new)
-            sliced[p] = new
-    return sliced
 
 
 def _map_leaves(state: dict[str, Any], kind: type, to: Callable[[Any], Any]) -> dict[str, Any]:
