@@ -9,7 +9,7 @@ Run: python benchmarks/detection_quality.py [--seeds 0,1,2] [--data kitimat] [--
      [--detectors dati,nearest,bc] [--kinds detour,jump,loiter] [--lane KEY=VALUE ...]
      [--no-ashore] [--out runs/quality]
      python benchmarks/detection_quality.py --forward
-     [--data kitimat|nyharbor|virginiabeach|pugetsound|losangeles|sanfrancisco|both]
+     [--data kitimat|nyharbor|virginiabeach|pugetsound|losangeles|sanfrancisco|boston|...|both]
      [--strength 1] [--seeds 0,1,2] [--train-seeds 0,1,2] [--no-ashore] [--at-sea] ...
 
 `--forward` is the analyst's protocol instead (`aisdati evaluate --cluster all --split time`):
@@ -76,7 +76,27 @@ FORWARD = {
         "2020-06-30T17:00:00",
         str(AREAS / "san-francisco.geojson"),
     ),
+    **{
+        name: (
+            DATA / "US_coastal_2020_06_30_points.csv.gz",
+            "20",
+            f"2020-06-30T{hour}:00:00",
+            str(AREAS / f"{box}.geojson"),
+        )
+        for name, box, hour in (
+            ("boston", "boston", 18),
+            ("longislandsoundeast", "long-island-sound-east", 17),
+            ("miami", "miami", 17),
+            ("penobscotbay", "penobscot-bay", 18),
+            ("rhodeisland", "rhode-island", 17),
+            ("tampabay", "tampa-bay", 18),
+        )
+    },
 }
+"""Forward areas: the data, --min-points, the split and the region. The six small areas after
+San Francisco were chosen from the US coastal day by counts alone (`benchmarks/coastal_areas.py`,
+docs/results/forward.md); their split is the whole hour by which two thirds of their tracks had
+started."""
 """The forward protocol's areas: input, --min-points (NY Harbor at 50 and Virginia Beach at 20:
 an area of ~150 training tracks, the issue's size; NY Harbor at 10 has 1,538, Virginia Beach at
 50 only 45), the first day (or hour) judged and the region of interest. Virginia Beach (June 4-5

@@ -266,7 +266,8 @@ class PolicyDetector(Detector):
             area = area_scores(cal["lane"], od, od)
             cal["od"] = [round(float(v), 2) for v in od]
             cal["area"] = [round(float(v), 2) for v in area]
-            stepod = stepod_scores(cal["stepspread"], od, cal["stepspread"], od)
+            own = cal["stepspread"], cal["od"]  # as scoring reads them back from the card
+            stepod = stepod_scores(*own, *own)
             cal["stepod"] = [round(float(v), 4) for v in stepod]
         self.card.calibration = cal
         self.card.calibrated_with = how.calibrated_with()
