@@ -1,6 +1,7 @@
 """The busiest waters of the shipped US coastal day (`US_coastal_2020_06_30_points.csv.gz`) as
-forward areas: how the fourth forward area (Puget Sound) was chosen, by counts alone, before any
-detector ran on it (docs/results/forward.md), and what the ashore rule (`aisdati.tracks.ashore`)
+forward areas: how the forward areas of that day (Puget Sound, Los Angeles, San Francisco, and
+six small ones from Boston to Tampa Bay) were chosen, by counts alone, before any detector ran on
+them (docs/results/forward.md), and what the ashore rule (`aisdati.tracks.ashore`)
 makes of each box's later tracks when the coastline holds its water as land.
 
 For each box in `benchmarks/areas/*.geojson`: `aisdati ingest --roi BOX --min-points 20` (Virginia
