@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from pooled_grid import pooled  # (this folder: run as a script)
 
 from aisdati.detection.labels import label_metrics
 from aisdati.detectors.od import stepod_scores
@@ -67,15 +68,10 @@ def cell_metrics(cell: Path) -> dict[str, dict]:
     return out
 
 
-def pooled(cells: list[dict], name: str) -> tuple[float, float, float]:
-    """Mean ROC AUC; false alarms and recall pooled over the cells' tracks."""
-    normal = sum(c[name]["labelled_tracks"] - c[name]["anomalies_labelled"] for c in cells)
-    altered = sum(c[name]["anomalies_labelled"] for c in cells)
-    fa = sum(c[name]["false_alarm_rate"] * (c[name]["labelled_tracks"]
-             - c[name]["anomalies_labelled"]) for c in cells)  # fmt: skip
-    caught = sum(c[name]["recall"] * c[name]["anomalies_labelled"] for c in cells)
-    auc = float(np.mean([c[name]["roc_auc"] for c in cells]))
-    return auc, fa / max(normal, 1), caught / max(altered, 1)
+def as_row(metrics: dict) -> dict:
+    """`label_metrics` as a row of evaluation.json, which `pooled_grid.pooled` pools."""
+    altered = metrics["anomalies_labelled"]
+    return {**metrics, "normal": metrics["labelled_tracks"] - altered, "anomalies": altered}
 
 
 def main() -> None:
@@ -98,7 +94,7 @@ def main() -> None:
         groups.append((f"all {len(by_grid)}", [c for cs in by_grid.values() for c in cs]))
     for grid, cells in groups:
         for name in ("stepspread", "stepod"):
-            auc, fa, recall = pooled(cells, name)
+            auc, fa, recall = pooled([as_row(c[name]) for c in cells])
             print(f"| {grid} | {name} | {len(cells)} | {auc:.3f} | {fa:.3f} | {recall:.3f} |")
 
 

@@ -92,7 +92,6 @@ def stepod_scores(
     goes: the middle third of a training track moves as its whole track does. The two are in
     different units (multiples of the draws' spread, metres), so they are joined by how rare
     each is, and a track is as abnormal as its rarer term."""
-    od_m = np.asarray(od_m, np.float64)
-    free = float(np.quantile(np.asarray(calibration_od_m, np.float64), OD_QUANTILE))
-    od_rarity = np.where(od_m > free, rarity(od_m, calibration_od_m), 0.0)
+    beyond = od_excess(od_m, calibration_od_m) > 0.0
+    od_rarity = np.where(beyond, rarity(od_m, calibration_od_m), 0.0)
     return np.maximum(rarity(stepspread, calibration_stepspread), od_rarity)
