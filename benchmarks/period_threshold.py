@@ -25,13 +25,12 @@ Run: python benchmarks/period_threshold.py runs/grid13/kitimat/forward-s1 [more 
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from pooled_grid import pooled  # (this folder: run as a script)
+from pooled_grid import grouped_from_args, pooled  # (this folder: run as a script)
 from stepod import as_row, card_of
 
 from aisdati.detection.labels import label_metrics
@@ -81,17 +80,10 @@ def cell_metrics(cell: Path) -> dict[str, dict]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("grids", nargs="+", type=Path, help="grid folders of forward BC cells")
-    ap.add_argument("--pool", action="store_true", help="also a row for all grids together")
-    args = ap.parse_args()
-    by_grid = {g: [cell_metrics(c) for c in sorted(g.glob("train*-seed*"))] for g in args.grids}
+    _, groups = grouped_from_args(__doc__, cell_metrics)
     print("| grid | threshold | cells | ROC AUC | normal flagged | anomalies flagged "
           "| period / card |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")
-    groups = list(by_grid.items())
-    if args.pool:
-        groups.append((f"all {len(by_grid)}", [c for cs in by_grid.values() for c in cs]))
     for grid, cells in groups:
         ratio = np.median([c["ratio"] for c in cells])
         for name in ("card", "period", *HINDSIGHT):

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,6 +37,22 @@ def pooled(rows: list[dict]) -> tuple[float, float, float]:
     caught = sum(r["recall"] * r["anomalies"] for r in rows)
     auc = float(np.mean([r["roc_auc"] for r in rows]))
     return auc, false_alarms / max(normal, 1), caught / max(altered, 1)
+
+
+def grouped_from_args(
+    doc: str, of_cell: Callable[[Path], Any]
+) -> tuple[int, list[tuple[str, list]]]:
+    """The grids named on the command line (`GRID... [--pool]`), each a list of its cells
+    (`train<t>-seed<s>`) measured by `of_cell`, and with `--pool` one more group of every cell
+    together (`all N`); and N, the number of grids, which come first."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("grids", nargs="+", type=Path, help="grid folders of forward BC cells")
+    ap.add_argument("--pool", action="store_true", help="also a row for all grids together")
+    args = ap.parse_args()
+    groups = [(str(g), [of_cell(c) for c in sorted(g.glob("train*-seed*"))]) for g in args.grids]
+    if args.pool:
+        groups.append((f"all {len(groups)}", [c for _, cells in groups for c in cells]))
+    return len(args.grids), groups
 
 
 def main() -> None:

@@ -14,13 +14,12 @@ Run: python benchmarks/stepod.py runs/grid13/kitimat/forward-s1-at-sea [more gri
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from pooled_grid import pooled  # (this folder: run as a script)
+from pooled_grid import grouped_from_args, pooled  # (this folder: run as a script)
 
 from aisdati.detection.labels import label_metrics
 from aisdati.detectors.od import stepod_scores
@@ -75,12 +74,8 @@ def as_row(metrics: dict) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("grids", nargs="+", type=Path, help="grid folders of forward BC cells")
-    ap.add_argument("--pool", action="store_true", help="also a row for all grids together")
-    args = ap.parse_args()
-    by_grid = {g: [cell_metrics(c) for c in sorted(g.glob("train*-seed*"))] for g in args.grids}
-    for grid, cells in by_grid.items():
+    grids, groups = grouped_from_args(__doc__, cell_metrics)
+    for grid, cells in groups[:grids]:
         for c in cells:
             logged, mine = c["logged"], c["stepspread"]
             if not np.isclose(logged["roc_auc"], mine["roc_auc"]) or not np.isclose(
@@ -89,9 +84,6 @@ def main() -> None:
                 raise SystemExit(f"{grid}: stepspread recomputed differs from evaluation.json")
     print("| grid | score | cells | ROC AUC | normal flagged | anomalies flagged |")
     print("|---|---|---|---|---|---|")
-    groups = list(by_grid.items())
-    if args.pool:
-        groups.append((f"all {len(by_grid)}", [c for cs in by_grid.values() for c in cs]))
     for grid, cells in groups:
         for name in ("stepspread", "stepod"):
             auc, fa, recall = pooled([as_row(c[name]) for c in cells])
