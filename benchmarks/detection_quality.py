@@ -93,10 +93,6 @@ FORWARD = {
         )
     },
 }
-"""Forward areas: the data, --min-points, the split and the region. The six small areas after
-San Francisco were chosen from the US coastal day by counts alone (`benchmarks/coastal_areas.py`,
-docs/results/forward.md); their split is the whole hour by which two thirds of their tracks had
-started."""
 """The forward protocol's areas: input, --min-points (NY Harbor at 50 and Virginia Beach at 20:
 an area of ~150 training tracks, the issue's size; NY Harbor at 10 has 1,538, Virginia Beach at
 50 only 45), the first day (or hour) judged and the region of interest. Virginia Beach (June 4-5
@@ -104,7 +100,10 @@ an area of ~150 training tracks, the issue's size; NY Harbor at 10 has 1,538, Vi
 choices were made on the other two; Puget Sound (one day's US coastal file, 00-18 h -> 18-24 h
 UTC: 60 training tracks, 34 judged) the fourth, chosen by counts before any detector ran on it
 (docs/results/forward.md); Los Angeles (00-20 h -> 20-24 h: 37 and 22) and San Francisco
-(00-17 h -> 17-24 h: 29 and 15), counted with it, the fifth and sixth.
+(00-17 h -> 17-24 h: 29 and 15), counted with it, the fifth and sixth. The six small areas
+after them (Boston to Tampa Bay) were chosen from the same day by counts alone
+(`benchmarks/coastal_areas.py`, docs/results/forward.md); their split is the whole hour by which
+two thirds of their tracks had started.
 """
 
 

@@ -25,13 +25,12 @@ Run: python benchmarks/period_threshold.py runs/grid13/kitimat/forward-s1 [more 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from pooled_grid import grouped_from_args, pooled  # (this folder: run as a script)
-from stepod import as_row, card_of
+from stepod import as_row, card_of, logged_row
 
 from aisdati.detection.labels import label_metrics
 from aisdati.tracks.ashore import AshoreCheck
@@ -70,11 +69,7 @@ def cell_metrics(cell: Path) -> dict[str, dict]:
     for name, share in HINDSIGHT.items():
         out[name] = label_metrics(labels, ranked > hindsight_cut(ranked, labels, share), ranked)
     out["ratio"] = period / card
-    doc = json.loads((cell / "evaluation.json").read_text())
-    logged = next(
-        r for r in doc["results"] if (r["detector"], r["score"], r["kind"]) == ("bc", SCORE, "all")
-    )
-    if not np.isclose(logged["recall"], out["card"]["recall"]):
+    if not np.isclose(logged_row(cell, SCORE)["recall"], out["card"]["recall"]):
         raise SystemExit(f"{cell}: the card's threshold recomputed differs from evaluation.json")
     return out
 

@@ -59,12 +59,16 @@ def cell_metrics(cell: Path) -> dict[str, dict]:
         flagged = (value > np.quantile(own, 1.0 - CONTAMINATION)) | ashore
         ranked = rule.ranked(value, meta["ashore_reports"], meta["n_points"])
         out[name] = label_metrics(meta["label"].to_numpy(), flagged, ranked)
-    doc = json.loads((cell / "evaluation.json").read_text())
-    out["logged"] = next(
-        r for r in doc["results"]
-        if (r["detector"], r["score"], r["kind"]) == ("bc", "stepspread", "all")
-    )  # fmt: skip
+    out["logged"] = logged_row(cell, "stepspread")
     return out
+
+
+def logged_row(cell: Path, score: str) -> dict:
+    """The cell's own evaluation.json row of BC's `score` over all kinds, to check against."""
+    doc = json.loads((cell / "evaluation.json").read_text())
+    return next(
+        r for r in doc["results"] if (r["detector"], r["score"], r["kind"]) == ("bc", score, "all")
+    )
 
 
 def as_row(metrics: dict) -> dict:
