@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup test demo quick selftest docs browser
+.PHONY: setup test demo quick selftest docs browser bench
 
 setup: $(VENV)/.installed
 
@@ -35,3 +35,31 @@ selftest: setup
 # the documentation site (mkdocs.yml) into build/site, failing on any warning or broken link
 docs: setup
 	$(BIN)/mkdocs build --strict
+
+# the lasting speed and memory benchmarks at small sizes (a few minutes on 2 cores): each prints
+# its table, and its rows go as JSON to $(BENCH_JSON)/<script>.json (benchmarks/README.md). The
+# full sizes are each script without the size options (JSON in benchmarks/results/); the
+# detection-quality grids train models for hours and are not run here, e.g.
+#   $(BIN)/python benchmarks/detection_quality.py --seeds 0,1,2
+#   $(BIN)/python benchmarks/detection_quality.py --forward --data kitimat --train-seeds 0,1,2
+#   $(BIN)/python benchmarks/pooled_grid.py runs/quality/<area>/forward-s1 [more grids]
+#   $(BIN)/python benchmarks/coastal_areas.py
+BENCH_JSON ?= benchmarks/results/quick
+bench: setup
+	$(BIN)/python benchmarks/dtw_speed.py --json $(BENCH_JSON)/dtw_speed.json
+	$(BIN)/python benchmarks/ashore_speed.py --sizes 100000,1000000 \
+	  --json $(BENCH_JSON)/ashore_speed.json
+	$(BIN)/python benchmarks/ais_speed.py --train-steps 30 --tracks 20 --rollouts 2 \
+	  --json $(BENCH_JSON)/ais_speed.json
+	$(BIN)/python benchmarks/detection_speed.py --tracks 100 --points 200 --draws 4 --before 5 \
+	  --json $(BENCH_JSON)/detection_speed.json
+	$(BIN)/python benchmarks/routes_speed.py --tracks 10000,100000 \
+	  --json $(BENCH_JSON)/routes_speed.json
+	$(BIN)/python benchmarks/selftest_speed.py --steps 5 --repeats 1 \
+	  --json $(BENCH_JSON)/selftest_speed.json
+	$(BIN)/python benchmarks/ingest_speed.py --rows 1000000 --work-dir data/raw/bench-quick \
+	  --json $(BENCH_JSON)/ingest_speed.json
+	$(BIN)/python benchmarks/ingest_memory.py --bomb-mb 20 --members 300 \
+	  --work-dir data/raw/bench-hostile-quick --json $(BENCH_JSON)/ingest_memory.json
+	$(BIN)/python benchmarks/scale.py --rows 1200000 --stages ingest \
+	  --work-dir data/raw/scale-quick --json $(BENCH_JSON)/scale.json

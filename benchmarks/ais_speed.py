@@ -8,7 +8,9 @@ one `aisdati train` / `aisdati detect --score rollout` run (AISTrackSource + DAT
 uses an untrained model (the cost does not depend on the weights).
 
 Run: python benchmarks/ais_speed.py [--train-steps 300] [--tracks 143] [--rollouts 10]
-(not part of the test suite; writes a markdown table to stdout).
+[--json PATH]
+(not part of the test suite; prints a markdown table, its rows as JSON in
+benchmarks/results/ais_speed.json).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import time
 
 import numpy as np
 import torch
+from report import Report, add_json_option  # (this folder: run as a script)
 
 from aisdati.ais.policy import AISPolicy, dati_act
 from aisdati.ais.source import build_source, make_env
@@ -85,23 +88,39 @@ def main() -> None:
     ap.add_argument("--train-steps", type=int, default=300)
     ap.add_argument("--tracks", type=int, default=143)
     ap.add_argument("--rollouts", type=int, default=10)
+    add_json_option(ap, "ais_speed")
     args = ap.parse_args()
     tr = bench_training(args.train_steps)
     sc = bench_scoring(args.tracks, args.rollouts)
     per_episode = 900 / tr["steps_per_s"]
-    print(f"AIS speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
-    print("| measure | value |")
-    print("|---|---|")
-    print(f"| training steps/s (E = 1, 900-step episodes) | {tr['steps_per_s']:.1f} |")
-    print(f"| one 900-step episode | {per_episode:.0f} s |")
-    print(f"| paper's budget, 170 episodes | {170 * per_episode / 3600:.1f} h |")
-    print(
-        f"| rollouts: {args.tracks} tracks x K = {args.rollouts}, 900-1500 points "
-        f"| {sc['rollout_s']:.1f} s |"
-    )
-    gcells = sc["cells"] / 1e9
-    print(f"| great-circle DTW of all pairs ({gcells:.2f} G cells) | {sc['dtw_s']:.1f} s |")
-    print(f"| rollout + scoring total (target < 30 s) | {sc['total_s']:.1f} s |")
+    with Report.from_args("ais_speed", args) as report:
+        report.say(f"AIS speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
+        table = report.table(["measure", "value"], title="AIS speed")
+        table.row(
+            ["training steps/s (E = 1, 900-step episodes)", f"{tr['steps_per_s']:.1f}"],
+            {"steps_per_s": tr["steps_per_s"], "steps": tr["steps"], "seconds": tr["seconds"]},
+        )
+        table.row(["one 900-step episode", f"{per_episode:.0f} s"], {"seconds": per_episode})
+        table.row(
+            ["paper's budget, 170 episodes", f"{170 * per_episode / 3600:.1f} h"],
+            {"hours": 170 * per_episode / 3600},
+        )
+        table.row(
+            [
+                f"rollouts: {args.tracks} tracks x K = {args.rollouts}, 900-1500 points",
+                f"{sc['rollout_s']:.1f} s",
+            ],
+            {"seconds": sc["rollout_s"], "tracks": args.tracks, "rollouts": args.rollouts},
+        )
+        gcells = sc["cells"] / 1e9
+        table.row(
+            [f"great-circle DTW of all pairs ({gcells:.2f} G cells)", f"{sc['dtw_s']:.1f} s"],
+            {"seconds": sc["dtw_s"], "cells": sc["cells"]},
+        )
+        table.row(
+            ["rollout + scoring total (target < 30 s)", f"{sc['total_s']:.1f} s"],
+            {"seconds": sc["total_s"], "target_s": 30},
+        )
 
 
 if __name__ == "__main__":

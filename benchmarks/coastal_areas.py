@@ -11,7 +11,8 @@ Beach's setting), the tracks and vessels, the share of reports on land by the co
 without and with the water the earlier tracks sailed (`AshoreCheck.seen`, as a model's card
 records it). No model is trained.
 
-Run: python benchmarks/coastal_areas.py [--out runs/coastal-areas]
+Run: python benchmarks/coastal_areas.py [--out runs/coastal-areas] [--json PATH]
+(prints a markdown table, its rows as JSON in benchmarks/results/coastal_areas.json)
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from detection_quality import AREAS, FORWARD, ingest  # (this folder: run as a script)
+from report import Report, add_json_option
 
 from aisdati.coastline import on_land
 from aisdati.tracks.ashore import AshoreCheck
@@ -39,7 +41,8 @@ def split_hour(starts: pd.Series) -> pd.Timestamp:
     return ordered.iloc[int(len(ordered) * TRAINING_SHARE)].round("h")
 
 
-def row(box: Path, data: Path) -> str:
+def row(box: Path, data: Path) -> tuple[list, dict]:
+    """The box's cells as printed, and its measurements unformatted."""
     table = read_track_table(data)
     tracks = load_tracks(data, table["track_id"].tolist())
     positions = [t.positions for t in tracks]
@@ -55,20 +58,24 @@ def row(box: Path, data: Path) -> str:
     excused = int(rule.flags(rule.counts(later, seen)).sum())
     cells = [box.stem, len(table), table["mmsi"].nunique(), f"{land:.3f}", f"{split:%H:%M}"]
     cells += [int(before.sum()), len(later), plain, excused]
-    return "| " + " | ".join(str(c) for c in cells) + " |"
+    keys = ("box", "tracks", "vessels", "reports_on_land", "split", "before", "after")
+    values = dict(zip(keys, [*cells[:3], land, split.isoformat(), *cells[5:7]], strict=True))
+    return cells, {**values, "later_ashore": plain, "later_ashore_with_seen_water": excused}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("runs/coastal-areas"))
+    add_json_option(ap, "coastal_areas")
     args = ap.parse_args()
-    print("| box | tracks | vessels | reports on land | split (UTC) | before | after | "
-          "later tracks ashore | with the earlier tracks' water |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|")
-    for box in sorted(AREAS.glob("*.geojson")):
-        data = args.out / box.stem
-        ingest(DAY, MIN_POINTS, data, str(box))
-        print(row(box, data), flush=True)
+    with Report.from_args("coastal_areas", args) as report:
+        columns = ["box", "tracks", "vessels", "reports on land", "split (UTC)", "before",
+                   "after", "later tracks ashore", "with the earlier tracks' water"]  # fmt: skip
+        table = report.table(columns, title="The US coastal day's boxes as forward areas")
+        for box in sorted(AREAS.glob("*.geojson")):
+            data = args.out / box.stem
+            ingest(DAY, MIN_POINTS, data, str(box))
+            table.row(*row(box, data))
 
 
 if __name__ == "__main__":

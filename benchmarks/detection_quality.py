@@ -7,12 +7,15 @@ mean over seeds is what the README's choices rest on.
 
 Run: python benchmarks/detection_quality.py [--seeds 0,1,2] [--data kitimat] [--episodes 60]
      [--detectors dati,nearest,bc] [--kinds detour,jump,loiter] [--lane KEY=VALUE ...]
-     [--no-ashore] [--out runs/quality]
+     [--no-ashore] [--out runs/quality] [--json PATH]
      python benchmarks/detection_quality.py --forward
      [--data kitimat|nyharbor|virginiabeach|pugetsound|losangeles|sanfrancisco|boston|...|both]
      [--strength 1] [--seeds 0,1,2] [--train-seeds 0,1,2] [--no-ashore] [--at-sea] ...
 
-`--forward` is the analyst's protocol instead (`aisdati evaluate --cluster all --split time`):
+Prints a markdown table; its rows go as JSON to benchmarks/results/detection_quality.json (or
+`--json PATH`).
+
+`--forward` is the analyst's protocol instead (`aisdati evaluate --cluster all --before DATE`):
 train one model of the whole area on the tracks before the split date (Kitimat: July -> August;
 NY Harbor: December 1-4 -> 5-7), write anomalies into 30 % of the later tracks and judge every
 later track; `--no-ashore` the same with the models' scores alone (no ashore rule,
@@ -42,6 +45,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from report import Report, add_json_option  # (this folder: run as a script)
 
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 SETS = {
@@ -166,8 +170,8 @@ def run_forward(area: str, train_seed: int, seed: int, args: argparse.Namespace)
         lanes = [x for kv in args.lane for x in ("--lane", kv)]
         reuse = args.models_from or seed != train_seed
         models = ["--models", str(trained)] if reuse else []
-        aisdati("evaluate", "--data", str(data), "--cluster", "all", "--split", "time",
-                "--before", before, "--altered", "0.3", "--strength", str(args.strength),
+        aisdati("evaluate", "--data", str(data), "--cluster", "all", "--before", before,
+                "--altered", "0.3", "--strength", str(args.strength),
                 "--detectors", args.detectors, "--kinds", args.kinds,
                 "--episodes", str(args.episodes), "--seed", str(seed), "--out", str(out),
                 "--quiet", *models, *lanes, *([] if args.ashore else ["--no-ashore"]),
@@ -187,26 +191,41 @@ def field_of(doc: dict, det: str, score: str, field: str, kind: str = "all") -> 
     return float("nan")
 
 
-def summary(grid: list[list[dict]], det: str, score: str, field: str, kind: str = "all") -> str:
-    """`mean ± sd` over every cell of the grid (rows: trainings; columns: injection seeds)."""
+def stats(
+    grid: list[list[dict]], det: str, score: str, field: str, kind: str = "all"
+) -> tuple[float, float]:
+    """Mean and sd over every cell of the grid (rows: trainings; columns: injection seeds)."""
     v = np.array([[field_of(d, det, score, field, kind) for d in row] for row in grid], float)
     sd = np.nanstd(v, ddof=1) if np.count_nonzero(~np.isnan(v)) > 1 else 0.0
-    return f"{np.nanmean(v):.3f} ± {sd:.3f}"
+    return float(np.nanmean(v)), float(sd)
 
 
-def forward(args: argparse.Namespace) -> None:
+def mean_sd(grid: list[list[dict]], *key: str) -> dict[str, float]:
+    """`stats` for the JSON."""
+    return dict(zip(("mean", "sd"), stats(grid, *key), strict=True))
+
+
+def summary(grid: list[list[dict]], det: str, score: str, field: str, kind: str = "all") -> str:
+    """`mean ± sd` over every cell of the grid (rows: trainings; columns: injection seeds)."""
+    mean, sd = stats(grid, det, score, field, kind)
+    return f"{mean:.3f} ± {sd:.3f}"
+
+
+def forward(args: argparse.Namespace, report: Report) -> None:
     """The forward protocol's table (see the module docstring)."""
     seeds = [int(s) for s in args.seeds.split(",")]
     trainings = [int(s) for s in args.train_seeds.split(",")]
     areas = ["kitimat", "nyharbor"] if args.data == "both" else [args.data]
     kinds = args.kinds.split(",")
-    print(f"Forward in time, 30 % altered at strength {args.strength:g}, trainings "
-          f"{args.train_seeds} x injection seeds {args.seeds}, --contamination 0.05 "
-          "(mean ± sd over the cells; ROC AUC per training: the mean over its seeds)")  # fmt: skip
-    print("| area | detector | score | ROC AUC | per training | avg precision | normal "
-          "flagged | anomalies flagged | " + " | ".join(f"AUC {k}" for k in kinds)
-          + " | training s |")  # fmt: skip
-    print("|---" * (9 + len(kinds)) + "|")
+    report.say(
+        f"Forward in time, 30 % altered at strength {args.strength:g}, trainings "
+        f"{args.train_seeds} x injection seeds {args.seeds}, --contamination 0.05 "
+        "(mean ± sd over the cells; ROC AUC per training: the mean over its seeds)"
+    )
+    columns = ["area", "detector", "score", "ROC AUC", "per training", "avg precision",
+               "normal flagged", "anomalies flagged", *(f"AUC {k}" for k in kinds),
+               "training s"]  # fmt: skip
+    table = report.table(columns, title="Forward in time")
     for area in areas:
         grid = [[run_forward(area, t, s, args) for s in seeds] for t in trainings]
         first = grid[0][0]
@@ -214,16 +233,21 @@ def forward(args: argparse.Namespace) -> None:
         trained = [run_forward(area, t, t, args) for t in trainings]
         for det, score in keys:
             cells = [summary(grid, det, score, "roc_auc")]
-            cells.append(" / ".join(
-                f"{np.nanmean([field_of(d, det, score, 'roc_auc') for d in row]):.3f}"
-                for row in grid
-            ))  # fmt: skip
+            per_training = [
+                float(np.nanmean([field_of(d, det, score, "roc_auc") for d in row])) for row in grid
+            ]
+            cells.append(" / ".join(f"{x:.3f}" for x in per_training))
             cells += [summary(grid, det, score, f) for f in FORWARD_FIELDS[1:]]
             cells += [summary(grid, det, score, "roc_auc", k) for k in kinds]
             seconds = [d["timings_s"][det]["train_s"] for d in trained]
             cells.append("(reused)" if args.models_from else f"{np.mean(seconds):.0f}")
             name = "dtw" if score == "nearest" else score
-            print(f"| {area} | {det} | {name} | " + " | ".join(cells) + " |")
+            values = {"area": area, "detector": det, "score": name,
+                      "roc_auc_per_training": per_training,
+                      **{f: mean_sd(grid, det, score, f) for f in FORWARD_FIELDS},
+                      **{f"roc_auc_{k}": mean_sd(grid, det, score, "roc_auc", k) for k in kinds},
+                      "train_s": None if args.models_from else float(np.mean(seconds))}  # fmt: skip
+            table.row([area, det, name, *cells], values)
 
 
 def aucs(results: list[dict]) -> dict[tuple[str, str], float]:
@@ -250,12 +274,19 @@ def main() -> None:
     ap.add_argument("--at-sea", action="store_true",
                     help="--forward: only anomalies a vessel could sail")  # fmt: skip
     ap.add_argument("--out", type=Path, default=Path("runs/quality"))
+    add_json_option(ap, "detection_quality")
     args = ap.parse_args()
-    if args.forward:
-        forward(args)
-        return
-    if args.data not in SETS:
+    if not args.forward and args.data not in SETS:
         ap.error(f"--data {args.data} is for --forward")
+    with Report.from_args("detection_quality", args) as report:
+        if args.forward:
+            forward(args, report)
+        else:
+            by_seed(args, report)
+
+
+def by_seed(args: argparse.Namespace, report: Report) -> None:
+    """Every route pooled, one split per seed: the table of the module docstring's first run."""
     seeds = [int(s) for s in args.seeds.split(",")]
     path, min_points = SETS[args.data]
     data = args.out / args.data / "processed"
@@ -272,24 +303,22 @@ def main() -> None:
             for key, auc in aucs(route_doc["results"]).items():
                 per_route.setdefault(key, {}).setdefault(route, []).append(auc)
     routes = sorted({r for v in per_route.values() for r in v})
-    print(
+    report.say(
         f"ROC AUC of {args.kinds} on {args.data}, every route pooled, seeds {args.seeds}"
         + (f", DATI with {' '.join(args.lane)}" if args.lane else "")
     )
-    print(
-        "| detector | score | "
-        + " | ".join(f"seed {s}" for s in seeds)
-        + " | mean ± sd | "
-        + " | ".join(f"{r} mean" for r in routes)
-        + " |"
-    )
-    print("|---" * (3 + len(seeds) + len(routes)) + "|")
+    columns = ["detector", "score", *(f"seed {s}" for s in seeds), "mean ± sd"]
+    table = report.table([*columns, *(f"{r} mean" for r in routes)], title="ROC AUC by seed")
     for (det, score), values in pooled.items():
         v = np.array(values, float)
         sd = v.std(ddof=1) if len(v) > 1 else 0.0
+        means = [float(np.mean(per_route[(det, score)].get(r, [np.nan]))) for r in routes]
         cells = [f"{x:.3f}" for x in v] + [f"{v.mean():.3f} ± {sd:.3f}"]
-        cells += [f"{np.mean(per_route[(det, score)].get(r, [np.nan])):.3f}" for r in routes]
-        print(f"| {det} | {'dtw' if score == 'nearest' else score} | " + " | ".join(cells) + " |")
+        cells += [f"{m:.3f}" for m in means]
+        name = "dtw" if score == "nearest" else score
+        raw = {"detector": det, "score": name, "roc_auc": v.tolist(), "mean": v.mean(), "sd": sd,
+               "route_means": dict(zip(routes, means, strict=True))}  # fmt: skip
+        table.row([det, name, *cells], raw)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,8 @@ measured on the first `--before` test tracks and extrapolated linearly to all of
 cost the same per test track).
 
 Run: python benchmarks/detection_speed.py [--tracks 1000] [--points 500] [--draws 10]
-[--before 20] [--only-scale] (not part of the test suite; prints markdown tables).
+[--before 20] [--only-scale] [--json PATH] (not part of the test suite; prints markdown tables,
+their rows as JSON in benchmarks/results/detection_speed.json).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import time
 
 import numpy as np
 import torch
+from report import Report, add_json_option  # (this folder: run as a script)
 from scipy.spatial import cKDTree
 
 from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
@@ -154,7 +156,7 @@ def keys(polylines: list[np.ndarray], course_m: float) -> np.ndarray:
     return np.hstack([EARTH_RADIUS_M * unit_vectors(np.concatenate(polylines)), course])
 
 
-def bench_scale(train: list[Track], test: list[Track], before: int) -> None:
+def bench_scale(train: list[Track], test: list[Track], before: int, report: Report) -> None:
     """The "Scoring at scale" table: both searches of all test tracks, after and before."""
     how = ScoreSettings(score="lane")
     det = NearestDetector()
@@ -171,14 +173,17 @@ def bench_scale(train: list[Track], test: list[Track], before: int) -> None:
     old_near = brute_nearest(train, test[:before]) * scale
     old_lane = brute_lane(train, test[:before], how.lane_course_km * 1000.0) * scale
     n, m, p = len(test), len(train), len(test[0].positions)
-    print(f"\nScoring at scale on {os.cpu_count()} CPU cores ({p} reports a track; before:")
-    print(f"measured on {before} test tracks and extrapolated to {n})\n")
-    print("| test x training tracks | nearest before | nearest after | lane before | lane after |")
-    print("|---|---|---|---|---|")
-    print(
-        f"| {n:,} x {m:,} | {old_near:,.0f} s (extrapolated) | {near_s:.1f} s | "
-        f"{old_lane:,.0f} s (extrapolated) | {lane_s:.1f} s |"
-    )
+    report.say(f"\nScoring at scale on {os.cpu_count()} CPU cores ({p} reports a track; before:")
+    report.say(f"measured on {before} test tracks and extrapolated to {n})\n")
+    columns = ["test x training tracks", "nearest before", "nearest after", "lane before"]
+    table = report.table([*columns, "lane after"], title="Scoring at scale")
+    table.row(
+        [f"{n:,} x {m:,}", f"{old_near:,.0f} s (extrapolated)", f"{near_s:.1f} s",
+         f"{old_lane:,.0f} s (extrapolated)", f"{lane_s:.1f} s"],
+        {"test_tracks": n, "training_tracks": m, "reports_per_track": p,
+         "before_measured_on": before, "nearest_before_s": old_near, "nearest_after_s": near_s,
+         "lane_before_s": old_lane, "lane_after_s": lane_s},
+    )  # fmt: skip
 
 
 def main() -> None:
@@ -188,6 +193,7 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=10)
     ap.add_argument("--before", type=int, default=20, help="test tracks the brute force scores")
     ap.add_argument("--only-scale", action="store_true", help="only the Scoring at scale table")
+    add_json_option(ap, "detection_speed")
     args = ap.parse_args()
     if min(args.tracks, args.points, args.draws, args.before) < 1:
         ap.error("--tracks, --points, --draws and --before must be at least 1")
@@ -196,31 +202,55 @@ def main() -> None:
     heads = rng.uniform(0, 360, 5)
     test = lanes(rng, args.tracks, args.points, heads)
     train = lanes(rng, args.tracks, args.points, heads)
-    bench_scale(train, test, min(args.before, args.tracks))
-    if args.only_scale:
-        return
+    with Report.from_args("detection_speed", args) as report:
+        bench_scale(train, test, min(args.before, args.tracks), report)
+        if not args.only_scale:
+            bench_scores(train, test, args, report)
+
+
+def bench_scores(
+    train: list[Track], test: list[Track], args: argparse.Namespace, report: Report
+) -> None:
+    """The "Detection speed" table: step, area default, lane and nearest scoring."""
     step_s = bench_step(test, args.draws)
     area_s = bench_area(train, test, args.draws)
     lane_s = bench_lane(test, args.draws)
     near_s, med = bench_nearest(train, test)
     n, p = args.tracks, args.points
-    print(f"Detection speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
-    print("| what | measured | target |")
-    print("|---|---|---|")
+    report.say(f"Detection speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
+    table = report.table(["what", "measured", "target"], title="Detection speed")
     k = args.draws
-    print(f"| step scoring: {n} tracks x {p} reports, K = {k} | {step_s:.1f} s | <= 20 s |")
-    print(
-        f"| the area's default: cross-fitted BC ({PRESETS[AREA_PRESET].members} members) by "
-        f"`stepspread`, member by member: {n} tracks x {p} reports, K = {k} | {area_s:.1f} s | |"
+    size = {"tracks": n, "reports": p, "draws": k}
+    table.row(
+        [f"step scoring: {n} tracks x {p} reports, K = {k}", f"{step_s:.1f} s", "<= 20 s"],
+        {"what": "step", **size, "seconds": step_s, "target_s": 20},
     )
-    print(
-        f"| lane scoring: {n} tracks x {p} reports, {ScoreSettings().lane_rollouts} rollouts "
-        f"of 2x the steps (best of the first K = {k}) | "
-        f"{lane_s:.1f} s | |"
+    table.row(
+        [
+            f"the area's default: cross-fitted BC ({PRESETS[AREA_PRESET].members} members) by "
+            f"`stepspread`, member by member: {n} tracks x {p} reports, K = {k}",
+            f"{area_s:.1f} s",
+            "",
+        ],
+        {"what": "area default (bc, stepspread)", **size, "seconds": area_s},
     )
-    print(
-        f"| nearest: {n} test x {n} training tracks of {p} points (exact, pruned; median "
-        f"distance {med:,.0f} m) | {near_s:.1f} s | <= 60 s |"
+    table.row(
+        [
+            f"lane scoring: {n} tracks x {p} reports, {ScoreSettings().lane_rollouts} rollouts "
+            f"of 2x the steps (best of the first K = {k})",
+            f"{lane_s:.1f} s",
+            "",
+        ],
+        {"what": "lane", **size, "seconds": lane_s},
+    )
+    table.row(
+        [
+            f"nearest: {n} test x {n} training tracks of {p} points (exact, pruned; median "
+            f"distance {med:,.0f} m)",
+            f"{near_s:.1f} s",
+            "<= 60 s",
+        ],
+        {"what": "nearest", **size, "seconds": near_s, "median_m": med, "target_s": 60},
     )
 
 

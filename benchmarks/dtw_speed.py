@@ -7,17 +7,20 @@ The reward needs the DTW between the imitated and the expert prefixes at every s
 Where recomputation would take too long, only every k-th step is timed and the episode total is
 extrapolated (each timed step stands for the k steps around it); the table says so.
 
-Run: python benchmarks/dtw_speed.py   (not part of the test suite)
+Run: python benchmarks/dtw_speed.py [--json PATH]   (not part of the test suite; prints a table,
+its rows as JSON in benchmarks/results/dtw_speed.json)
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 from collections.abc import Callable
 
 import numpy as np
 from fastdtw import fastdtw
 from haversine import Unit, haversine
+from report import Report, add_json_option  # (this folder: run as a script)
 from scipy.spatial.distance import euclidean
 
 from aisdati.dtw import IncrementalDTW, dtw
@@ -76,36 +79,31 @@ def bench_case(name: str, a, b, metric: str, fast_dist, fast_stride: int, exact_
     ]
 
 
-def print_table(rows) -> None:
-    headers = ("case", "method", "s / episode", "(a) speed-up", "note")
-    cells = [(c, m, f"{s:.4g}", f"{x:,.0f}x", note) for c, m, s, x, note in rows]
-    try:
-        from rich.console import Console
-        from rich.table import Table
-    except ImportError:
-        widths = [max(len(r[k]) for r in [headers, *cells]) for k in range(len(headers))]
-        for r in [headers, *cells]:
-            print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)))
-        return
-    table = Table(title="DTW reward cost per episode")
-    for k, h in enumerate(headers):
-        table.add_column(h, justify="right" if k in (2, 3) else "left")
-    for r in cells:
-        table.add_row(*r)
-    Console(width=140).print(table)
-
-
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_json_option(ap, "dtw_speed")
+    args = ap.parse_args()
     rng = np.random.default_rng(SEED)
     a, b = random_walk(rng, 900, (0.0, 0.0), 1.0), random_walk(rng, 900, (0.0, 0.0), 1.0)
     rows = bench_case("euclidean, 900 steps", a, b, "euclidean", euclidean, 30, 1)
     lon_lat = (18.0, 57.0)
     a, b = random_walk(rng, 1500, lon_lat, 0.002), random_walk(rng, 1500, lon_lat, 0.002)
     rows += bench_case("haversine, 1500 steps", a, b, "haversine", haversine_lonlat, 75, 15)
-    print_table(rows)
-    t_inc, t_fast = rows[0][2], rows[1][2]
-    verdict = "meets" if t_fast / t_inc >= 1000 else "MISSES"
-    print(f"euclidean: (a) is {t_fast / t_inc:,.0f}x faster than (b); {verdict} the 1000x target")
+    with Report.from_args("dtw_speed", args) as report:
+        headers = ("case", "method", "s / episode", "(a) speed-up", "note")
+        justify = ["right" if k in (2, 3) else "left" for k in range(len(headers))]
+        table = report.table(
+            headers, title="DTW reward cost per episode", style="rich", justify=justify, width=140
+        )
+        for c, m, sec, x, note in rows:
+            values = {"case": c, "method": m, "seconds": sec, "speed_up": x, "note": note}
+            table.row((c, m, f"{sec:.4g}", f"{x:,.0f}x", note), values)
+        table.show()
+        t_inc, t_fast = rows[0][2], rows[1][2]
+        verdict = "meets" if t_fast / t_inc >= 1000 else "MISSES"
+        report.say(
+            f"euclidean: (a) is {t_fast / t_inc:,.0f}x faster than (b); {verdict} the 1000x target"
+        )
 
 
 if __name__ == "__main__":

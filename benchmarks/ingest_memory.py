@@ -10,7 +10,8 @@ Two inputs, both built from the real rows of tests/data/NYHarbor_2020_06_30_firs
 Each ingest runs in a fresh subprocess (`ingest_speed.measure`), so its peak RSS is its own.
 
 Usage: python benchmarks/ingest_memory.py [--bomb-mb 590] [--members 3000] [--work-dir DIR]
-Prints a markdown table.
+[--json PATH]
+Prints a markdown table, its rows as JSON in benchmarks/results/ingest_memory.json.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from ingest_speed import AISDATI, measure
+from report import Report, add_json_option
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = ROOT / "tests" / "data" / "NYHarbor_2020_06_30_first_hour.csv"
@@ -95,6 +97,7 @@ def main() -> None:
     parser.add_argument("--bomb-mb", type=int, default=590)
     parser.add_argument("--members", type=int, default=3000)
     parser.add_argument("--work-dir", type=Path, default=ROOT / "data" / "raw" / "bench-hostile")
+    add_json_option(parser, "ingest_memory")
     args = parser.parse_args()
     work = args.work_dir
     work.mkdir(parents=True, exist_ok=True)
@@ -111,15 +114,19 @@ def main() -> None:
         build_members(archive, members)
         seconds, rss, report = ingest(archive, work / f"out-members-{members}")
         rows.append((f"NY hour in {members:,} zip member(s)", archive, report, seconds, rss))
-    print("| input | zip MB | rows read | kept points | wall s | peak RSS MiB |")
-    print("|---|---|---|---|---|---|")
-    for name, archive, report, seconds, rss in rows:
-        print(
-            f"| {name} | {archive.stat().st_size / 1e6:.1f} | {report['rows_read']:,} | "
-            f"{report['kept_points']:,} | {seconds:.1f} | {rss:.0f} |"
-        )
-    one, many = rows[-2][3], rows[-1][3]
-    print(f"\n{args.members:,} members take {many / one:.2f}x the time of one member")
+    with Report.from_args("ingest_memory", args) as out:
+        columns = ["input", "zip MB", "rows read", "kept points", "wall s", "peak RSS MiB"]
+        table = out.table(columns, title="aisdati ingest on hostile archives")
+        for name, archive, report, seconds, rss in rows:
+            zip_mb = archive.stat().st_size / 1e6
+            table.row(
+                [name, f"{zip_mb:.1f}", f"{report['rows_read']:,}", f"{report['kept_points']:,}",
+                 f"{seconds:.1f}", f"{rss:.0f}"],
+                {"input": name, "zip_mb": zip_mb, "rows_read": report["rows_read"],
+                 "kept_points": report["kept_points"], "seconds": seconds, "peak_rss_mib": rss},
+            )  # fmt: skip
+        one, many = rows[-2][3], rows[-1][3]
+        out.say(f"\n{args.members:,} members take {many / one:.2f}x the time of one member")
 
 
 if __name__ == "__main__":

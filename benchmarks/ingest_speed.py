@@ -12,8 +12,10 @@ its own:
   read+filter rate, printed beside aisdati's read+clean+filter rate.
 
 Usage: python benchmarks/ingest_speed.py [--rows 10000000] [--work-dir data/raw/bench] [--workers N]
-Prints a markdown table. `--workers N` runs aisdati's tasks on N local Dask workers; the zip is
-one member, so one read task: its rate is that of one worker, the later stages are shared.
+[--json PATH]
+Prints a markdown table, its rows as JSON in benchmarks/results/ingest_speed.json. `--workers N`
+runs aisdati's tasks on N local Dask workers; the zip is one member, so one read task: its rate
+is that of one worker, the later stages are shared.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import sys
 import zipfile
 from datetime import date, timedelta
 from pathlib import Path
+
+from report import Report, add_json_option  # (this folder: run as a script)
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = ROOT / "tests" / "data" / "AIS_2022_01_03_head.zip"
@@ -119,15 +123,22 @@ def main() -> None:
     parser.add_argument("--rows", type=int, default=10_000_000)
     parser.add_argument("--work-dir", type=Path, default=ROOT / "data" / "raw" / "bench")
     parser.add_argument("--workers", type=int, default=1, help="aisdati ingest --workers")
+    add_json_option(parser, "ingest_speed")
     args = parser.parse_args()
+    with Report.from_args("ingest_speed", args) as out:
+        run(args, out)
+
+
+def run(args: argparse.Namespace, out: Report) -> None:
+    """Build the input, measure every method, print the table."""
     big_zip, big_csv, n = build(args.rows, args.work_dir)
-    print(f"input: {big_zip} ({n:,} rows, {big_zip.stat().st_size / 2**20:.0f} MiB zipped)")
+    out.say(f"input: {big_zip} ({n:,} rows, {big_zip.stat().st_size / 2**20:.0f} MiB zipped)")
     results = []
     measure(_ingest(SEED, args.work_dir / "warm-up", "none", 1))  # numba's caches, once
     runs = [(big_zip, "florida-straits"), (big_zip, "none"), (big_csv, "none")]
     for source, roi in runs:
-        out = args.work_dir / f"out-{roi}-{source.suffix[1:]}"
-        seconds, rss, stdout = measure(_ingest(source, out, roi, args.workers))
+        folder = args.work_dir / f"out-{roi}-{source.suffix[1:]}"
+        seconds, rss, stdout = measure(_ingest(source, folder, roi, args.workers))
         report = json.loads(stdout)
         stage = report["stage_seconds"]["read_clean_filter"]
         results.append(
@@ -149,19 +160,23 @@ def main() -> None:
             ("DuckDB read_csv + filter (unzipped CSV)", seconds, n / query, n / seconds, rss, None)
         )
     except ImportError:
-        print("duckdb is not installed (pip install -e '.[bench]'): no DuckDB row")
+        out.say("duckdb is not installed (pip install -e '.[bench]'): no DuckDB row")
     seconds, rss, _ = measure([sys.executable, "-c", PANDAS, str(big_zip)])
     results.append(("pandas.read_csv + filter", seconds, None, n / seconds, rss, None))
 
-    print(f"\n{os.cpu_count()} CPU cores; {n:,} rows\n")
-    print("| method | wall s | rows/s read+clean+filter | rows/s overall | peak RSS MiB |")
-    print("|---|---|---|---|---|")
+    out.say(f"\n{os.cpu_count()} CPU cores; {n:,} rows\n")
+    columns = ["method", "wall s", "rows/s read+clean+filter", "rows/s overall", "peak RSS MiB"]
+    table = out.table(columns, title=f"Ingest of {n:,} rows")
     for name, seconds, stage_rate, rate, rss, _ in results:
         stage_text = f"{stage_rate / 1e6:.2f} M" if stage_rate else "-"
-        print(f"| {name} | {seconds:.1f} | {stage_text} | {rate / 1e6:.2f} M | {rss:.0f} |")
+        table.row(
+            [name, f"{seconds:.1f}", stage_text, f"{rate / 1e6:.2f} M", f"{rss:.0f}"],
+            {"method": name, "rows": n, "seconds": seconds, "stage_rows_per_s": stage_rate,
+             "rows_per_s": rate, "peak_rss_mib": rss},
+        )  # fmt: skip
     for name, *_, report in results:
         if report:
-            print(f"\n{name}: kept {report['kept_points']:,} points, tracks {report['tracks']}")
+            out.say(f"\n{name}: kept {report['kept_points']:,} points, tracks {report['tracks']}")
 
 
 if __name__ == "__main__":

@@ -10,17 +10,18 @@ tracks flagged and of the anomalies flagged, pooled: the flagged tracks of every
 tracks of every cell.
 
 Run: python benchmarks/pooled_grid.py runs/grid12/losangeles/forward-s1-at-sea [more grids]
+     [--json PATH]
+(prints a markdown table, its rows as JSON in benchmarks/results/pooled_grid.json)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+from report import Report, add_json_option  # (this folder: run as a script)
 
 
 def all_rows(cell: Path) -> dict[tuple[str, str], dict]:
@@ -39,44 +40,37 @@ def pooled(rows: list[dict]) -> tuple[float, float, float]:
     return auc, false_alarms / max(normal, 1), caught / max(altered, 1)
 
 
-def grouped_from_args(
-    doc: str, of_cell: Callable[[Path], Any]
-) -> tuple[int, list[tuple[str, list]]]:
-    """The grids named on the command line (`GRID... [--pool]`), each a list of its cells
-    (`train<t>-seed<s>`) measured by `of_cell`, and with `--pool` one more group of every cell
-    together (`all N`); and N, the number of grids, which come first."""
-    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
-    ap.add_argument("grids", nargs="+", type=Path, help="grid folders of forward BC cells")
-    ap.add_argument("--pool", action="store_true", help="also a row for all grids together")
-    args = ap.parse_args()
-    groups = [(str(g), [of_cell(c) for c in sorted(g.glob("train*-seed*"))]) for g in args.grids]
-    if args.pool:
-        groups.append((f"all {len(groups)}", [c for _, cells in groups for c in cells]))
-    return len(args.grids), groups
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("grids", nargs="+", type=Path, help="grid folders of forward cells")
+    add_json_option(ap, "pooled_grid")
     args = ap.parse_args()
     cells = {g: [all_rows(c) for c in sorted(g.glob("train*-seed*"))] for g in args.grids}
     if empty := [str(g) for g, c in cells.items() if not c]:
         raise SystemExit(f"no cells (train<t>-seed<s>/evaluation.json) in {', '.join(empty)}")
     keys = sorted(set.intersection(*(set(c[0]) for c in cells.values())))
-    print("| grid | detector | score | cells | ROC AUC | normal flagged | anomalies flagged |")
-    print("|---|---|---|---|---|---|---|")
-    for det, score in keys:
-        aucs, rows = [], []
-        for grid, got in cells.items():
-            mine = [c[(det, score)] for c in got]
-            auc, fa, recall = pooled(mine)
-            aucs.append(auc)
-            rows += mine
-            print(f"| {grid} | {det} | {score} | {len(mine)} | {auc:.3f} | {fa:.3f} "
-                  f"| {recall:.3f} |")  # fmt: skip
-        _, fa, recall = pooled(rows)
-        print(f"| **all {len(cells)}** | {det} | {score} | {len(rows)} | **{np.mean(aucs):.3f}** "
-              f"| **{fa:.3f}** | **{recall:.3f}** |")  # fmt: skip
+    with Report.from_args("pooled_grid", args) as report:
+        columns = ["grid", "detector", "score", "cells", "ROC AUC", "normal flagged"]
+        table = report.table([*columns, "anomalies flagged"], title="Forward grids pooled")
+        for det, score in keys:
+            aucs, rows = [], []
+            for grid, got in cells.items():
+                mine = [c[(det, score)] for c in got]
+                auc, fa, recall = pooled(mine)
+                aucs.append(auc)
+                rows += mine
+                table.row(
+                    [grid, det, score, len(mine), f"{auc:.3f}", f"{fa:.3f}", f"{recall:.3f}"],
+                    {"grid": str(grid), "detector": det, "score": score, "cells": len(mine),
+                     "roc_auc": auc, "false_alarm_rate": fa, "recall": recall},
+                )  # fmt: skip
+            _, fa, recall = pooled(rows)
+            table.row(
+                [f"**all {len(cells)}**", det, score, len(rows), f"**{np.mean(aucs):.3f}**",
+                 f"**{fa:.3f}**", f"**{recall:.3f}**"],
+                {"grid": f"all {len(cells)}", "detector": det, "score": score, "cells": len(rows),
+                 "roc_auc": np.mean(aucs), "false_alarm_rate": fa, "recall": recall},
+            )  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -12,8 +12,8 @@ first n tracks of the largest), so each row adds tracks to the same traffic.
 The first call compiles the kernels (numba caches them on disk); a warm-up on 200 tracks runs
 first, then one timed run per size.
 
-Usage: python benchmarks/routes_speed.py [--tracks 10000,100000,1000000] [--seed 0]
-Prints a markdown table.
+Usage: python benchmarks/routes_speed.py [--tracks 10000,100000,1000000] [--seed 0] [--json PATH]
+Prints a markdown table, its rows as JSON in benchmarks/results/routes_speed.json.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
+from report import Report, add_json_option  # (this folder: run as a script)
 
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.routes import RouteSettings, cluster_routes, lines_from_wkb
@@ -72,6 +73,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", default="10000,100000,1000000", help="comma-separated sizes")
     parser.add_argument("--seed", type=int, default=0)
+    add_json_option(parser, "routes_speed")
     args = parser.parse_args()
     sizes = sorted(int(n) for n in args.tracks.split(","))
     rng = np.random.default_rng(args.seed)
@@ -83,26 +85,29 @@ def main() -> None:
     warm = time.perf_counter()
     cluster_routes(tracks[:200], ids[:200], length_km[:200], settings)
     warm = time.perf_counter() - warm
-    print(
-        f"route clustering of up to {sizes[-1]:,} tracks synthesised from {len(lines)} real "
-        f"tracks; {os.cpu_count()} CPUs; warm-up (200 tracks, compiles on first use) "
-        f"{warm:.1f} s\n"
-    )
-    cols = ["tracks", "points", "resample", "endpoints", "split", "merge", "describe", "total",
-            "s per 100k tracks", "routes", "routed tracks"]  # fmt: skip
-    print("| " + " | ".join(cols) + " |")
-    print("|" + "---|" * len(cols))
-    for n in sizes:
-        start = time.perf_counter()
-        routes = cluster_routes(tracks[:n], ids[:n], length_km[:n], settings)
-        total = time.perf_counter() - start
-        s = routes.seconds
-        routed = int(sum(label is not None for label in routes.labels))
-        row = [f"{n:,}", f"{sum(len(t) for t in tracks[:n]):,}"]
-        row += [f"{s[k]:.1f} s" for k in cols[2:7]]
-        row += [f"**{total:.1f} s**", f"{total / n * 1e5:.1f}", str(len(routes.table))]
-        row += [f"{routed:,}"]
-        print("| " + " | ".join(row) + " |", flush=True)
+    with Report.from_args("routes_speed", args) as report:
+        report.say(
+            f"route clustering of up to {sizes[-1]:,} tracks synthesised from {len(lines)} real "
+            f"tracks; {os.cpu_count()} CPUs; warm-up (200 tracks, compiles on first use) "
+            f"{warm:.1f} s\n"
+        )
+        cols = ["tracks", "points", "resample", "endpoints", "split", "merge", "describe",
+                "total", "s per 100k tracks", "routes", "routed tracks"]  # fmt: skip
+        table = report.table(cols, title="Route clustering")
+        for n in sizes:
+            start = time.perf_counter()
+            routes = cluster_routes(tracks[:n], ids[:n], length_km[:n], settings)
+            total = time.perf_counter() - start
+            s = routes.seconds
+            routed = int(sum(label is not None for label in routes.labels))
+            points = sum(len(t) for t in tracks[:n])
+            row = [f"{n:,}", f"{points:,}"]
+            row += [f"{s[k]:.1f} s" for k in cols[2:7]]
+            row += [f"**{total:.1f} s**", f"{total / n * 1e5:.1f}", str(len(routes.table))]
+            row += [f"{routed:,}"]
+            values = {"tracks": n, "points": points, **{f"{k}_s": s[k] for k in cols[2:7]}}
+            values |= {"total_s": total, "routes": len(routes.table), "routed_tracks": routed}
+            table.row(row, values)
 
 
 if __name__ == "__main__":

@@ -25,7 +25,8 @@ on 16 and 64 workers, from the 2-worker rates per worker and the measured 2-work
 held constant: a projection, not a measurement. `--stages ingest` runs the ingest alone.
 
 Usage: python benchmarks/scale.py [--rows 100000000] [--work-dir data/raw/scale]
-       [--episodes 2] [--max-tracks 10] [--stages ingest]
+       [--episodes 2] [--max-tracks 10] [--stages ingest] [--json PATH]
+(the tables' rows also go as JSON to benchmarks/results/scale.json)
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
 from ingest_speed import AISDATI as CONSOLE_SCRIPT
+from report import Report, add_json_option
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = {
@@ -183,35 +185,52 @@ def main() -> None:
     ap.add_argument("--max-tracks", type=int, default=10)
     ap.add_argument("--stages", default="ingest,train,detect",
                     help="ingest alone (its memory at scale) or all three")  # fmt: skip
+    add_json_option(ap, "scale")
     opts = ap.parse_args()
     opts.stages = opts.stages.split(",")
     if opts.stages not in (["ingest"], ["ingest", "train", "detect"]):
         raise SystemExit("--stages: ingest, or ingest,train,detect")
+    with Report.from_args("scale", opts) as report:
+        run(opts, report)
+
+
+def run(opts: argparse.Namespace, report: Report) -> None:
+    """Build the input, run the stages on 1 and 2 workers, print the tables."""
     *inputs, rows = build(opts.rows, opts.rows_per_file, opts.work_dir)
-    print(f"input: {rows:,} rows in {len(list(inputs[0].glob('*.csv')))} files under {inputs[0]}")
+    files = len(list(inputs[0].glob("*.csv")))
+    report.say(f"input: {rows:,} rows in {files} files under {inputs[0]}")
     runs = {w: stages(w, tuple(inputs), opts.work_dir, opts) for w in (1, 2)}
-    print("\n| stage | workers | seconds | rate | peak RSS of one process | of the command's "
-          "process | speed-up | efficiency |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|")
+    report.say()
+    columns = ["stage", "workers", "seconds", "rate", "peak RSS of one process",
+               "of the command's process", "speed-up", "efficiency"]  # fmt: skip
+    table = report.table(columns, title="1 and 2 Dask workers")
     for stage in opts.stages:
         for w in (1, 2):
             s, rate, unit, (mem, own) = runs[w][stage]
             up = runs[1][stage][0] / s
-            print(f"| {stage} | {w} | {s:.1f} | {rate:,.1f} {unit} | {mem:,.0f} MiB | "
-                  f"{own:,.0f} MiB | {up:.2f}x | {up / w:.0%} |")  # fmt: skip
+            table.row(
+                [stage, w, f"{s:.1f}", f"{rate:,.1f} {unit}", f"{mem:,.0f} MiB",
+                 f"{own:,.0f} MiB", f"{up:.2f}x", f"{up / w:.0%}"],
+                {"stage": stage, "workers": w, "seconds": s, "rate": rate, "unit": unit,
+                 "peak_rss_mib": mem, "command_rss_mib": own, "speed_up": up,
+                 "efficiency": up / w, "rows": rows},
+            )  # fmt: skip
     if opts.stages == ["ingest"]:
         return
-    print("\nProjection of a national year (3e9 reports, 12 M tracks, 2,000 routes), at the "
-          "2-worker rate per worker (its efficiency held):\n")  # fmt: skip
-    print("| stage | 16 workers | 64 workers |")
-    print("|---|---|---|")
+    report.say("\nProjection of a national year (3e9 reports, 12 M tracks, 2,000 routes), at the "
+               "2-worker rate per worker (its efficiency held):\n")  # fmt: skip
+    table = report.table(["stage", "16 workers", "64 workers"], title="National year (projected)")
     need = {"ingest": NATIONAL_YEAR["rows"], "train": NATIONAL_YEAR["routes"],
             "detect": NATIONAL_YEAR["tracks"]}  # fmt: skip
     for stage, amount in need.items():
         _, rate2, unit, _ = runs[2][stage]
         per_worker = rate2 / 2 / (3600 if unit == "routes/h" else 1)  # per second
         hours = [amount / (per_worker * n) / 3600 for n in (16, 64)]
-        print(f"| {stage} | {hours[0]:,.1f} h | {hours[1]:,.1f} h |")
+        table.row(
+            [stage, f"{hours[0]:,.1f} h", f"{hours[1]:,.1f} h"],
+            {"stage": stage, "amount": amount, "hours_16_workers": hours[0],
+             "hours_64_workers": hours[1]},
+        )  # fmt: skip
 
 
 if __name__ == "__main__":

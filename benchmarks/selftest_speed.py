@@ -18,6 +18,9 @@ jobs run slower than the single measurement here. `--run` adds a reduced end-to-
 through `run_selftest` (the CLI's code path) as a sanity check of the wiring, not of the scale.
 
     python benchmarks/selftest_speed.py [--steps 20] [--repeats 3] [--workers 2] [--run]
+        [--json PATH]
+
+(prints a table, its rows as JSON in benchmarks/results/selftest_speed.json)
 """
 
 from __future__ import annotations
@@ -28,8 +31,8 @@ import time
 from dataclasses import replace
 
 import torch
+from report import Report, add_json_option  # (this folder: run as a script)
 from rich.console import Console
-from rich.table import Table
 
 from aisdati.model.bc import BC_PAPER, BCConfig, BCTrainer
 from aisdati.model.dati import DATITrainer
@@ -91,7 +94,14 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="worker processes (cores)")
     parser.add_argument("--preset", default="paper", help="self-test preset (ours or paper)")
     parser.add_argument("--run", action="store_true", help="also time a reduced end-to-end run")
+    add_json_option(parser, "selftest_speed")
     args = parser.parse_args()
+    with Report.from_args("selftest_speed", args) as report:
+        run(args, report)
+
+
+def run(args: argparse.Namespace, report: Report) -> None:
+    """Measure every piece, print the projection (and with `--run`, the reduced run)."""
     torch.set_num_threads(1)
     w, reps = args.workers, args.repeats
     settings = preset_settings(args.preset)
@@ -117,25 +127,40 @@ def main() -> None:
         pieces.append(("Table 2", f"{method}, E={t2}", ms, EPISODES * STEPS, t2))
 
     console = Console()
-    table = Table(
+    columns = ("table", "what (per worker)", "ms / step", "ms / member-step", "minutes")
+    table = report.table(
+        columns,
         title=f"Projected wall time of the full tables ({args.preset} preset, {w} workers, "
-        f"1 thread each; Table 1 x {reps} repeats), from measured step costs"
+        f"1 thread each; Table 1 x {reps} repeats), from measured step costs",
+        style="rich",
+        justify=["left" if col in ("table", "what (per worker)") else "right" for col in columns],
     )
-    for col in ("table", "what (per worker)", "ms / step", "ms / member-step", "minutes"):
-        table.add_column(col, justify="left" if col in ("table", "what (per worker)") else "right")
     minutes: dict[str, float] = {}
     for tab, what, ms, steps, members in pieces:
         m = ms * steps / 1e3 / 60
         minutes[tab] = minutes.get(tab, 0.0) + m
-        table.add_row(tab, what, f"{ms:.1f}", f"{ms / members:.2f}", f"{m:.1f}")
+        table.row(
+            (tab, what, f"{ms:.1f}", f"{ms / members:.2f}", f"{m:.1f}"),
+            {"table": tab, "what": what, "ms_per_step": ms, "steps": steps, "members": members,
+             "minutes": m},
+        )  # fmt: skip
     for tab, m in minutes.items():
-        table.add_row(f"[bold]{tab}[/]", "total", "", "", f"[bold]{m:.1f}[/]")
-    table.add_row("[bold]both[/]", "total", "", "", f"[bold]{sum(minutes.values()):.1f}[/]")
-    console.print(table)
-    console.print(
+        table.row(
+            (f"[bold]{tab}[/]", "total", "", "", f"[bold]{m:.1f}[/]"),
+            {"table": tab, "what": "total", "minutes": m},
+        )
+    total = sum(minutes.values())
+    table.row(
+        ("[bold]both[/]", "total", "", "", f"[bold]{total:.1f}[/]"),
+        {"table": "both", "what": "total", "minutes": total},
+    )
+    table.show()
+    note = (
         "A projection, not a run: every DATI and DDPG-TI member at 100 x 200 steps, rollouts "
         "left out; workers run side by side, so a table's wall time is one worker's sum."
     )
+    console.print(note)
+    report.note(note)
     if args.run:
         small = dict(episodes=2, steps=40, seeds=2, references=3)
         reduced = preset_settings(
@@ -149,9 +174,11 @@ def main() -> None:
             methods=("dati", "bc", "bc-paper", "ddpg-ti"),
         )
         result = run_selftest(reduced)
-        console.print(
+        line = (
             f"reduced end-to-end Table 1 ({small}): {result.wall_seconds:.1f} s wall on {w} workers"
         )
+        console.print(line)
+        report.note(line)
 
 
 if __name__ == "__main__":
