@@ -62,18 +62,6 @@ SELFTEST_PRESET_OPTION = typer.Option(
     "references per seed) or ours (early stopping keeping the lowest-loss actor, region and "
     "speeds with margins, shared references).",
 )
-LANE_COURSE_OPTION = typer.Option(
-    2.0,
-    "--lane-course-km",
-    help="Lane score: what sailing against the lane's course costs, in km (across it: 0.7 x "
-    "as much; 0: position only). As the models were calibrated (training uses the default).",
-)
-LANE_TRAFFIC_OPTION = typer.Option(
-    True,
-    "--lane-traffic/--no-lane-traffic",
-    help="Lane score of dati and bc: the lane also holds one rollout from every training "
-    "track's start (where the model's traffic goes). As the models were calibrated.",
-)
 ASHORE = AshoreCheck()
 ASHORE_OPTION = typer.Option(
     True,
@@ -84,17 +72,12 @@ ASHORE_OPTION = typer.Option(
     "above the tidal limit, which the coastline holds as land).",
 )
 WORKERS_OPTION = typer.Option(
-    1,
+    "1",
     "--workers",
-    help="Run the command's tasks on a local Dask cluster of this many processes (1: in this "
-    "process). Results do not depend on it.",
-)
-SCHEDULER_OPTION = typer.Option(
-    None,
-    "--scheduler",
-    envvar="AISDATI_SCHEDULER",
-    help="Run the command's tasks on the existing Dask cluster at this address "
-    "(tcp://HOST:PORT) instead; every worker must see the input and output folders.",
+    envvar="AISDATI_WORKERS",
+    help="Where the command's tasks run: N local Dask processes (1: in this process), or the "
+    "address of an existing Dask cluster (tcp://HOST:PORT; every worker must see the input and "
+    "output folders). Results do not depend on it.",
 )
 DEVICE_OPTION = typer.Option(
     "cpu",
@@ -106,14 +89,12 @@ LANE_OPTION = typer.Option(
     None,
     "--lane",
     help="Override one lever of the preset, KEY=VALUE (repeatable): validation=true, "
-    "region=box|corridor, corridor_km=2, state=position|motion, time=step|progress, "
+    "region=box|corridor, corridor_km=2, state=position|motion, "
     "ranges=max|quantile, noise=gaussian|ou, fourier=6 (octaves of position features; 0 off), "
-    "pretrain=50 (epochs of cloning before the adversarial training; 0 off), variety=1 (noise "
-    "draws per pair in that cloning, the nearest pulled), members=3 (seeds "
-    "trained as one lane model), average=0 (decay of a moving-average actor; 0 off), "
-    "critic=decision|state, validation_tracks=8, validation_rollouts=3, "
-    "validate_by=rollout|step, goal=true, crossfit=true (members calibrated on folds they did "
-    "not train on), fold_by=vessel|time (those folds by vessel or by stretches of the period).",
+    "pretrain=50 (epochs of cloning before the adversarial training; 0 off), members=3 (seeds "
+    "trained as one lane model), validation_tracks=8, validation_rollouts=3, "
+    "validate_by=rollout|step, crossfit=true (members calibrated on vessel folds they did "
+    "not train on).",
 )
 
 
@@ -126,15 +107,17 @@ def ingest(
         "-i",
         help="AIS file, glob or folder (.zip .csv .parquet; NMEA .nmea .ais .txt); repeatable.",
     ),
-    year: int = typer.Option(None, help="Download MarineCadastre files of this year (2015 on)."),
-    months: str = typer.Option("1-12", help="Months to download, e.g. 1-3,7."),
-    days: str = typer.Option(None, help="Days to download (daily years 2018 on), e.g. 1-7."),
-    zone: int = typer.Option(None, help="UTM zone (monthly zone years 2015-2017), e.g. 17."),
-    data_dir: Path = typer.Option(Path("data/raw"), help="Download cache folder."),
-    base_url: str = typer.Option(
-        None, envvar="AISDATI_BASE_URL", help="Server to download from instead of MarineCadastre."
+    download: str = typer.Option(
+        None,
+        "--download",
+        help="Download MarineCadastre's files of this period (2015 on): YYYY, YYYY-MM or "
+        "YYYY-MM-DD, or a range A..B (2018-07-01..2018-07-07); 2015-2017 come by month, in "
+        "the UTM zones --roi spans. A mirror: set AISDATI_BASE_URL.",
+        show_default=False,
     ),
-    force: bool = typer.Option(False, "--force", help="Download again even if complete."),
+    data_dir: Path = typer.Option(
+        Path("data/raw"), help="Download cache folder (a complete file is not fetched again)."
+    ),
     out: Path = typer.Option(Path("data/processed"), help="Output folder."),
     roi: str = typer.Option(
         "florida-straits",
@@ -155,23 +138,15 @@ def ingest(
         help="Split a track where the vessel dwells (within --dwell-radius) this long; 0: only "
         "at --stop-gap gaps (the paper).",
     ),
-    clusters: str = typer.Option(
-        "routes",
-        help="routes: the paper's up/down/other plus route clusters (route-1, ...: lanes by "
-        "entry, exit and shape); direction: the paper's rule only.",
-    ),
     route_min_tracks: int = typer.Option(5, help="Fewest tracks of a route."),
     route_eps_km: str = typer.Option(
         "auto",
         help="Route endpoint radius and shape tolerance in km; auto: HDBSCAN, no fixed scale.",
     ),
-    route_seed: int = typer.Option(0, help="Seed of the route clustering's samples."),
     keep_rejects: bool = typer.Option(
         False, "--keep-rejects", help="Write every rejected row with its reason to rejects.parquet."
     ),
-    workers: int = WORKERS_OPTION,
-    scheduler: str | None = SCHEDULER_OPTION,
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
+    workers: str = WORKERS_OPTION,
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Read MarineCadastre AIS files (downloaded or local), then filter, clean, segment and
@@ -194,13 +169,8 @@ def selftest(
         "--methods",
         "-m",
         help="Methods to compare, comma-separated: dati, bc, bc-paper, ddpg-ti (Table 1: all "
-        "four), dati-no-time-embedding, dati-no-reward-input.",
-    ),
-    ablation: bool = typer.Option(
-        False,
-        "--ablation",
-        help="Table 2: DATI, DATI without time embedding and without reward input, everything "
-        "else equal (default family: circles).",
+        "four), dati-no-time-embedding, dati-no-reward-input; or table2: the paper's ablation "
+        "(DATI with and without time embedding and reward input; default family: circles).",
     ),
     seeds: int = typer.Option(10, help="Training seeds per family (paper: 10)."),
     episodes: int = typer.Option(100, help="Maximum training episodes per seed (paper: 100)."),
@@ -208,30 +178,22 @@ def selftest(
         None, help="Steps per episode τ (default: the family's, 200)."
     ),
     references: int = typer.Option(10, help="Unseen test references per family (paper: 10)."),
-    workers: int = typer.Option(
-        2,
+    workers: str = typer.Option(
+        "2",
         "--workers",
-        help="Train the members on a local Dask cluster of this many processes (one per core); "
-        "1: in this process.",
+        envvar="AISDATI_WORKERS",
+        help="Train the members on a local Dask cluster of this many processes (one per core; "
+        "1: in this process), or on the existing one at this address (tcp://HOST:PORT).",
     ),
-    scheduler: str | None = SCHEDULER_OPTION,
     device: str = DEVICE_OPTION,
     preset: str = SELFTEST_PRESET_OPTION,
     repeats: int = typer.Option(
         1, help="Run the whole protocol this many times on further seed blocks (its spread)."
     ),
-    noise: str | None = typer.Option(
-        None,
-        help="DATI's latent noise: gaussian, ou or family (OU at the family's dt, Gaussian for "
-        "Ribbons); default: the preset's.",
-    ),
-    time_embedding: bool = typer.Option(True, help="Time2Vec input (off: Table 2 ablation)."),
-    reward_input: bool = typer.Option(True, help="Reward input to the critics (off: ablation)."),
     quick: bool = typer.Option(
         False, "--quick", help="Smoke check: 2 seeds x 3 episodes x 40 steps."
     ),
     out: Path | None = typer.Option(None, help="Output folder (default runs/selftest-<time>)."),
-    quiet: bool = typer.Option(False, "--quiet", help="No progress bar or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON on stdout."),
 ) -> None:
     """Train DATI (and the baselines or ablations) on the paper's synthetic families and compare
@@ -275,16 +237,8 @@ def train(
     resume: bool = typer.Option(
         False, "--resume", help="Continue exactly from <out>/<cluster>.ckpt if it exists."
     ),
-    routes_per_task: int = typer.Option(
-        1,
-        "--routes-per-task",
-        help="--cluster routes: routes one task trains together as one batched ensemble (0: "
-        "all in one). The models depend on it, never on --workers.",
-    ),
-    workers: int = WORKERS_OPTION,
-    scheduler: str | None = SCHEDULER_OPTION,
+    workers: str = WORKERS_OPTION,
     device: str = DEVICE_OPTION,
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or table."),
     as_json: bool = typer.Option(False, "--json", help="Print the model card as JSON on stdout."),
 ) -> None:
     """Train a detector on one cluster's tracks. DATI writes <out>/<cluster>.pt (weights only),
@@ -324,20 +278,12 @@ def evaluate(
         "loiter.loops=1-2, speed.span, speed.slow=0.3, speed.fast=2-3, gap.span=0.2-0.4, "
         "noise.fraction=0.2, noise.km=0.5-1.",
     ),
-    train_fraction: float = typer.Option(
-        0.6, "--train-fraction", help="Share of the tracks (by vessel) to train on."
-    ),
-    split: str = typer.Option(
-        "vessel",
-        "--split",
-        help="vessel: train on a seeded share of the vessels, judge the others; time: train "
-        "on the tracks that start before --before, judge every later one (forward in time).",
-    ),
     before: datetime | None = typer.Option(
         None,
         "--before",
         formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S"],
-        help="--split time: the first day (UTC) of the judged period, e.g. 2018-08-01.",
+        help="Split by time instead of by vessel: train on the tracks that start before this "
+        "day (UTC), judge every later one (forward in time), e.g. 2018-08-01.",
     ),
     altered: float = typer.Option(
         0.5, "--altered", help="Share of the judged tracks that take an anomaly."
@@ -361,23 +307,13 @@ def evaluate(
     preset: str = PRESET_OPTION,
     lane: list[str] = LANE_OPTION,
     episodes: int = typer.Option(170, help="Training episodes of dati and bc."),
-    patience: int = typer.Option(10, help="DATI early stopping patience; 0 disables."),
-    rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts / draws per track."),
-    lane_rollouts: int = typer.Option(
-        30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
-    ),
-    lane_course_km: float = LANE_COURSE_OPTION,
-    lane_traffic: bool = LANE_TRAFFIC_OPTION,
     ashore: bool = ASHORE_OPTION,
-    near_km: float = typer.Option(10.0, "--near-km", help="nearest: start-distance filter."),
     contamination: float = typer.Option(
         0.05, help="Calibrated flagging: share of training tracks a detector would flag."
     ),
     seed: int = typer.Option(0, help="Seed of the split, the injections and the training."),
-    workers: int = WORKERS_OPTION,
-    scheduler: str | None = SCHEDULER_OPTION,
+    workers: str = WORKERS_OPTION,
     device: str = DEVICE_OPTION,
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress or table."),
     as_json: bool = typer.Option(False, "--json", help="Print evaluation.json on stdout."),
 ) -> None:
     """Measure detection on your own data: split a cluster's tracks by vessel, write anomalies
@@ -409,19 +345,10 @@ def detect(
         None,
         "--score",
         help="How a policy judges a track: lane (distance to where its K free rollouts go; "
-        "for nearest: to where the training tracks go), step (teacher-forced one-step "
-        "errors, m), steprate (the same errors over their report intervals, m/s; models "
-        "trained since it exists), stepspread (the same errors over the spread of the model's "
-        "K draws; models trained since it exists), stepod (the rarer among the training "
-        "tracks of stepspread and of the track's start-end pair; models trained since it "
-        "exists), rollout (the best free rollout's DTW, the "
-        "paper's), both (rollout + step), "
-        "steplane (step + lane), steptraffic (step + the distance to the training tracks "
-        "themselves; models trained since it exists) or area (lane + how much rarer the "
-        "track's start-end pair is than the training tracks'; models trained since 0.2.0). "
-        "Default: the model's own, "
-        "recorded when it was trained: for a model of a whole area (the area preset) "
-        "stepspread (bc) or step (dati), else lane.",
+        "for nearest: to where the training tracks go), rollout (the best free rollout's DTW, "
+        "the paper's), step (teacher-forced one-step errors, m) or stepspread (those errors "
+        "over the spread of the model's draws). Default: the model's own (its card says).",
+        show_default=False,
     ),
     out: Path | None = typer.Option(None, "--out", help="Report folder (default reports/<time>)."),
     cluster: str = typer.Option(
@@ -432,29 +359,31 @@ def detect(
     track: list[int] = typer.Option(
         None, "--track", help="Judge these track ids instead (repeatable)."
     ),
-    rollouts: int = typer.Option(10, "--rollouts", "-k", help="Rollouts per track (paper: 1)."),
-    lane_rollouts: int = typer.Option(
-        30, "--lane-rollouts", help="Rollouts per track that make up its lane (lane score)."
-    ),
-    lane_course_km: float = LANE_COURSE_OPTION,
-    lane_traffic: bool = LANE_TRAFFIC_OPTION,
     ashore: bool = ASHORE_OPTION,
-    threshold: float = typer.Option(0.75, help="Flag normalised scores above this, in (0, 1]."),
-    top_percent: float | None = typer.Option(
-        None, "--top-percent", help="Flag this percentage of highest scores instead."
-    ),
-    contamination: float | None = typer.Option(
-        None,
+    contamination: float = typer.Option(
+        0.05,
         "--contamination",
-        help="Flag scores above the model's calibrated threshold instead: the share of its own "
-        "training tracks it would flag (e.g. 0.05); independent of the test set.",
+        help="The default rule: flag scores above each model's calibrated threshold, which "
+        "flags this share of its own training tracks; a track's flag does not depend on the "
+        "other tracks judged with it.",
+    ),
+    threshold: float | None = typer.Option(
+        None,
+        "--threshold",
+        help="The paper's rule instead (Λ, section 6.2: 0.75): flag scores above this share of "
+        "the largest score of the tracks judged together, in (0, 1]; depends on the batch.",
+        show_default=False,
+    ),
+    top_percent: float | None = typer.Option(
+        None,
+        "--top-percent",
+        help="Flag this percentage of the highest scores of the batch instead.",
+        show_default=False,
     ),
     near_km: float = typer.Option(
         10.0, "--near-km", help="Test tracks start within this distance of a training start."
     ),
-    seed: int = typer.Option(0, help="Seed of the rollouts' latent noise."),
-    workers: int = WORKERS_OPTION,
-    scheduler: str | None = SCHEDULER_OPTION,
+    workers: str = WORKERS_OPTION,
     device: str = DEVICE_OPTION,
     labels: Path | None = typer.Option(
         None,
@@ -463,7 +392,6 @@ def detect(
         "incident list mmsi,start,end[,kind] (a track overlapping a window of its vessel is an "
         "anomaly, every other one normal); with kinds, metrics per kind.",
     ),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No table."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON on stdout."),
 ) -> None:
     """Score test tracks against trained models: writes scores.parquet, profiles.parquet,

@@ -64,7 +64,7 @@ def rescored(seed_dir: Path, route: str, ids: pd.Series) -> np.ndarray:
     """DATI's lane scores of these held-out tracks with today's defaults (the traffic too)."""
     det = load_detector(seed_dir / route / "models" / route)
     tracks = load_tracks(seed_dir / route / "data", [int(i) for i in ids])
-    return det.score(tracks, ScoreSettings(seed=int(seed_dir.name[4:]))).score_m
+    return det.score(tracks, ScoreSettings(seed=int(seed_dir.name[4:]))).score
 
 
 def draw_lane(ax: plt.Axes, seed_dir: Path, route: str, track: int) -> None:

@@ -61,6 +61,6 @@ def kitimat(tmp_path_factory) -> Path:
 
     out = tmp_path_factory.mktemp("kitimat")
     args = ["ingest", "--input", str(KITIMAT), "--roi", "none", "--min-points", "100"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 0, result.output
     return out

@@ -30,7 +30,7 @@ def run(tmp_path_factory):
         return CliRunner().invoke(app, [str(a) for a in args])
 
     # the paper's segmentation (--dwell-time 0): the cluster sizes below are pinned to it
-    args = ["--roi", "none", "--min-points", "30", "--dwell-time", "0", "--out", proc, "-q"]
+    args = ["--roi", "none", "--min-points", "30", "--dwell-time", "0", "--out", proc]
     r = cli("ingest", "--input", data, *args)
     assert r.exit_code == 0, r.output
     r = cli(
@@ -65,8 +65,6 @@ def run(tmp_path_factory):
         models,
         "--out",
         report,
-        "-k",
-        2,
         "--near-km",
         20,
         "--top-percent",
@@ -110,7 +108,7 @@ def test_detect_outputs_parse(run):
     scores = table.to_pandas()
     assert len(scores) >= 3
     assert scores["rank"].tolist() == list(range(1, len(scores) + 1))
-    assert scores["score"].max() == pytest.approx(1.0)
+    assert ((scores["score"] > scores["threshold"]) <= scores["flagged"]).all()
     assert scores["flagged"].sum() >= 1
     assert set(scores["model"]) == {"down"}
     doc = json.loads((report / "anomalies.geojson").read_text())
@@ -192,4 +190,4 @@ def test_detect_table_of_several_models_keeps_its_figures_whole(kitimat, cli, tm
     shown = scores[scores["flagged"]].sort_values("rank").head(15)
     assert scores["model"].nunique() > 1 and len(shown) > 1 and "…" not in r.output
     for row in shown.itertuples():
-        assert f"{row.score:.3f}" in r.output and f"{row.max_dev_m / 1000:,.2f}" in r.output
+        assert f"{row.score / 1000:,.2f}" in r.output and f"{row.max_dev_m / 1000:,.2f}" in r.output

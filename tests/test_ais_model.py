@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from aisdati.ais.source import build_source, make_env, track_reference
-from aisdati.detection.run import flag
+from aisdati.detection.run import DetectSettings, relative_thresholds, small_batch_note
 from aisdati.dtw import batch_mean_dtw_m, dtw_path_length, matched_distances
 from aisdati.errors import UserError
 from aisdati.geo import haversine_m, spherical_step
@@ -27,7 +28,7 @@ def processed(tmp_path_factory):
     out = tmp_path_factory.mktemp("processed")
     src = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
     args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 0, result.output
     return out
 
@@ -111,18 +112,24 @@ def test_planted_detour_scores_above_its_untouched_twin(processed):
     score_twin = min(mean_dtw_m(r, twin) for r in rollouts)
     score_detour = min(mean_dtw_m(r, detoured) for r in rollouts)
     assert score_detour > 5 * score_twin
-    scores = np.array([score_twin, score_detour]) / max(score_twin, score_detour)
-    assert flag(scores, 0.75, None).tolist() == [False, True]
+    assert score_twin < 0.75 * score_detour  # the paper's rule flags the detour alone
     profile = matched_distances(detoured, rollouts[0])
     dev, idx = profile.max(), int(profile.argmax())
     assert dev > 4000
     assert abs(idx - len(detoured) / 2) <= len(detoured) / 10
 
 
-def test_flag_top_percent():
-    scores = np.array([0.1, 1.0, 0.5, 0.9])
-    assert flag(scores, 0.75, 25).tolist() == [False, True, False, False]
-    assert flag(scores, 0.75, None).tolist() == [False, True, False, True]
+def test_batch_relative_rules_flag_by_the_batch_and_warn_of_a_small_one(tmp_path):
+    scores = np.array([0.1, 1.0, 0.5, 0.9, 0.2, 0.3, 0.4, 0.6, 0.7, 0.05])
+    base = DetectSettings(data_dir=tmp_path, models_dir=tmp_path, out_dir=tmp_path)
+    paper = replace(base, threshold=0.75)
+    assert paper.rule == "relative" and base.rule == "calibrated"
+    assert (scores > relative_thresholds(scores, paper)).tolist() == list(scores > 0.75)
+    top = replace(base, top_percent=20)
+    assert np.flatnonzero(scores > relative_thresholds(scores, top)).tolist() == [1, 3]
+    assert small_batch_note(10, paper) is None and small_batch_note(50, base) is None
+    assert "--threshold flags relative to the judged batch, and 1" in small_batch_note(1, paper)
+    assert "--top-percent" in small_batch_note(9, top)
 
 
 def test_label_metrics_weighted_f1_and_auc():

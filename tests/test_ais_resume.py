@@ -21,12 +21,12 @@ DATA = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 def processed(tmp_path_factory):
     out = tmp_path_factory.mktemp("processed")
     args = ["ingest", "--input", str(DATA), "--roi", "none", "--min-points", "30", "--out"]
-    result = CliRunner().invoke(app, [*args, str(out), "--quiet"])
+    result = CliRunner().invoke(app, [*args, str(out)])
     assert result.exit_code == 0, result.output
     return out
 
 
-@pytest.mark.parametrize("lane", [(), ("average=0.9",)], ids=["live-actor", "averaged-actor"])
+@pytest.mark.parametrize("lane", [()], ids=["live-actor"])
 def test_resume_equals_uninterrupted(processed, tmp_path, lane):
     def settings(out: str, resume: bool = False) -> TrainSettings:
         return TrainSettings(
@@ -77,6 +77,6 @@ def test_resume_of_another_run_is_refused(processed, tmp_path):
     with pytest.raises(KeyboardInterrupt):
         train_ais(first, interrupt)
     args = ["train", "--cluster", "down", "--data", str(processed), "--out", str(tmp_path)]
-    result = CliRunner().invoke(app, [*args, "--max-tracks", "2", "--seed", "5", "--resume", "-q"])
+    result = CliRunner().invoke(app, [*args, "--max-tracks", "2", "--seed", "5", "--resume"])
     assert result.exit_code == 2
     assert "belongs to another run" in result.output

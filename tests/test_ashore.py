@@ -112,11 +112,11 @@ def test_a_stretch_moved_inland_flags_its_track_and_ranks_it_first(
     assert (ruled.drop(track.track_id)["ashore_reports"] == 0).all()
     model = detect(replace(settings, ashore=False))
     alone = model.scores.set_index("track_id")
-    cut = model.models[0].threshold(settings.how, 0.05)
+    cut = model.models[0].threshold(settings.how_for(model.models[0]), 0.05)
     assert (alone["ashore_reports"] == 0).all()
-    assert (alone["flagged"] == (alone["score_m"] > cut)).all()
+    assert (alone["flagged"] == (alone["score"] > cut)).all()
     # the rule adds its flag to the model's and leaves every score as the model gave it
-    assert np.allclose(ruled["score_m"], alone.loc[ruled.index, "score_m"])
+    assert np.allclose(ruled["score"], alone.loc[ruled.index, "score"])
     assert (
         ruled["flagged"] == (alone.loc[ruled.index, "flagged"] | (ruled["ashore_reports"] >= 2))
     ).all()
@@ -138,8 +138,6 @@ def test_evaluate_reports_the_rule_and_scores_without_it(cli, kitimat, tmp_path)
         kitimat,
         "--cluster",
         "all",
-        "--split",
-        "time",
         "--before",
         "2018-08-01",
         "--detectors",
@@ -149,10 +147,10 @@ def test_evaluate_reports_the_rule_and_scores_without_it(cli, kitimat, tmp_path)
         "--altered",
         "0.5",
     )
-    ruled = cli(*args, "--out", tmp_path / "ruled", "-q")  # fmt: skip
+    ruled = cli(*args, "--out", tmp_path / "ruled")  # fmt: skip
     assert ruled.exit_code == 0, ruled.output
     alone = cli(*args, "--no-ashore", "--models", tmp_path / "ruled" / "models",
-                "--out", tmp_path / "alone", "-q")  # fmt: skip
+                "--out", tmp_path / "alone")  # fmt: skip
     assert alone.exit_code == 0, alone.output
     doc = {
         k: json.loads((tmp_path / k / "evaluation.json").read_text()) for k in ("ruled", "alone")
@@ -175,7 +173,7 @@ def ny_tracks(tmp_path_factory) -> list[Track]:
 
     out = tmp_path_factory.mktemp("nyweek")
     args = ["ingest", "--input", str(NY_WEEK), "--roi", "none", "--min-points", "50"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out), "--quiet"])
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 0, result.output
     table = read_track_table(out)
     return load_tracks(out, [int(i) for i in table["track_id"]])
@@ -218,7 +216,7 @@ def test_a_card_records_its_traffics_water_and_old_cards_still_load(ny_tracks, t
 
 def test_evaluate_at_sea_writes_only_anomalies_a_vessel_could_sail(cli, kitimat, tmp_path):
     out = tmp_path / "sea"
-    r = cli("evaluate", "--data", kitimat, "--cluster", "all", "--split", "time", "--before",
+    r = cli("evaluate", "--data", kitimat, "--cluster", "all", "--before",
             "2018-08-01", "--detectors", "nearest", "--kinds", "detour,jump", "--altered", "0.5",
             "--at-sea", "--out", out)  # fmt: skip
     assert r.exit_code == 0, r.output

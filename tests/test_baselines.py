@@ -103,11 +103,11 @@ def test_parse_methods():
     [
         ("--methods", "bogus"),
         ("--methods", ","),
-        ("--ablation", "--methods", "bc"),
+        ("--methods", "table2,bc"),
     ],
 )
 def test_bad_methods_are_one_line_errors(cli, tmp_path, args):
-    result = cli("selftest", "--out", tmp_path / "o", "--quiet", *args)
+    result = cli("selftest", "--out", tmp_path / "o", *args)
     assert result.exit_code == 2
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:")
@@ -139,7 +139,8 @@ def test_table1_methods_end_to_end(cli, tmp_path):
 
 def test_ablation_end_to_end(cli, tmp_path):
     out = tmp_path / "t2"
-    result = cli("selftest", "--ablation", "--episodes", "1", "--steps", "10", "--out", out, *TINY)
+    result = cli("selftest", "--methods", "table2", "--episodes", "1", "--steps", "10",
+                 "--out", out, *TINY)
     assert result.exit_code == 0, result.output
     assert "ablation" in result.output and "top-2" in result.output
     rows = pd.read_csv(out / "results.csv")

@@ -110,7 +110,7 @@ def test_a_route_trains_and_scores_on_the_gpu_close_to_the_cpu(kitimat, tmp_path
     ids = read_track_table(kitimat)["track_id"].to_numpy()[:12]
     tracks = load_tracks(kitimat, [int(i) for i in ids])
     how = replace(ScoreSettings(), lane_rollouts=4, rollouts=2, lane_traffic=False)
-    on_cpu = model.score(tracks, how).score_m
+    on_cpu = model.score(tracks, how).score
     model.to_device("cuda:0")
-    on_gpu = model.score(tracks, how).score_m
+    on_gpu = model.score(tracks, how).score
     np.testing.assert_allclose(on_gpu, on_cpu, rtol=1e-3, atol=1.0)

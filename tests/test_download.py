@@ -20,6 +20,7 @@ from aisdati.preprocess.download import (
     download,
     fetch,
     marinecadastre_files,
+    utm_zones,
 )
 
 FAST = DownloadSettings(retries=3, backoff_s=0.01, timeout_s=5, chunk_bytes=4096)
@@ -89,16 +90,24 @@ def fixture_zip(data) -> bytes:
 
 
 def test_file_names_follow_each_years_layout():
-    assert marinecadastre_files(2015, "1-2", zone=17) == [
+    assert marinecadastre_files("2015-01..2015-02", zones=[17]) == [
         RemoteFile(2015, "AIS_2015_01_Zone17.zip"),
         RemoteFile(2015, "AIS_2015_02_Zone17.zip"),
     ]
-    assert [f.name for f in marinecadastre_files(2022, "2", "27-31")] == [
+    assert [f.name for f in marinecadastre_files("2016-03", zones=[17, 18])] == [
+        "AIS_2016_03_Zone17.zip",
+        "AIS_2016_03_Zone18.zip",
+    ]
+    assert [f.name for f in marinecadastre_files("2022-02-27..2022-03-01")] == [
         "AIS_2022_02_27.zip",
         "AIS_2022_02_28.zip",
+        "AIS_2022_03_01.zip",
     ]
-    assert len(marinecadastre_files(2020, "2")) == 29
-    assert marinecadastre_files(2025, "1", "1")[0].name == "ais-2025-01-01.csv.zst"
+    assert len(marinecadastre_files("2020-02")) == 29
+    assert len(marinecadastre_files("2019")) == 365
+    assert marinecadastre_files("2025-01-01")[0].name == "ais-2025-01-01.csv.zst"
+    assert utm_zones(-83.5, -79.0) == [17]  # the paper's Florida Straits
+    assert utm_zones(-125.0, -119.0) == [10, 11]
     assert (
         RemoteFile(2015, "AIS_2015_01_Zone17.zip").url(
             "https://coast.noaa.gov/htdata/CMSP/AISDataHandler/"
@@ -108,19 +117,21 @@ def test_file_names_follow_each_years_layout():
 
 
 @pytest.mark.parametrize(
-    "kwargs, message",
+    "spec, message",
     [
-        ({"year": 2014}, "File Geodatabases"),
-        ({"year": 2015}, "add --zone"),
-        ({"year": 2016, "zone": 17, "days": "1"}, "--days does not apply"),
-        ({"year": 2022, "zone": 17}, "not per zone"),
-        ({"year": 2022, "months": "13"}, "1..12"),
-        ({"year": 2022, "months": "x"}, "expected numbers"),
+        ("2014", "File Geodatabases"),
+        ("2015-03", "per UTM zone, chosen by --roi"),
+        ("2016-03-01", "files of 2015-2017 are monthly"),
+        ("2022-13", "is no date"),
+        ("2022-02-30", "is no date"),
+        ("July 2022", "expected YYYY"),
+        ("2022-03..2022-02", "ends before it starts"),
+        ("2022-03..2022-03-05", "both ends of a range are days, or both months"),
     ],
 )
-def test_wrong_year_layout_is_a_user_error(kwargs, message):
+def test_a_wrong_period_is_a_user_error(spec, message):
     with pytest.raises(UserError, match=message):
-        marinecadastre_files(**kwargs)
+        marinecadastre_files(spec)
 
 
 def test_interrupted_download_resumes_with_range(server, fixture_zip, tmp_path):
@@ -180,7 +191,7 @@ def test_truncated_zst_is_refused_and_a_whole_one_accepted(server, tmp_path):
     assert fetch(f"{base}/2025/ais-2025-01-02.csv.zst", tmp_path / "b.csv.zst", settings=FAST)
 
 
-def test_complete_files_are_skipped_unless_forced(server, fixture_zip, tmp_path):
+def test_complete_files_are_skipped(server, fixture_zip, tmp_path):
     handler, base = server
     handler.files["/2022/AIS_2022_01_03.zip"] = fixture_zip
     dest = tmp_path / "AIS_2022_01_03.zip"
@@ -188,8 +199,6 @@ def test_complete_files_are_skipped_unless_forced(server, fixture_zip, tmp_path)
     n = len(handler.requests)
     assert not fetch(f"{base}/2022/AIS_2022_01_03.zip", dest, settings=FAST)
     assert len(handler.requests) == n
-    assert fetch(f"{base}/2022/AIS_2022_01_03.zip", dest, force=True, settings=FAST)
-    assert len(handler.requests) == n + 1
 
 
 def test_missing_remote_file_is_a_user_error(server, tmp_path):
@@ -198,13 +207,14 @@ def test_missing_remote_file_is_a_user_error(server, tmp_path):
         fetch(f"{base}/2022/AIS_2022_01_04.zip", tmp_path / "x.zip", settings=FAST)
 
 
-def test_cli_downloads_then_ingests(server, fixture_zip, tmp_path, cli):
+def test_cli_downloads_then_ingests(server, fixture_zip, tmp_path, cli, monkeypatch):
     handler, base = server
     handler.files["/2022/AIS_2022_01_03.zip"] = fixture_zip
     handler.drop_first, handler.drop_at = 1, 100_000
-    args = ["ingest", "--year", "2022", "--months", "1", "--days", "3", "--base-url", base]
-    args += ["--data-dir", tmp_path / "raw", "--out", tmp_path / "out", "--roi", "none"]
-    result = cli(*args, "--min-points", "5", "--quiet")
+    args = ["ingest", "--download", "2022-01-03", "--data-dir", tmp_path / "raw"]
+    args += ["--out", tmp_path / "out", "--roi", "none"]
+    monkeypatch.setenv("AISDATI_BASE_URL", base)
+    result = cli(*args, "--min-points", "5")
     assert result.exit_code == 0, result.output
     assert (tmp_path / "raw" / "2022" / "AIS_2022_01_03.zip").read_bytes() == fixture_zip
     assert (tmp_path / "out" / "tracks.parquet").exists()

@@ -207,7 +207,7 @@ def test_detect_on_two_workers_scores_as_in_process(kitimat, tmp_path):
     models = tmp_path / "models"
     trained = run(
         "train", "--cluster", "routes", "--method", "nearest", "--data", kitimat,
-        "--out", models, "--workers", "2", "--quiet",
+        "--out", models, "--workers", "2",
     )  # fmt: skip
     assert trained.exit_code == 0, trained.output
     assert sorted(p.name for p in models.glob("route-*-nearest.json"))
@@ -216,7 +216,7 @@ def test_detect_on_two_workers_scores_as_in_process(kitimat, tmp_path):
         out = tmp_path / f"detect-{workers}"
         result = run(
             "detect", "--data", kitimat, "--models", models, "--method", "nearest",
-            "--cluster", "all", "--out", out, "--workers", workers, "--quiet",
+            "--cluster", "all", "--out", out, "--workers", workers,
         )  # fmt: skip
         assert result.exit_code == 0, result.output
         scores[workers] = pd.read_parquet(out / "scores.parquet")
@@ -242,7 +242,7 @@ def test_scores_in_chunks_are_the_scores_of_the_whole_set(kitimat, in_process, c
     how = replace(ScoreSettings(), lane_rollouts=2, rollouts=2, lane_traffic=False)
     here = model.score(tracks, how)
     there = model.score(tracks, how, runner=DaskRunner(cluster))
-    np.testing.assert_array_equal(here.score_m, there.score_m)
+    np.testing.assert_array_equal(here.score, there.score)
     assert len(there.profiles) == len(tracks)
 
 
@@ -256,18 +256,17 @@ def test_a_scheduler_nobody_runs_is_one_line_and_exit_2(kitimat, tmp_path):
     address = f"tcp://127.0.0.1:{free_port()}"
     result = run(
         "detect", "--data", kitimat, "--models", tmp_path, "--out", tmp_path / "r",
-        "--scheduler", address,
+        "--workers", address,
     )  # fmt: skip
     one_line_error(result, f"cannot reach the Dask scheduler at {address}")
     assert not (tmp_path / "r" / "report.json").exists()
 
 
-def test_workers_and_scheduler_together_are_refused(kitimat, tmp_path):
-    result = run(
-        "detect", "--data", kitimat, "--models", tmp_path, "--workers", "2",
-        "--scheduler", "tcp://127.0.0.1:1",
-    )  # fmt: skip
-    one_line_error(result, "give --workers or --scheduler, not both")
+def test_workers_is_a_count_or_an_address(kitimat, tmp_path):
+    result = run("detect", "--data", kitimat, "--models", tmp_path, "--workers", "two")
+    one_line_error(result, "--workers 'two': expected a number of processes or a scheduler address")
+    assert Execution.parse("3") == Execution(workers=3)
+    assert Execution.parse(" tcp://127.0.0.1:1 ") == Execution(scheduler="tcp://127.0.0.1:1")
 
 
 def test_an_existing_cluster_runs_the_tasks(cluster):

@@ -32,12 +32,12 @@ def trained(tmp_path_factory):
     its `down` cluster (the lanes preset without pretraining: corridors beside the policies)."""
     base = tmp_path_factory.mktemp("models")
     proc, models = base / "processed", base / "models"
-    r = run("ingest", "--input", NY_HOUR, "--roi", "none", "--min-points", 30, "--out", proc, "-q")
+    r = run("ingest", "--input", NY_HOUR, "--roi", "none", "--min-points", 30, "--out", proc)
     assert r.exit_code == 0, r.output
     for method in ("dati", "bc", "nearest"):
         r = run(
             "train", "--cluster", "down", "--method", method, "--data", proc, "--out", models,
-            "--episodes", 2, "--max-tracks", 3, "--seed", 1, "--lane", "pretrain=0", "-q",
+            "--episodes", 2, "--max-tracks", 3, "--seed", 1, "--lane", "pretrain=0",
         )  # fmt: skip
         assert r.exit_code == 0, r.output
     return {"proc": proc, "models": models}
@@ -52,7 +52,7 @@ def copy_of(trained, tmp_path: Path) -> Path:
 def detect(trained, models: Path, out: Path, method: str, *extra):
     return run(
         "detect", "--data", trained["proc"], "--models", models, "--out", out, "--method",
-        method, "-k", 1, "--near-km", 20, "--lane-rollouts", 1, *extra,
+        method, "--near-km", 20, *extra,
     )  # fmt: skip
 
 
@@ -332,7 +332,7 @@ def resume(trained, models: Path, *lane: str):
     options = [x for item in lane for x in ("--lane", item)]
     return run(
         "train", "--cluster", "down", "--data", trained["proc"], "--out", models,
-        "--episodes", 3, "--max-tracks", 2, "--seed", 4, "--resume", "-q", *options,
+        "--episodes", 3, "--max-tracks", 2, "--seed", 4, "--resume", *options,
     )  # fmt: skip
 
 
@@ -349,7 +349,7 @@ def test_resume_without_the_lane_options_names_the_ones_that_differ(trained, che
     result = resume(trained, models, "fourier=0", "pretrain=0")
     one_line_error(result, r"written with --lane members=1, this run has members=3")
     # a checkpoint from before a lane setting existed ran as its default does: it resumes
-    edit_checkpoint(lambda d: d["identity"]["lane"].pop("variety"))(models / "down.ckpt")
+    edit_checkpoint(lambda d: d["identity"]["lane"].pop("validate_by"))(models / "down.ckpt")
     result = resume(trained, models, *RESUME_LANE)
     assert result.exit_code == 0, result.output
 

@@ -139,9 +139,7 @@ def test_nan_and_infinity_in_parquet_are_rejected(cli, data, tmp_path, baseline)
         table.loc[rows[k], column] = value
     src = tmp_path / "nan.parquet"
     pq.write_table(pa.Table.from_pandas(table, preserve_index=False), src)
-    result, report = ingest(
-        cli, tmp_path / "out", src, extra=(*SETTINGS, "--clusters", "direction")
-    )
+    result, report = ingest(cli, tmp_path / "out", src, extra=SETTINGS)
     assert result.exit_code == 0, result.output
     rejected, before = report["rejected"], baseline["rejected"]
     assert rejected["missing_value"] == before["missing_value"] + 4

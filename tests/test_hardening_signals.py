@@ -61,7 +61,7 @@ def temporaries(folder: Path) -> list[str]:
 
 def start_big_ingest(out: Path) -> subprocess.Popen:
     inputs = [a for name in BIG_INPUTS for a in ("--input", DATA / name)]
-    proc = aisdati("ingest", *inputs, "--roi", "none", "--min-points", "20", "--out", out, "-q")
+    proc = aisdati("ingest", *inputs, "--roi", "none", "--min-points", "20", "--out", out)
     wait_for(lambda: any(n.startswith(".ingest-") for n in temporaries(out)), proc)
     time.sleep(0.3)  # well inside the run (it takes seconds)
     return proc
@@ -97,7 +97,7 @@ def test_the_next_run_sweeps_what_sigkill_left(cli, tmp_path):
     assert any(n.startswith(f".ingest-{proc.pid}-") for n in left), left  # what the kill left
     result = cli(
         "ingest", "--input", DATA / "NYHarbor_2020_06_30_first_hour.csv",
-        "--roi", "none", "--min-points", "20", "--out", out, "-q",
+        "--roi", "none", "--min-points", "20", "--out", out,
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert temporaries(out) == []
@@ -127,7 +127,7 @@ def test_the_sweep_removes_only_stale_temporaries_of_ours(tmp_path):
     with hold_lock(out / live[0]):  # a run in progress (in this process) holds its folder
         proc = aisdati(
             "ingest", "--input", DATA / "NYHarbor_2020_06_30_first_hour.csv",
-            "--roi", "none", "--min-points", "20", "--out", out, "-q",
+            "--roi", "none", "--min-points", "20", "--out", out,
         )  # fmt: skip
         _, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
@@ -147,8 +147,8 @@ def long_track(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("kitimat")
     args = ["ingest", "--input", str(DATA / "AIS_2018_07-08_Kitimat.csv.gz"), "--roi", "none"]
-    args += ["--dwell-time", "0", "--clusters", "direction"]  # keep the 493 reports in one
-    result = CliRunner().invoke(app, [*args, "--min-points", "300", "--out", str(out), "-q"])
+    args += ["--dwell-time", "0"]  # keep the 493 reports in one
+    result = CliRunner().invoke(app, [*args, "--min-points", "300", "--out", str(out)])
     assert result.exit_code == 0, result.output
     return out
 
@@ -162,7 +162,7 @@ def test_stopping_the_first_training_episode_says_no_model_was_saved(
     models = tmp_path / "models"
     proc = aisdati(
         "train", "--cluster", "other", "--data", long_track, "--out", models,
-        "--episodes", "1", "--max-tracks", "1", "-q",
+        "--episodes", "1", "--max-tracks", "1",
     )  # fmt: skip
     wait_for(models.is_dir, proc)  # the output folder is prepared just before training
     time.sleep(1.0)

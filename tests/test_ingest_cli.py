@@ -256,8 +256,8 @@ def test_bad_options_are_user_errors(cli, data, tmp_path):
     ]:
         result = cli("ingest", "--input", data / HEAD_ZIP, "--out", tmp_path / "o", *args)
         assert result.exit_code == 2 and message in " ".join(result.stderr.split()), result.stderr
-    result = cli("ingest", "--year", "2022", "--zone", "17", "--out", tmp_path / "o")
-    assert result.exit_code == 2 and "not per zone" in result.stderr
+    result = cli("ingest", "--download", "2016-03-01", "--out", tmp_path / "o")
+    assert result.exit_code == 2 and "files of 2015-2017 are monthly" in result.stderr
     result = cli("ingest", "--out", tmp_path / "o")
     assert result.exit_code == 2 and "nothing to ingest" in result.stderr
 

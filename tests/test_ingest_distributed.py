@@ -44,7 +44,7 @@ TIMINGS = ("seconds", "stage_seconds", "outputs")
 
 @pytest.fixture(scope="module")
 def cluster():
-    """A local cluster of two worker processes, for the runs given its address (--scheduler)."""
+    """A local cluster of two worker processes, for the runs given its address (--workers)."""
     from distributed import LocalCluster
 
     with LocalCluster(
@@ -72,7 +72,7 @@ def kitimat_runs(tmp_path_factory) -> tuple[Path, Path]:
 
     base = tmp_path_factory.mktemp("kitimat")
     for name, extra in (("one", ()), ("two", ("--workers", "2"))):
-        args = ["ingest", "--input", KITIMAT, "--out", base / name, *KITIMAT_ARGS, *extra, "-q"]
+        args = ["ingest", "--input", KITIMAT, "--out", base / name, *KITIMAT_ARGS, *extra]
         result = CliRunner().invoke(app, [str(a) for a in args])
         assert result.exit_code == 0, result.output
     return base / "one", base / "two"
@@ -123,7 +123,7 @@ def test_kitimat_on_two_local_workers_gives_the_outputs_of_one_process(kitimat_r
 
 def test_the_ny_week_on_a_cluster_gives_the_outputs_of_one_process(cli, tmp_path, cluster):
     one = ingest(cli, tmp_path / "one", NY_WEEK, *NY_WEEK_ARGS)
-    two = ingest(cli, tmp_path / "two", NY_WEEK, *NY_WEEK_ARGS, "--scheduler", cluster)
+    two = ingest(cli, tmp_path / "two", NY_WEEK, *NY_WEEK_ARGS, "--workers", cluster)
     assert one["tracks"]["total"] == two["tracks"]["total"] == 2144
     assert_same_outputs(tmp_path / "one", tmp_path / "two")
 
@@ -219,7 +219,7 @@ def test_ctrl_c_during_a_run_on_workers_leaves_the_earlier_set(kitimat_runs, tmp
     shutil.copytree(kitimat_runs[0], out)
     before = snapshot(out)
     command = "import sys; from aisdati.cli import app; sys.argv[0] = 'aisdati'; app()"
-    args = ["ingest", "--input", NY_WEEK, "--out", out, *NY_WEEK_ARGS, "--workers", "2", "-q"]
+    args = ["ingest", "--input", NY_WEEK, "--out", out, *NY_WEEK_ARGS, "--workers", "2"]
     proc = subprocess.Popen(
         [sys.executable, "-c", command, *[str(a) for a in args]],
         stderr=subprocess.PIPE,

@@ -226,14 +226,14 @@ def test_a_detection_over_the_cap_says_how_many_tracks_its_maps_draw(cli, kitima
     every flagged track and 2 of the others, and its title says so."""
     models = tmp_path / "models"
     trained = cli("train", "--cluster", "routes", "--method", "nearest", "--data", kitimat,
-                  "--out", models, "--quiet")  # fmt: skip
+                  "--out", models)  # fmt: skip
     assert trained.exit_code == 0, trained.output
     out = tmp_path / "report"
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(maps, "MAP_UNFLAGGED_TRACKS", 2)
         result = cli(
             "detect", "--data", kitimat, "--models", models, "--method", "nearest",
-            "--cluster", "all", "--top-percent", "10", "--out", out, "--quiet",
+            "--cluster", "all", "--top-percent", "10", "--out", out,
         )  # fmt: skip
     assert result.exit_code == 0, result.output
     scores = pd.read_parquet(out / "scores.parquet")

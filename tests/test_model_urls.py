@@ -106,7 +106,6 @@ def untimed(card: Path) -> dict:
 def train_nearest_routes(data: Path, out: str | Path) -> None:
     trained = run(
         "train", "--cluster", "routes", "--method", "nearest", "--data", data, "--out", out,
-        "--quiet",
     )  # fmt: skip
     assert trained.exit_code == 0, trained.output
 
@@ -132,7 +131,7 @@ def test_train_and_detect_by_url_judge_as_a_local_folder(kitimat, ftp, nearest_u
             out = tmp_path / f"detect-{len(scores)}-{len(named)}"
             result = run(
                 "detect", "--data", kitimat, "--models", source, *named, "--method", "nearest",
-                "--cluster", "all", "--out", out, "--quiet",
+                "--cluster", "all", "--out", out,
             )  # fmt: skip
             assert result.exit_code == 0, result.output
             scores.append(pd.read_parquet(out / "scores.parquet"))

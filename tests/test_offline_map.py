@@ -130,7 +130,7 @@ def test_the_page_renders_offline_with_coast_and_tracks(tmp_path, proxy):
     proxy_url, seen = proxy
     tracks = kitimat_tracks()
     props = [
-        {"track_id": i, "mmsi": 100 + i, "score": float(i), "score_m": 100.0 * i}
+        {"track_id": i, "mmsi": 100 + i, "score": 100.0 * i, "threshold": 150.0}
         for i in range(len(tracks))
     ]
     flagged = np.arange(len(tracks)) >= len(tracks) - 2

@@ -203,19 +203,12 @@ def test_ingest_writes_route_outputs(kitimat):
     assert not list(out.glob(".*tmp*"))
 
 
-def test_cli_routes_table_and_direction_only(cli, tmp_path):
+def test_cli_routes_table_and_bad_route_options(cli, tmp_path):
     args = ["ingest", "--input", KITIMAT, "--roi", "none", "--min-points", "100", "--out", tmp_path]
     result = cli(*args)
     assert result.exit_code == 0, result.output
     assert "route-1" in result.output and "median length" in result.output
-    result = cli(*args, "--clusters", "direction", "--json")
-    assert result.exit_code == 0, result.output
-    assert json.loads(result.stdout)["route_clusters"] is None
-    tracks = pq.read_table(tmp_path / "tracks.parquet")
-    assert tracks.column("route").null_count == tracks.num_rows
-    assert not (tmp_path / "routes.parquet").exists()  # no stale routes beside new tracks
     for bad, words in (
-        (["--clusters", "lanes"], "--clusters"),
         (["--route-eps-km", "far"], "--route-eps-km"),
         (["--route-min-tracks", "1"], "--route-min-tracks"),
         (["--dwell-time", "soon"], "--dwell-time"),
@@ -242,7 +235,7 @@ def test_select_routes_unrouted_and_clusters(kitimat):
 def test_a_route_too_small_to_train_on_says_so_in_one_line(cli, tmp_path):
     data, models = tmp_path / "data", tmp_path / "models"
     args = ["--roi", "none", "--min-points", "100", "--route-min-tracks", "2", "--out", data]
-    result = cli("ingest", "--input", KITIMAT, *args, "-q")
+    result = cli("ingest", "--input", KITIMAT, *args)
     assert result.exit_code == 0, result.output
     table = read_track_table(data)
     sizes = table["route"].value_counts()

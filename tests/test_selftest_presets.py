@@ -206,7 +206,7 @@ def test_paper_preset_runs_dati_and_bc_paper_with_repeats(tmp_path):
 def test_cli_preset_repeats_and_bc_paper(cli, tmp_path):
     out = tmp_path / "run"
     result = cli(
-        "selftest", "--out", out, "--quiet", "--family", "circles", "--seeds", "1",
+        "selftest", "--out", out, "--family", "circles", "--seeds", "1",
         "--episodes", "1", "--steps", "10", "--references", "2", "--workers", "1",
         "--preset", "paper", "--repeats", "2", "--methods", "bc,bc-paper",
     )  # fmt: skip
@@ -232,13 +232,12 @@ def test_cli_preset_repeats_and_bc_paper(cli, tmp_path):
     [
         (("--preset", "nosuch"), "unknown self-test preset"),
         (("--repeats", "0"), "--repeats"),
-        (("--noise", "bogus"), "--noise"),
     ],
-    ids=["preset", "repeats", "noise"],
+    ids=["preset", "repeats"],
 )
 def test_bad_preset_options_are_one_line_errors(cli, tmp_path, args, message):
     out = tmp_path / "run"
-    result = cli("selftest", "--out", out, "--quiet", "--family", "circles", *args)
+    result = cli("selftest", "--out", out, "--family", "circles", *args)
     assert result.exit_code == 2, result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and message in lines[0]

@@ -16,45 +16,25 @@ forward in time by a rule written before (docs/results/forward.md); a cluster or
 the paper's DATI (`DEFAULT_METHOD`)."""
 DEFAULT_METHOD = "dati"
 """The detector `train` fits for a cluster or route when `--method` is not given."""
-SCORES = (
-    "rollout",
-    "step",
-    "steprate",
-    "stepspread",
-    "stepod",
-    "lane",
-    "both",
-    "steplane",
-    "steptraffic",
-    "area",
-)
-"""The ways a detector scores a track (`aisdati.detectors.scoring.ScoreSettings.score`)."""
-SCORE_UNITS = {"steprate": "m/s", "stepspread": "x spread", "stepod": "rarity"}
-"""The unit of each score not in metres but for `RATIO_SCORES` (multiples of medians):
-`steprate` is the one-step errors over their report intervals, `stepspread` over the spread of
-the model's own draws, `stepod` the rarer of `stepspread` and the origin-destination term
-among the training tracks' own (-log10 of a share, `aisdati.detectors.rarity`)."""
-RATIO_SCORES: dict[str, tuple[str, str]] = {
-    "both": ("rollout", "step"),
-    "steplane": ("step", "lane"),
-    "steptraffic": ("step", "traffic"),
-}
-"""Scores that add two others, each divided by the median of the training tracks' own scores of
-its kind, so that neither dominates by its unit of scale (a track as typical as the median
-training track scores 2). `steplane` joins what the one-step score sees (a move the traffic
-would not make: a jump) to what the lane sees (a place the traffic does not go: a detour);
-`steptraffic` joins it to the distance to the training tracks themselves (`traffic`: where the
-area's vessels went, not where the policy sails)."""
-STEP_SCORES = ("step", "steprate", "stepspread")
+SCORES = ("rollout", "step", "stepspread", "lane")
+"""The ways a detector scores a track (`aisdati.detectors.scoring.ScoreSettings.score`): the
+paper's (`rollout`) and the ones a preset judges by. What was measured and not adopted is listed
+in docs/results/tried.md; its code is in git history."""
+REMOVED_SCORES = ("steprate", "steptraffic", "steplane", "stepod", "both", "area")
+"""Scores of earlier releases, measured and not adopted: a card that judges by one is refused
+with `LAST_RELEASE_WITH_EXPERIMENTS` named."""
+LAST_RELEASE_WITH_EXPERIMENTS = "0.3.0"
+"""The last release that reads cards of the removed scores and lane levers."""
+SCORE_UNITS = {"stepspread": "x spread"}
+"""The unit of each score not in metres: `stepspread` is the one-step errors over the spread of
+the model's own draws."""
+STEP_SCORES = ("step", "stepspread")
 """Scores of the teacher-forced one-step errors: computed together from the same K draws."""
-LANE_SCORES = ("lane", "steplane", "steptraffic", "area")
-"""Scores whose calibration rests on the lane settings (`ScoreSettings.calibrated_with`)."""
 
 
 def score_unit(score: str) -> str:
-    """The unit of a score's raw values: metres, `SCORE_UNITS`'s, or (a sum of ratios,
-    `RATIO_SCORES`) multiples of the training tracks' medians."""
-    return "x median" if score in RATIO_SCORES else SCORE_UNITS.get(score, "m")
+    """The unit of a score's raw values: metres, or `SCORE_UNITS`'s."""
+    return SCORE_UNITS.get(score, "m")
 
 
 def readable_value(value: float, unit: str) -> float:

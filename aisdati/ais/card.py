@@ -30,13 +30,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.ais import SCORES
+from aisdati.ais import LAST_RELEASE_WITH_EXPERIMENTS, REMOVED_SCORES, SCORES
 from aisdati.ais.card_fields import CardFields, is_number
 from aisdati.ais.space import (
     MAX_FOURIER,
     MAX_MEMBERS,
     MAX_PRETRAIN,
-    MAX_VARIETY,
     LaneConfig,
     state_width,
 )
@@ -308,7 +307,7 @@ class ModelCard:
             lane_config=lane, networks=networks, data=_read_data(f),
             calibration=_read_calibration(f), calibrated_with=_read_calibrated_with(f),
             training=_read_training(f), preset=doc.get("preset"), created=doc.get("created"),
-            score=f.choice("score", SCORES) if doc.get("score") is not None else "lane",
+            score=_read_score(f),
             code_version=doc.get("code_version"), epsilon_m=doc.get("epsilon_m"),
             epsilon_interpretation=doc.get("epsilon_interpretation"),
         )  # fmt: skip
@@ -354,7 +353,6 @@ def _read_lane(f: CardFields) -> LaneConfig:
             f.integer(f"lane_config.{key}", 1, most)
     for key, least, most in (
         ("fourier", 0, MAX_FOURIER), ("pretrain", 0, MAX_PRETRAIN), ("members", 1, MAX_MEMBERS),
-        ("variety", 1, MAX_VARIETY),
     ):  # fmt: skip
         if key in lane:
             f.integer(f"lane_config.{key}", least, most)
@@ -381,7 +379,7 @@ def _read_networks(f: CardFields, method: str, lane: LaneConfig) -> NetworkCard 
                 f.number(f"config.{key}", value=value)
         _read_sizes(f, "config", ("state_features", "time_embedding_dim", "hidden_units"))
         return NetworkCard(seeds=seeds, config=config)
-    state_dim = f.choice("state_dim", (state_width(lane.state, lane.fourier, lane.goal),))
+    state_dim = f.choice("state_dim", (state_width(lane.state, lane.fourier),))
     decision_dim = f.integer("decision_dim", 3, 3)
     f.choice("config.noise", ("gaussian", "ou"))
     f.number("config.noise_sigma", 0.0, 100.0)
@@ -444,6 +442,20 @@ def _read_points(
         f.number(f"{name}[0]", -180.0, 180.0, value=point[0])
         f.number(f"{name}[1]", -90.0, 90.0, value=point[1])
     return points
+
+
+def _read_score(f: CardFields) -> str:
+    """The score the model judges by; cards from before this field: lane. A score removed
+    after `LAST_RELEASE_WITH_EXPERIMENTS` is refused in one line that names that release."""
+    if f.get("score", None) is None:
+        return "lane"
+    if f.get("score") in REMOVED_SCORES:
+        raise UserError(
+            f"model card {f.path}: score {f.get('score')!r} was removed after aisdati "
+            f"{LAST_RELEASE_WITH_EXPERIMENTS} (measured, not adopted): use that release to read "
+            "this model, or retrain"
+        )
+    return f.choice("score", SCORES)
 
 
 def _read_calibration(f: CardFields) -> dict[str, list[float]]:

@@ -1,8 +1,11 @@
 """A learnt AIS policy (DATI's forward actor, or BC) and the two ways it judges a track.
 
 Both read the same observation as in training, (position scaled by the model's box, step index
-t; with `goal=true`, the judged track's own last report as the goal), and decide (SOG, COG, dt)
-scaled into [-1, 1], which the spherical rule turns into a move.
+t), and decide (SOG, COG, dt) scaled into [-1, 1], which the spherical rule turns into a move.
+
+Every draw is keyed (`Draws`): its latent noise and the ensemble member that acts on it follow
+from the run's seed, the judged track's own reports and the draw's index alone, so a track's
+scores are the same whatever other tracks are judged with it (`aisdati.model.noise.KeyedNoise`).
 
 - **rollout** (the paper's score, section 6.2): K free rollouts from the track's first point,
   for as many steps as the track has; the score is the best rollout's mean great-circle distance
@@ -12,7 +15,7 @@ scaled into [-1, 1], which the spherical rule turns into a move.
   are drawn at (s_t, t), moved by the rule over the track's *real* time step, and the error is the
   great-circle distance from the predicted position to the real s_{t+1}; the best of the K is the
   step error (the model as a one-step predictive density, as likelihood-based AIS detectors do).
-  Each draw takes fresh latent noise.
+  Each draw takes its own latent noise.
 - **lane** (a departure from the paper): each report's distance to the nearest point of any of
   the K free rollouts, whatever its timing: whether the track stays where the traffic the model
   generates from its start goes. Best-of-K DTW judges a track against one rollout; a lane of
@@ -27,6 +30,7 @@ tail_mean`, so a short jump or loiter counts as much as a long detour, whatever 
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -39,15 +43,65 @@ from aisdati.dtw import batch_mean_dtw_m
 from aisdati.geo import haversine_m
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks, one_member
-from aisdati.model.noise import NoiseProcess
+from aisdati.model.noise import GOLDEN, KeyedNoise, NoiseProcess, mix64
 from aisdati.model.rules import SphericalRule
+
+
+@dataclass(frozen=True)
+class Draws:
+    """What each row of a batch is: draw `index` of the track keyed `track` (`track_keys`).
+    Its noise follows from the pair and its member from `track` and `draw`, never from the
+    row's place in the batch."""
+
+    track: np.ndarray
+    """[n] uint64: the key of the row's track."""
+    index: np.ndarray
+    """[n] int64: which of its track's draws the row's noise is."""
+    draw: np.ndarray
+    """[n] int64: which of its track's K draws the row is (sets its member)."""
+
+    @property
+    def keys(self) -> np.ndarray:
+        """[n] uint64 noise keys: the track's key and the draw's index mixed."""
+        with np.errstate(over="ignore"):
+            return mix64(self.track + self.index.astype(np.uint64) * GOLDEN)
+
+    def members(self, count: int) -> np.ndarray:
+        """[n] which of `count` ensemble members acts on each row: a track's draws in turn,
+        starting at a member its key picks."""
+        return ((self.track % np.uint64(count)).astype(np.int64) + self.draw) % count
+
+    def __getitem__(self, rows: slice) -> Draws:
+        return Draws(self.track[rows], self.index[rows], self.draw[rows])
+
+    def __len__(self) -> int:
+        return len(self.track)
+
+
+def track_keys(tracks: Sequence[np.ndarray], seed: int, stream: int = 0) -> np.ndarray:
+    """[N] uint64: a key per track from the run's `seed`, a `stream` and the track's own
+    positions (a track is what it reports, whatever its id or batch)."""
+    out = np.empty(len(tracks), np.uint64)
+    for i, positions in enumerate(tracks):
+        h = hashlib.blake2b(digest_size=8, key=f"{seed}:{stream}".encode())
+        h.update(np.ascontiguousarray(positions, np.float64).tobytes())
+        out[i] = np.frombuffer(h.digest(), np.uint64)[0]
+    return out
+
+
+def draw_rows(keys: np.ndarray, draws: range) -> Draws:
+    """Draws `draws` of each track keyed `keys`: draw d of track i at row i * len(draws) +
+    (d - draws.start)."""
+    index = np.tile(np.arange(draws.start, draws.stop, dtype=np.int64), len(keys))
+    return Draws(np.repeat(np.asarray(keys, np.uint64), len(draws)), index, index)
+
 
 Act = Callable[[np.ndarray], np.ndarray]
 """observations [N, state + 1] (`AISSpace.features`, then the time input) -> scaled decisions
 [N, 3]."""
-MakeAct = Callable[[int, int, bool], Act]
-"""(batch size N, seed, temporal noise) -> a stateful batched policy; with temporal noise off,
-each call draws independent latent noise (one-step scoring)."""
+MakeAct = Callable[[Draws, bool], Act]
+"""(what each row is, temporal noise) -> a stateful batched policy; each call draws the rows'
+next latent noise, which with temporal noise follows an Ornstein-Uhlenbeck process."""
 
 
 @dataclass
@@ -63,47 +117,39 @@ class AISPolicy:
         return self.space.rule
 
     def observe(
-        self,
-        positions: np.ndarray,
-        previous: np.ndarray,
-        dts: np.ndarray,
-        t: np.ndarray,
-        horizon: np.ndarray,
-        goals: np.ndarray | None = None,
+        self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray, t: np.ndarray
     ) -> np.ndarray:
-        state = self.space.features(positions, previous, dts, goals)
-        time = self.space.time_input(t, horizon)
-        return np.concatenate([state, np.asarray(time)[:, None]], axis=1).astype(np.float32)
+        state = self.space.features(positions, previous, dts)
+        return np.concatenate([state, np.asarray(t, np.float64)[:, None]], axis=1).astype(
+            np.float32
+        )
 
     # ---------------------------------------------------------------- free rollouts
     def generate(
         self,
         starts: np.ndarray,
         horizons: np.ndarray,
-        rollouts: int,
-        seed: int = 0,
+        keys: np.ndarray,
+        draws: range,
         reach: float = 1.0,
-        goals: np.ndarray | None = None,
     ) -> np.ndarray:
-        """K rollouts from each start in one batch: positions [N * K, max steps + 1, 2],
-        rollout k of start i at row i * K + k; rows past their last step hold their last
-        position. Each runs `reach` x its horizon steps (rounded up); the time input still
-        counts towards the horizon, so the first `horizon` steps are the same whatever the
-        reach. A step that would leave the region sticks or slides (`AISSpace.resolve`).
-        `goals` [N, 2]: where each start's track is bound (goal-conditioned models)."""
+        """Rollouts `draws` from each start (keyed `keys`, `track_keys`) in one batch: positions
+        [N * R, max steps + 1, 2], rollout d of start i at row i * R + (d - draws.start); rows
+        past their last step hold their last position. Each runs `reach` x its horizon steps
+        (rounded up). A step that would leave the region sticks or slides
+        (`AISSpace.resolve`)."""
         with one_thread():
-            n = len(starts) * rollouts
-            pos = np.repeat(np.asarray(starts, np.float64), rollouts, axis=0)
-            bound = None if goals is None else np.repeat(np.asarray(goals), rollouts, axis=0)
+            rows = draw_rows(keys, draws)
+            n = len(rows)
+            pos = np.repeat(np.asarray(starts, np.float64).reshape(-1, 2), len(draws), axis=0)
             prev, last_dt = pos.copy(), np.zeros(n)
-            limit = np.repeat(np.asarray(horizons), rollouts)
-            runs = np.ceil(limit * reach).astype(int)
-            steps = int(np.max(runs))
+            runs = np.ceil(np.repeat(np.asarray(horizons), len(draws)) * reach).astype(int)
+            steps = int(np.max(runs, initial=0))
             out = np.empty((n, steps + 1, 2))
             out[:, 0] = pos
-            act = self.make_act(n, seed, True)
+            act = self.make_act(rows, True)
             for t in range(steps):
-                action = act(self.observe(pos, prev, last_dt, np.full(n, t), limit, bound))
+                action = act(self.observe(pos, prev, last_dt, np.full(n, t)))
                 decision = self.rule.decision_scaler.unscale(np.clip(action, -1.0, 1.0))
                 moved = self.space.resolve(pos, self.rule.step(pos, decision))
                 live = t < runs
@@ -124,13 +170,12 @@ class AISPolicy:
         """Best-of-K mean great-circle DTW (metres) of each track over its own number of
         steps, its best rollout, and all its L rollouts (`lane_rollouts`, default K) run
         `reach` x as many steps ([L, steps + 1, 2]: the lane the policy generates from the
-        track's start). The K scored rollouts come first and are drawn as without a lane, so
-        the rollout score does not depend on L; the other L - K come from a stream of their
-        own."""
-        starts = np.array([t[0] for t in tracks])
-        goals = np.array([t[-1] for t in tracks])
-        horizons = np.array([len(t) - 1 for t in tracks])
-        paths = self.generate(starts, horizons, rollouts, seed, reach, goals)
+        track's start). The K scored rollouts are draws 0 .. K - 1 of the track, the other
+        L - K draws K .. L - 1, so the rollout score does not depend on L."""
+        keys = track_keys(tracks, seed)
+        starts = np.array([t[0] for t in tracks]).reshape(-1, 2)
+        horizons = np.array([len(t) - 1 for t in tracks], np.int64)
+        paths = self.generate(starts, horizons, keys, range(rollouts), reach)
         dists = batch_mean_dtw_m(
             paths,
             np.repeat(horizons + 1, rollouts),
@@ -142,8 +187,7 @@ class AISPolicy:
         every = [paths[i * rollouts : (i + 1) * rollouts, : r + 1] for i, r in enumerate(runs)]
         more = (lane_rollouts or rollouts) - rollouts
         if more > 0:
-            stream = int(np.random.SeedSequence([seed, 1]).generate_state(1)[0])
-            extra = self.generate(starts, horizons, more, stream, reach, goals)
+            extra = self.generate(starts, horizons, keys, range(rollouts, rollouts + more), reach)
             every = [
                 np.concatenate([e, extra[i * more : (i + 1) * more, : r + 1]])
                 for i, (e, r) in enumerate(zip(every, runs, strict=True))
@@ -158,64 +202,49 @@ class AISPolicy:
         dts: Sequence[np.ndarray],
         draws: int,
         seed: int = 0,
-        ahead: int = 1,
         chunk: int = 200_000,
     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Per track, every draw's prediction error (metres) `ahead` reports on from each real
-        report that has one ([n - h, K] for n reports, h = min(ahead, n - 1), K `draws`): the
-        policy moved h times from the real report, each move over the real time step, its own
-        moves feeding its state; and the predicted positions [n - h, K, 2]. Row i predicts
-        report i + h. With `ahead` 1 these are the one-step errors."""
-        spans = [min(ahead, len(p) - 1) for p in tracks]
-        here, prev, last, there, step_dt, t0, horizon, goal = ([] for _ in range(8))
-        for p, d, h in zip(tracks, dts, spans, strict=True):
-            m = len(p) - h  # anchors 0 .. n - h - 1
-            here.append(p[:m])
-            prev.append(np.vstack([p[:1], p[: m - 1]]))
-            last.append(np.r_[0.0, d[: m - 1]])
-            there.append(p[h:])
-            step_dt.append(np.stack([d[k : k + m] for k in range(h)], axis=1))
-            t0.append(np.arange(m))
-            horizon.append(np.full(m, len(p) - 1))
-            goal.append(np.broadcast_to(p[-1], (m, 2)))
-        h_max = max(spans, default=1)
-        rows = [
-            np.concatenate(x).repeat(draws, axis=0)
-            for x in (here, prev, last, there, t0, horizon, goal)
-        ]
-        pos, before, last_dt, target, t, limit, bound = rows
-        # the first move's observations are the same for every draw: computed once per report
-        first = self.observe(*(np.concatenate(x) for x in (here, prev, last, t0, horizon, goal)))
-        first = first.repeat(draws, axis=0)
-        dt = np.concatenate([np.pad(x, ((0, 0), (0, h_max - x.shape[1]))) for x in step_dt])
-        dt = dt.repeat(draws, axis=0)
-        moves = np.concatenate([np.full(len(x), h) for x, h in zip(here, spans, strict=True)])
-        moves = moves.repeat(draws)
+        """Per track, every draw's one-step prediction error (metres) from each real report
+        that has a next one ([n - 1, K] for n reports, K `draws`): the policy moved once from
+        the real report over the real time step; and the predicted positions [n - 1, K, 2].
+        Row i predicts report i + 1. Draw k of report i of a track is its draw i * K + k
+        (`Draws.index`), acted on by the member of its k (`Draws.draw`)."""
+        anchors = [max(len(p) - 1, 0) for p in tracks]
+        keys = track_keys(tracks, seed)
+        here = np.concatenate(
+            [p[:m] for p, m in zip(tracks, anchors, strict=True)] + [np.empty((0, 2))]
+        )
+        prev = np.concatenate(
+            [np.vstack([p[:1], p[: m - 1]])[:m] for p, m in zip(tracks, anchors, strict=True)]
+            + [np.empty((0, 2))]
+        )
+        last = np.concatenate(
+            [np.r_[0.0, d[: m - 1]][:m] for d, m in zip(dts, anchors, strict=True)] + [np.empty(0)]
+        )
+        there = np.concatenate(
+            [p[1 : m + 1] for p, m in zip(tracks, anchors, strict=True)] + [np.empty((0, 2))]
+        )
+        step_dt = np.concatenate([d[:m] for d, m in zip(dts, anchors, strict=True)] + [np.empty(0)])
+        t = np.concatenate([np.arange(m) for m in anchors] + [np.empty(0, np.int64)])
+        obs = self.observe(here, prev, last, t).repeat(draws, axis=0)
+        track = np.repeat(keys, np.asarray(anchors, np.int64) * draws)
+        index = np.concatenate(
+            [np.arange(m * draws, dtype=np.int64) for m in anchors] + [np.empty(0, np.int64)]
+        )
+        rows = Draws(track, index, index % draws)
+        pos, target = here.repeat(draws, axis=0), there.repeat(draws, axis=0)
+        dt = step_dt.repeat(draws)
         err = np.empty(len(pos))
         pred = np.empty((len(pos), 2))
-        chunk = max(draws, chunk - chunk % draws)  # draw d of each report: same member
         with one_thread():
             for lo in range(0, len(pos), chunk):
                 sl = slice(lo, lo + chunk)
-                act = self.make_act(len(pos[sl]), seed + lo, False)
-                p, q, w = pos[sl], before[sl], last_dt[sl]
-                for k in range(int(moves[sl].max(initial=0))):
-                    obs = (
-                        first[sl]
-                        if k == 0
-                        else self.observe(p, q, w, t[sl] + k, limit[sl], bound[sl])
-                    )
-                    decision = self.rule.decision_scaler.unscale(np.clip(act(obs), -1.0, 1.0))
-                    decision[:, 2] = dt[sl, k]
-                    live = (k < moves[sl])[:, None]
-                    p, q, w = (
-                        np.where(live, self.rule.step(p, decision), p),
-                        np.where(live, p, q),
-                        decision[:, 2],
-                    )
-                pred[sl] = p
-                err[sl] = haversine_m(p[:, 0], p[:, 1], target[sl, 0], target[sl, 1])
-        cuts = np.cumsum([len(p) - h for p, h in zip(tracks, spans, strict=True)])[:-1]
+                act = self.make_act(rows[sl], False)
+                decision = self.rule.decision_scaler.unscale(np.clip(act(obs[sl]), -1.0, 1.0))
+                decision[:, 2] = dt[sl]
+                pred[sl] = self.rule.step(pos[sl], decision)
+                err[sl] = haversine_m(pred[sl, 0], pred[sl, 1], target[sl, 0], target[sl, 1])
+        cuts = np.cumsum(anchors)[:-1]
         return np.split(err.reshape(-1, draws), cuts), np.split(pred.reshape(-1, draws, 2), cuts)
 
     def step_errors(
@@ -243,15 +272,18 @@ def best_draws(
     )
 
 
-def member_rows(n: int, members: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Which of n batch rows each member of an ensemble acts on: an [M, width] grid of row
-    indices (clamped to the batch) and its mask of real rows. Row i is member i mod M's (member
-    m's rows m, m + M, ... as row m of an [M, ceil(n / M)] grid: K draws spread over the
-    members, each computing its own rows only). One member acts on every row through a
-    one-member copy of the networks (`aisdati.model.networks.one_member`), M = 1."""
-    width = -(-n // members)
-    grid = torch.arange(members)[:, None] + members * torch.arange(width)[None]
-    return grid.clamp(max=n - 1), grid < n
+def member_rows(members_of: np.ndarray, members: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Which of n batch rows each member of an ensemble acts on, from each row's member
+    (`Draws.members`): an [M, width] grid of row indices (padded with row 0) and its mask of
+    real rows. One member acts on every row through a one-member copy of the networks
+    (`aisdati.model.networks.one_member`), M = 1."""
+    mine = [np.flatnonzero(members_of == m) for m in range(members)]
+    width = max((len(r) for r in mine), default=0)
+    grid = np.zeros((members, width), np.int64)
+    valid = np.zeros((members, width), bool)
+    for m, rows in enumerate(mine):
+        grid[m, : len(rows)], valid[m, : len(rows)] = rows, True
+    return torch.as_tensor(grid), torch.as_tensor(valid)
 
 
 def member_decisions(out: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor) -> np.ndarray:
@@ -263,20 +295,21 @@ def member_decisions(out: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor)
 
 def dati_act(nets: DATINetworks, config: DATIConfig, member: int | None = None) -> MakeAct:
     """DATI's forward actor as a batched policy: member `member` of the ensemble, or with None
-    every member in turn (`member_rows`). Each row draws its own latent noise, Gaussian or
-    (with temporal noise) Ornstein-Uhlenbeck."""
+    every member on its rows (`Draws.members`). Each row draws its own keyed latent noise,
+    Gaussian or (with temporal noise) Ornstein-Uhlenbeck."""
     if member is not None:
         nets = one_member(nets, member)
     members = nets.forward_actor.out.weight.shape[0]  # live members (stopped ones leave)
     device = nets.device
 
-    def make(n: int, seed: int, temporal: bool) -> Act:
+    def make(rows: Draws, temporal: bool) -> Act:
         process = config.noise_process if temporal else NoiseProcess("gaussian")
-        noise = config.latent_noise([torch.Generator().manual_seed(int(seed))], [process], rows=n)
-        grid, valid = member_rows(n, members)
+        dim = config.network.latent_dim
+        noise = KeyedNoise(rows.keys, dim, config.noise_sigma, config.ou_theta, process)
+        grid, valid = member_rows(rows.members(members), members)
 
         def act(obs: np.ndarray) -> np.ndarray:
-            eta = noise.sample()[0]
+            eta = noise.sample()
             out = nets.decide(torch.as_tensor(obs)[grid].to(device), eta[grid].to(device)).cpu()
             return member_decisions(out, grid, valid)
 

@@ -46,7 +46,7 @@ class AISTrackSource(ReferenceSource):
 
     @property
     def time_high(self) -> float:
-        return self.space.time_high(self.max_steps)
+        return float(self.max_steps)
 
     def contains(self, position: np.ndarray) -> bool:
         return bool(self.space.contains(position))
@@ -54,17 +54,11 @@ class AISTrackSource(ReferenceSource):
     def resolve(self, position: np.ndarray, proposed: np.ndarray) -> np.ndarray:
         return self.space.resolve(position, proposed)
 
-    def features(
-        self,
-        positions: np.ndarray,
-        previous: np.ndarray,
-        dts: np.ndarray,
-        goals: np.ndarray | None = None,
-    ) -> np.ndarray:
-        return self.space.features(positions, previous, dts, goals)
+    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        return self.space.features(positions, previous, dts)
 
     def time_input(self, t: np.ndarray, horizon: int) -> np.ndarray:
-        return self.space.time_input(t, horizon)
+        return np.asarray(t, np.float64)
 
     def sample(self, rng: np.random.Generator) -> Reference:
         if self.position >= len(self.order):

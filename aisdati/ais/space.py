@@ -15,9 +15,6 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
 - `state="motion"`: the state adds the agent's current course (sin, cos) and speed (scaled by the
   SOG range), from its last move, so the policy can continue a course ("the state space of DATI
   may easily be enlarged", section 7).
-- `time="progress"`: the time input is the fraction of the track done (x `PROGRESS_SCALE`, to stay
-  in the range of step indices that Time2Vec's initialisation suits) instead of the step index,
-  which means different places on tracks of different speed and reporting rate.
 - `ranges="quantile"`: SOG and dt ranges from the 99th percentile of the perfect decisions
   (x 1.1) instead of the maxima: one 1-hour gap made the typical 3-minute dt sit at -0.91 on the
   tanh axis, where an error of 0.02 is 40 s.
@@ -26,9 +23,6 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
 - `members=M`: M seeds of the same lane trained as one batched ensemble (each with its own
   validation and early stopping) and saved as one model; scoring draws its K rollouts (and K
   one-step draws) across the members in turn, so one seed's blind spot is covered by another's.
-- `critic="state"`: the critics also see the state the decision is taken in (a conditional
-  WGAN, a departure from the paper, whose critics see only the decision, t and r): the
-  adversarial term then matches p(a | s, t, r) instead of p(a | t, r) averaged over states.
 - `fourier=F`: the state adds sin and cos of the scaled position at F octaves (π, 2π, ...,
   2^(F-1) π), Fourier features (Tancik et al. 2020). The paper's actor sees the position through
   16 tanh units of a linear map; a lane that winds through a box needs a policy that changes
@@ -40,29 +34,16 @@ lowest total loss, latent noise is Gaussian. Each lever departs from it in one d
   near its reference, so the pull pairs the reference's decisions with states near the
   reference's own. The paper starts from random actors. With validation the pretrained actor is
   a candidate for the kept one (episode 0), which an episode's actor must beat.
-- `variety=K`: the warm start pulls, of K latent-noise draws per (state, perfect decision) pair,
-  only the draw nearest the perfect decision (Social GAN's variety loss, Gupta et al. 2018), so
-  the actor spreads its draws over the decisions a state allows instead of learning to ignore
-  its noise, as the one-step score's best-of-K draws assume. 1 (the default): every draw pulled.
 - `validate_by="step"`: validation scores an actor by its mean one-step error on the
   validation tracks (teacher-forced, as the `step` score) instead of its rollouts' DTW: the
   actor kept is the one best at what a model judging by one-step errors is used for.
-- `goal=true`: the state adds where the track is bound, its last report (scaled like the
-  position, with the same Fourier octaves, and the scaled offset from the agent to it), so one
-  model of a whole area's multimodal traffic generates, from a track's start, tracks that go
-  where that track goes ("the state space of DATI may easily be enlarged to include more
-  information such as destination", section 7). In training the goal is the reference's end;
-  in scoring, the judged track's own end (`aisdati.ais.policy`). How unusual the (start, end)
-  pair itself is, the goal cannot say: `aisdati.detectors.od` scores that.
 - `crossfit=true`: member m of an M-member lane trains on every fold of the training tracks but
   fold m (folds by vessel), validates on fold m, and calibrates the threshold on it, so the
   threshold comes from tracks the member did not fit (`aisdati.detectors.dati`).
-  `fold_by=time` folds by stretches of the period instead (each member calibrated on a stretch
-  it did not train on, its vessels' other trips allowed in its training, as a later month
-  meets the vessels that recur); measured forward in time, not the preset's.
-- `average=B`: validate and keep an exponential moving average (decay B per training batch) of
-  the forward actor instead of the live one (`DATIConfig.actor_average`): the validation DTW of
-  the live actor jumps by km from one episode to the next, so the kept one was the best of noise.
+
+What was measured and not adopted (time by progress, a state-aware critic, a moving-average
+actor, the variety loss, a goal in the state, folds by time) is in docs/results/tried.md; a card
+that names one is refused (`REMOVED_LEVERS`).
 """
 
 from __future__ import annotations
@@ -73,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
+from aisdati.ais import AREA_PRESET, DEFAULT_PRESET, LAST_RELEASE_WITH_EXPERIMENTS
 from aisdati.ais.corridor import Corridor
 from aisdati.errors import UserError
 from aisdati.geo import spherical_decision
@@ -87,11 +68,19 @@ BOX_MARGIN = 0.1
 MIN_MARGIN_DEG = 0.01
 DECISION_HEADROOM = 1.1
 RANGE_QUANTILE = 0.99
-PROGRESS_SCALE = 100.0
 MAX_MEMBERS = 16
 MAX_PRETRAIN = 1000
 MAX_FOURIER = 12
-MAX_VARIETY = 100
+REMOVED_LEVERS = {
+    "time": "step",
+    "critic": "decision",
+    "average": 0.0,
+    "variety": 1,
+    "goal": False,
+    "fold_by": "vessel",
+}
+"""Levers of earlier releases, measured and not adopted, with the value that meant "off": a card
+that records one at that value reads as before; at another, it is refused."""
 
 
 @dataclass(frozen=True)
@@ -104,30 +93,21 @@ class LaneConfig:
     region: str = "box"
     corridor_km: float = 2.0
     state: str = "position"
-    time: str = "step"
     ranges: str = "max"
     noise: str = "gaussian"
     members: int = 1
-    critic: str = "decision"
     pretrain: int = 0
-    variety: int = 1
     fourier: int = 0
-    average: float = 0.0
     validate_by: str = "rollout"
-    goal: bool = False
     crossfit: bool = False
-    fold_by: str = "vessel"
 
     def __post_init__(self) -> None:
         choices = {
             "region": ("box", "corridor"),
             "state": ("position", "motion"),
-            "time": ("step", "progress"),
             "ranges": ("max", "quantile"),
             "noise": ("gaussian", "ou"),
-            "critic": ("decision", "state"),
             "validate_by": ("rollout", "step"),
-            "fold_by": ("vessel", "time"),
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
@@ -138,10 +118,6 @@ class LaneConfig:
             raise UserError(f"fourier must be in [0, {MAX_FOURIER}] octaves, got {self.fourier}")
         if not 0 <= self.pretrain <= MAX_PRETRAIN:
             raise UserError(f"pretrain must be in [0, {MAX_PRETRAIN}] epochs, got {self.pretrain}")
-        if not 1 <= self.variety <= MAX_VARIETY:
-            raise UserError(f"variety must be in [1, {MAX_VARIETY}] draws, got {self.variety}")
-        if not 0.0 <= self.average < 1.0:
-            raise UserError(f"average must be in [0, 1), got {self.average}")
         if not 1 <= self.members <= MAX_MEMBERS:
             raise UserError(f"members must be in [1, {MAX_MEMBERS}], got {self.members}")
         if self.crossfit and self.members < 2:
@@ -152,7 +128,16 @@ class LaneConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> LaneConfig:
-        return cls(**(data or {}))
+        """A recorded configuration; a removed lever at its "off" value is dropped, at another
+        value refused in one line (`REMOVED_LEVERS`)."""
+        data = dict(data or {})
+        for key, off in REMOVED_LEVERS.items():
+            if key in data and data.pop(key) != off:
+                raise UserError(
+                    f"lane lever {key!r} was removed after aisdati {LAST_RELEASE_WITH_EXPERIMENTS}"
+                    f" (measured, not adopted): use that release to read this model, or retrain"
+                )
+        return cls(**data)
 
 
 LANES = LaneConfig(
@@ -179,9 +164,7 @@ motion state), and validation by the one-step errors it judges with (`validate_b
 forward in time at sea, three trainings x three injection seeds, the one-step AUC rose on all
 three areas measured, Kitimat 0.702 -> 0.770, NY Harbor 0.803 -> 0.823, Virginia Beach
 0.836 -> 0.864; it mostly keeps the behaviour-cloned warm start, which the adversarial episodes
-do not improve on for one-step predictions of a whole area). The goal lever (`goal=true`)
-measured worse than without on Kitimat, forward in time, so the area preset leaves it off
-(docs/results/forward.md). Their names are
+do not improve on for one-step predictions of a whole area). Their names are
 `aisdati.ais.DEFAULT_PRESET` and `AREA_PRESET`."""
 PRESET_SCORES: dict[tuple[str, str], str] = {
     (AREA_PRESET, "dati"): "step",
@@ -229,11 +212,10 @@ def lane_config(preset: str, overrides: Sequence[str] = ()) -> LaneConfig:
     return LaneConfig(**values)
 
 
-def state_width(state: str, fourier: int, goal: bool = False) -> int:
+def state_width(state: str, fourier: int) -> int:
     """Width of the agent's state: the position (2) or position and motion (5), plus sin and
-    cos of both coordinates at each Fourier octave; with a goal, its position, octaves and
-    offset (the layout of `AISSpace.features`)."""
-    return (5 if state == "motion" else 2) + 4 * fourier + (4 + 4 * fourier if goal else 0)
+    cos of both coordinates at each Fourier octave (the layout of `AISSpace.features`)."""
+    return (5 if state == "motion" else 2) + 4 * fourier
 
 
 def region_box(positions: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -280,7 +262,7 @@ class AISSpace:
 
     @property
     def state_dim(self) -> int:
-        return state_width(self.config.state, self.config.fourier, self.config.goal)
+        return state_width(self.config.state, self.config.fourier)
 
     @property
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -289,14 +271,7 @@ class AISSpace:
         else:
             lo, hi = np.zeros(2), np.ones(2)
         waves = 4 * self.config.fourier
-        lo, hi = np.r_[lo, -np.ones(waves)], np.r_[hi, np.ones(waves)]
-        if self.config.goal:  # the goal's position and octaves, then the offset to it
-            lo = np.r_[lo, np.zeros(2), -np.ones(waves), -np.ones(2)]
-            hi = np.r_[hi, np.ones(2), np.ones(waves), np.ones(2)]
-        return lo, hi
-
-    def time_high(self, max_steps: int) -> float:
-        return PROGRESS_SCALE if self.config.time == "progress" else float(max_steps)
+        return np.r_[lo, -np.ones(waves)], np.r_[hi, np.ones(waves)]
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         inside = self.in_box(points)
@@ -324,26 +299,14 @@ class AISSpace:
         out = np.where(self.in_box(prop)[:, None], prop, pos)
         return out[0] if single else out
 
-    def features(
-        self,
-        positions: np.ndarray,
-        previous: np.ndarray,
-        dts: np.ndarray,
-        goals: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """The state of agents at `positions` (previously at `previous`, `dts` hours before),
-        bound for `goals` (needed with `goal=true`, ignored without)."""
+    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """The state of agents at `positions` (previously at `previous`, `dts` hours before)."""
         positions = np.asarray(positions, np.float64)
         scaled = self._scaled(positions)
         parts = [scaled]
         if self.config.state == "motion":
             parts.append(self._motion(positions, previous, dts))
         parts.append(self._waves(scaled))
-        if self.config.goal:
-            if goals is None:
-                raise ValueError("a goal-conditioned model needs each agent's goal")
-            target = self._scaled(np.broadcast_to(np.asarray(goals, np.float64), positions.shape))
-            parts += [target, self._waves(target), np.clip(target - scaled, -1.0, 1.0)]
         return np.concatenate(parts, axis=-1)
 
     def _scaled(self, positions: np.ndarray) -> np.ndarray:
@@ -375,12 +338,6 @@ class AISSpace:
             ],
             axis=-1,
         )
-
-    def time_input(self, t: np.ndarray, horizon: int | np.ndarray) -> np.ndarray:
-        t = np.asarray(t, np.float64)
-        if self.config.time == "progress":
-            return PROGRESS_SCALE * t / np.maximum(np.asarray(horizon, np.float64), 1.0)
-        return t
 
     @classmethod
     def from_card(cls, card: ModelCard, corridor: Corridor | None = None) -> AISSpace:

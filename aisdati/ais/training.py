@@ -253,19 +253,12 @@ def member_curves(
 # ------------------------------------------------------------------------- what DATI trains with
 def dati_config(settings: TrainSettings, tracks: Sequence[Track]) -> DATIConfig:
     """The paper's hyperparameters, with OU latent noise at the data's median report interval
-    (hours) and a state-aware critic when the lane configuration asks for them."""
+    (hours) when the lane configuration asks for it."""
     config = DATIConfig(episodes=settings.episodes, patience=settings.patience)
     if settings.lane.noise == "ou":
         dt = float(np.median(np.concatenate([t.dts for t in tracks])))
         config = replace(config, noise="ou", ou_dt=dt)
-    if settings.lane.critic == "state":
-        config = config.with_network(conditional_critic=True)
-    return replace(
-        config,
-        pretrain_epochs=settings.lane.pretrain,
-        pretrain_variety=settings.lane.variety,
-        actor_average=settings.lane.average,
-    )
+    return replace(config, pretrain_epochs=settings.lane.pretrain)
 
 
 def demonstrations(envs: Sequence[TrajectoryImitationEnv]) -> list[tuple[np.ndarray, ...]]:
@@ -278,20 +271,11 @@ def demonstrations(envs: Sequence[TrajectoryImitationEnv]) -> list[tuple[np.ndar
     return out
 
 
-def crossfit_folds(
-    tracks: Sequence[Track], folds: int, seed: int, by: str = "vessel"
-) -> np.ndarray:
-    """Fold (0 .. folds - 1) of each track for cross-fitting (`LaneConfig.crossfit`). By vessel:
-    vessels in seeded order, each to the fold with the fewest tracks so far, so that no vessel's
-    other tracks teach the member that is calibrated on it; with fewer vessels than folds,
-    tracks in seeded order, dealt round. By time (`LaneConfig.fold_by`): contiguous stretches
-    of the period, equal in tracks, so that each member is calibrated on a stretch it did not
-    train on, as the model is used on a later period."""
-    if by == "time":
-        order = np.argsort([t.start.value for t in tracks], kind="stable")
-        out = np.empty(len(tracks), dtype=np.int64)
-        out[order] = np.arange(len(tracks)) * folds // max(len(tracks), 1)
-        return out
+def crossfit_folds(tracks: Sequence[Track], folds: int, seed: int) -> np.ndarray:
+    """Fold (0 .. folds - 1) of each track for cross-fitting (`LaneConfig.crossfit`): vessels
+    in seeded order, each to the fold with the fewest tracks so far, so that no vessel's other
+    tracks teach the member that is calibrated on it; with fewer vessels than folds, tracks in
+    seeded order, dealt round."""
     rng = np.random.default_rng([seed, 11])
     mmsi = np.array([t.mmsi for t in tracks])
     out = np.empty(len(tracks), dtype=np.int64)
@@ -331,7 +315,7 @@ class Validator:
         self.rollouts, self.seed = lane.validation_rollouts, seed
 
     def __call__(self, trainer: DATITrainer, k: int) -> float:
-        policy = AISPolicy(self.space, dati_act(trainer.candidate, self.config, member=k))
+        policy = AISPolicy(self.space, dati_act(trainer.nets, self.config, member=k))
         if self.by == "step":  # `validate_by`: the mean one-step error of each track
             errors = policy.step_errors(self.tracks, self.dts, self.rollouts, self.seed)[0]
             return float(np.median([e.mean() for e in errors]))
@@ -444,7 +428,7 @@ class EnsembleRun:
         self.seeds = self.seeds[first_member:]
         # each member's tracks: its route's, or with cross-fitting all but its own fold
         self.folds = [
-            crossfit_folds(r.tracks, self.members, self.seeds[k * self.members], first.lane.fold_by)
+            crossfit_folds(r.tracks, self.members, self.seeds[k * self.members])
             if first.lane.crossfit
             else np.full(len(r.tracks), -1)
             for k, r in enumerate(self.routes)

@@ -66,6 +66,13 @@ def warn(message: str) -> None:
     err_console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
+def shows_progress(as_json: bool) -> bool:
+    """Progress unless --json, whose output is the JSON alone (at a terminal as bars; into a
+    log, the bars' plain lines; the rich widgets that cannot print plainly, spinners and the
+    download bars, show at a terminal only)."""
+    return not as_json
+
+
 def spinner(where: Console, text: str, show: bool = True) -> contextlib.AbstractContextManager:
     """A rich spinner with `text` on `where` while the block runs; nothing when not `show`."""
     return where.status(text, spinner="dots") if show else contextlib.nullcontext()

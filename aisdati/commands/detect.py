@@ -11,7 +11,7 @@ from pathlib import Path
 from rich.markup import escape
 
 from aisdati.ais.card import unfinished_models
-from aisdati.commands.common import console, err_console, spinner, warn
+from aisdati.commands.common import console, shows_progress, spinner, warn
 from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
 from aisdati.detection.run import (
@@ -39,21 +39,14 @@ def run(
     out: Path | None,
     cluster: str,
     track: list[int] | None,
-    rollouts: int,
-    lane_rollouts: int,
-    lane_course_km: float,
-    lane_traffic: bool,
     ashore: bool,
-    threshold: float,
+    threshold: float | None,
     top_percent: float | None,
-    contamination: float | None,
+    contamination: float,
     near_km: float,
-    seed: int,
     labels: Path | None,
-    workers: int,
-    scheduler: str | None,
+    workers: str,
     device: str,
-    quiet: bool,
     as_json: bool,
 ) -> None:
     """`aisdati detect` with its options (see `aisdati.cli.detect`)."""
@@ -63,8 +56,6 @@ def run(
             "--top-percent": top_percent,
             "--contamination": contamination,
             "--near-km": near_km,
-            "--lane-course-km": lane_course_km,
-            "--seed": seed,
         }
     )
     settings = DetectSettings(
@@ -76,21 +67,16 @@ def run(
         cluster=cluster.strip().lower(),
         track_ids=tuple(track or ()),
         score=score.strip().lower() if score is not None else None,
-        rollouts=rollouts,
-        lane_rollouts=lane_rollouts,
-        lane_course_km=lane_course_km,
-        lane_traffic=lane_traffic,
         ashore=ashore,
         threshold=threshold,
         top_percent=top_percent,
         contamination=contamination,
         near_km=near_km,
-        seed=seed,
         labels=labels,
         device=resolve_device(device),
     )
     check_settings(settings)
-    execution = Execution(workers=workers, scheduler=scheduler)
+    execution = Execution.parse(workers)
     with (
         fetched_models(models_dir, settings.models, "--models") as local,  # a URL: a copy
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
@@ -101,14 +87,16 @@ def run(
         for message in unfinished_models(local, settings.models, settings.method):
             warn(message)
         where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"
-        with spinner(err_console if as_json else console, where, show=not quiet):
+        with spinner(console, where, show=shows_progress(as_json)):
             result = detect(settings, runner)
+            for note in result.notes:
+                warn(note)
             files = [outputs.final(f) for f in write_outputs(result, outputs.folder, runner)]
         outputs.commit()
     if as_json:
         doc = {**report_dict(result), "files": [str(f) for f in files]}
         print(json.dumps(doc, default=str))
-    elif not quiet:
+    else:
         print_detection(result, files, settings.out_dir)
 
 
@@ -117,10 +105,16 @@ SHOWN_IDS = 8
 
 
 def coverage_line(coverage: Coverage) -> str:
-    """`judged 221 of 225 tracks (all: 200, route-1: 21); not judged: 4, no model covers its
-    start and end (...): 17, 19, ...`: what judged each track, or why none did."""
+    """`all 24 tracks judged (all-bc: 24); 134 training tracks of the models left out`, or
+    `judged 221 of 225 tracks (...); not judged: 4, no model covers its start and end (...):
+    tracks 17, 19, ...`: what judged each track, or why none did."""
     by = ", ".join(f"{escape(k)}: {v}" for k, v in coverage.judged_by.items())
-    text = f"judged {coverage.judged} of {coverage.candidates} tracks ({by})"
+    if coverage.judged == coverage.candidates:
+        text = f"all {coverage.judged} tracks judged ({by})"
+    else:
+        text = f"judged {coverage.judged} of {coverage.candidates} tracks ({by})"
+    if coverage.training:
+        text += f"; {len(coverage.training)} training tracks of the models left out"
     for reason, ids in coverage.not_judged.items():
         shown = ", ".join(str(i) for i in ids[:SHOWN_IDS]) + (
             ", ..." if len(ids) > SHOWN_IDS else ""
@@ -131,7 +125,8 @@ def coverage_line(coverage: Coverage) -> str:
 
 def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     """The flagged tracks, the scores against hand labels if given, and what was written."""
-    console.print(detection_table(result.scores, result.score))
+    rule = result.settings.rule if result.settings else "calibrated"
+    console.print(detection_table(result.scores, result.score, rule))
     if result.coverage is not None:
         console.print(coverage_line(result.coverage), highlight=False)
     check = AshoreCheck()

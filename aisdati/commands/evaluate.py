@@ -15,7 +15,7 @@ import pandas as pd
 from rich.markup import escape
 
 from aisdati.ais.training import TrainSettings
-from aisdati.commands.common import console, err_console, lane_settings, spinner
+from aisdati.commands.common import console, err_console, lane_settings, shows_progress, spinner
 from aisdati.commands.tables import pooled_table, results_table
 from aisdati.detectors import ScoreSettings, parse_detectors
 from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
@@ -51,8 +51,6 @@ def run(
     detectors: str,
     kinds: str,
     param: list[str] | None,
-    train_fraction: float,
-    split: str,
     before: datetime | None,
     altered: float,
     strength: float,
@@ -61,27 +59,16 @@ def run(
     preset: str | None,
     lane: list[str] | None,
     episodes: int,
-    patience: int,
-    rollouts: int,
-    lane_rollouts: int,
-    lane_course_km: float,
-    lane_traffic: bool,
     ashore: bool,
-    near_km: float,
     contamination: float,
     seed: int,
-    workers: int,
-    scheduler: str | None,
+    workers: str,
     device: str,
-    quiet: bool,
     as_json: bool,
 ) -> None:
     """`aisdati evaluate` with its options (see `aisdati.cli.evaluate`)."""
     check_options(
         {
-            "--train-fraction": train_fraction,
-            "--near-km": near_km,
-            "--lane-course-km": lane_course_km,
             "--contamination": contamination,
             "--seed": seed,
         }
@@ -93,19 +80,11 @@ def run(
         detectors=parse_detectors(detectors),
         kinds=parse_kinds(kinds),
         params=parse_params(param),
-        train_fraction=train_fraction,
         seed=seed,
         episodes=episodes,
-        patience=patience,
-        rollouts=rollouts,
-        lane_rollouts=lane_rollouts,
-        lane_course_km=lane_course_km,
-        lane_traffic=lane_traffic,
         ashore=ashore,
-        near_km=near_km,
         contamination=contamination,
         models_dir=None,
-        split=split.strip().lower(),
         before=None if before is None else pd.Timestamp(before, tz="UTC"),
         altered=altered,
         strength=strength,
@@ -117,11 +96,11 @@ def run(
         # a URL's models: a local copy, named by the URL in messages
         settings = replace(settings, models_dir=local, models_shown=shown_folder(models))
         check(settings)
-        evaluate_with(settings, Execution(workers=workers, scheduler=scheduler), quiet, as_json)
+        evaluate_with(settings, Execution.parse(workers), as_json)
 
 
 def evaluate_with(
-    settings: EvaluateSettings, execution: Execution, quiet: bool, as_json: bool
+    settings: EvaluateSettings, execution: Execution, as_json: bool
 ) -> None:
     """Evaluate with the settings checked, models (if any) in a local folder."""
     with (
@@ -129,11 +108,11 @@ def evaluate_with(
         open_runner(execution) as runner,
     ):
         outputs.retire_earlier()  # the data and models it describes are about to change
-        shown = Display(settings, runner, show=not (quiet or as_json))
+        shown = Display(settings, runner, show=shows_progress(as_json))
         if settings.cluster == ALL_ROUTES:
-            evaluate_every_route(settings, shown, outputs, quiet, as_json)
+            evaluate_every_route(settings, shown, outputs, as_json)
         else:
-            evaluate_one(settings, shown, outputs, quiet, as_json)
+            evaluate_one(settings, shown, outputs, as_json)
 
 
 def owned_outputs(settings: EvaluateSettings) -> tuple[str, ...]:
@@ -187,7 +166,7 @@ class Display:
 
 
 def evaluate_one(
-    settings: EvaluateSettings, shown: Display, outputs: OutputSet, quiet: bool, as_json: bool
+    settings: EvaluateSettings, shown: Display, outputs: OutputSet, as_json: bool
 ) -> None:
     """One cluster or route: evaluate, write, print the table and the timings."""
     result = evaluate(settings, shown.stage, shown.train, shown.runner)
@@ -195,8 +174,6 @@ def evaluate_one(
     outputs.commit()
     if as_json:
         print(json.dumps(report(result), default=str))
-        return
-    if quiet:
         return
     console.print(results_table(result, console.width))
     if settings.ashore:
@@ -224,7 +201,7 @@ def evaluate_one(
 
 
 def evaluate_every_route(
-    settings: EvaluateSettings, shown: Display, outputs: OutputSet, quiet: bool, as_json: bool
+    settings: EvaluateSettings, shown: Display, outputs: OutputSet, as_json: bool
 ) -> None:
     """`--cluster routes`: each route judged by its own model, pooled into one table."""
     routes = evaluate_routes(settings, shown.stage, shown.train, shown.train_routes, shown.runner)
@@ -232,8 +209,6 @@ def evaluate_every_route(
     outputs.commit()
     if as_json:
         print(json.dumps(routes_report(routes), default=str))
-        return
-    if quiet:
         return
     console.print(pooled_table(routes, console.width))
     for ev in routes.routes:

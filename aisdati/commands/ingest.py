@@ -9,14 +9,16 @@ from pathlib import Path
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
+from shapely.geometry import MultiPolygon, Polygon
 
-from aisdati.commands.common import console, err_console, warn
+from aisdati.commands.common import console, shows_progress, warn
 from aisdati.commands.tables import routes_table, summary_table
 from aisdati.errors import UserError
 from aisdati.execution.runner import Execution
 from aisdati.options import check_options
 from aisdati.outdir import prepare_output_dir
-from aisdati.preprocess.download import download, marinecadastre_files
+from aisdati.preprocess.download import download as fetch_files
+from aisdati.preprocess.download import marinecadastre_files, utm_zones
 from aisdati.preprocess.inputs import expand_inputs
 from aisdati.preprocess.output import DATASET_NAMES, OUTPUT_NAMES
 from aisdati.preprocess.pipeline import ingest
@@ -26,13 +28,8 @@ from aisdati.preprocess.settings import IngestSettings, parse_duration
 
 def run(
     inputs: list[str] | None,
-    year: int | None,
-    months: str,
-    days: str | None,
-    zone: int | None,
+    download: str | None,
     data_dir: Path,
-    base_url: str | None,
-    force: bool,
     out: Path,
     roi: str,
     min_sog: float,
@@ -41,23 +38,19 @@ def run(
     min_points: int,
     dwell_radius: float,
     dwell_time: str,
-    clusters: str,
     route_min_tracks: int,
     route_eps_km: str,
-    route_seed: int,
     keep_rejects: bool,
-    workers: int,
-    scheduler: str | None,
-    quiet: bool,
+    workers: str,
     as_json: bool,
 ) -> None:
     """`aisdati ingest` with its options (see `aisdati.cli.ingest`): its tasks on `workers`
-    local processes, or on the Dask cluster at `scheduler` (whose workers must see the inputs
+    local processes, or on the Dask cluster at that address (whose workers must see the inputs
     and --out at the same paths: ingest's spill files and staged outputs live in --out)."""
-    check_options({"--min-sog": min_sog, "--max-speed": max_speed, "--route-seed": route_seed})
-    execution = Execution(workers=workers, scheduler=scheduler)
-    if not inputs and year is None:
-        raise UserError("nothing to ingest: give --input FILES or --year (with --months/--zone)")
+    check_options({"--min-sog": min_sog, "--max-speed": max_speed})
+    execution = Execution.parse(workers)
+    if not inputs and download is None:
+        raise UserError("nothing to ingest: give --input FILES or --download PERIOD")
     settings = IngestSettings(
         min_sog_kn=min_sog,
         max_speed_kn=max_speed,
@@ -66,10 +59,8 @@ def run(
         keep_rejects=keep_rejects,
         dwell_radius_m=dwell_radius,
         dwell_time_s=parse_duration(dwell_time, "--dwell-time", allow_zero=True),
-        clusters=clusters.strip().lower(),
         route_min_tracks=route_min_tracks,
         route_eps_km=parse_route_eps(route_eps_km),
-        route_seed=route_seed,
     )
     check_options(
         {
@@ -80,21 +71,30 @@ def run(
         }
     )
     area = load_roi(roi, warn=warn)
-    remote = marinecadastre_files(year, months, days, zone) if year is not None else []
+    remote = marinecadastre_files(download, roi_zones(area)) if download is not None else []
     local = expand_inputs(inputs) if inputs else []
     prepare_output_dir(out, "--out", OUTPUT_NAMES, DATASET_NAMES)
     if remote:
         prepare_output_dir(data_dir, "--data-dir")
-    with download_progress(err_console if as_json else console, quiet) as progress:
-        files = download(remote, data_dir, base_url, force, progress=progress) + local
+    with download_progress(console, shows_progress(as_json)) as progress:
+        files = fetch_files(remote, data_dir, progress=progress) + local
         result = ingest(files, out, settings, area, roi, progress, execution)
     if as_json:
         print(json.dumps(result.as_dict(), default=str))
-    elif not quiet:
+    else:
         console.print(summary_table(result.counts))
         if result.routes is not None:
             console.print(routes_table(result.routes))
         console.print(f"wrote {escape(', '.join(result.outputs.values()))}", highlight=False)
+
+
+def roi_zones(area: Polygon | MultiPolygon | None) -> list[int] | None:
+    """The UTM zones the region of interest spans (what the 2015-2017 files are cut by); None
+    without a region."""
+    if area is None:
+        return None
+    lon_min, _, lon_max, _ = area.bounds
+    return utm_zones(lon_min, lon_max)
 
 
 def parse_route_eps(text: str) -> float | None:
@@ -107,15 +107,15 @@ def parse_route_eps(text: str) -> float | None:
         raise UserError(f"--route-eps-km {text!r}: expected a number of km or auto") from None
 
 
-def download_progress(where: Console, quiet: bool) -> Progress:
+def download_progress(where: Console, show: bool) -> Progress:
     """The bars of the downloads and the pipeline's stages (their text names input files:
-    printed as it is, not as markup); off when quiet or not a terminal."""
+    printed as it is, not as markup); off unless `show` (`shows_progress`)."""
     return Progress(
         TextColumn("{task.description}", markup=False),
         BarColumn(),
         DownloadColumn(),
         TimeRemainingColumn(),
         console=where,
-        disable=quiet or not where.is_terminal,
+        disable=not (show and where.is_terminal),
         transient=True,
     )

@@ -3,50 +3,42 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
 from rich.markup import escape
 
-from aisdati.commands.common import console
+from aisdati.commands.common import console, shows_progress
 from aisdati.commands.tables import ablation_table, selftest_table
 from aisdati.errors import UserError
-from aisdati.execution import resolve_device
+from aisdati.execution import Execution, resolve_device
 from aisdati.outdir import prepare_output_dir
 from aisdati.progress import EpisodeProgress
 from aisdati.selftest.families import FAMILIES
 from aisdati.selftest.outputs import result_rows, write_outputs
 from aisdati.selftest.paper import PAPER_FAMILIES
 from aisdati.selftest.protocol import run_selftest
-from aisdati.selftest.settings import ABLATION, QUICK, parse_methods, preset_settings
+from aisdati.selftest.settings import ABLATION, QUICK, TABLE2, parse_methods, preset_settings
 
 
 def run(
     family: list[str],
     methods: str,
-    ablation: bool,
     seeds: int,
     episodes: int,
     steps: int | None,
     references: int,
-    workers: int,
-    scheduler: str | None,
+    workers: str,
     device: str,
     preset: str,
     repeats: int,
-    noise: str | None,
-    time_embedding: bool,
-    reward_input: bool,
     quick: bool,
     out: Path | None,
-    quiet: bool,
     as_json: bool,
 ) -> None:
     """`aisdati selftest` with its options (see `aisdati.cli.selftest`)."""
+    ablation = methods.strip().lower() == TABLE2
     names = family_names(family, ablation)
-    if ablation and methods.strip().lower() != "dati":
-        raise UserError("--ablation runs the three DATI variants itself; leave out --methods")
     method_names = ABLATION if ablation else parse_methods(methods)
     for name in names:
         if name not in FAMILIES:
@@ -55,34 +47,32 @@ def run(
         seeds, references, steps, episodes = (
             QUICK[k] for k in ("seeds", "references", "steps", "episodes")
         )
-    check_counts(seeds, episodes, references, workers, repeats, steps)
+    check_counts(seeds, episodes, references, repeats, steps)
+    execution = Execution.parse(workers)
     settings = preset_settings(
         preset,
         episodes,
-        noise,
         families=tuple(names),
         seeds=seeds,
         references=references,
         steps=steps,
-        workers=workers,
-        scheduler=scheduler,
+        workers=execution.workers,
+        scheduler=execution.scheduler,
         device=resolve_device(device),
         methods=tuple(method_names),
         repeats=repeats,
     )
-    config = settings.config.with_network(time_embedding=time_embedding, reward_input=reward_input)
-    settings = replace(settings, config=config)
     out = out or Path("runs") / f"selftest-{datetime.now():%Y%m%d-%H%M%S}"
     prepare_output_dir(out, "--out")
     total = len(method_names) * len(names) * seeds * repeats
     label = "training DATI" if list(method_names) == ["dati"] else "training"
-    with EpisodeProgress(total, episodes, label, disable=quiet or as_json) as progress:
+    with EpisodeProgress(total, episodes, label, disable=not shows_progress(as_json)) as progress:
         result = run_selftest(settings, progress.update)
     files = write_outputs(result, out)
     rows = result_rows(result)
     if as_json:
         print(json.dumps({"results": rows, "wall_seconds": result.wall_seconds, "out": str(out)}))
-    elif not quiet:
+    else:
         make_table = ablation_table if ablation else selftest_table
         console.print(make_table(rows, result.wall_seconds))
         names = ", ".join(f.name for f in files)
@@ -97,14 +87,13 @@ def family_names(family: list[str], ablation: bool) -> list[str]:
 
 
 def check_counts(
-    seeds: int, episodes: int, references: int, workers: int, repeats: int, steps: int | None
+    seeds: int, episodes: int, references: int, repeats: int, steps: int | None
 ) -> None:
     """Every count option is at least 1 (--steps at least 2), or a one-line `UserError`."""
     for label, value in (
         ("--seeds", seeds),
         ("--episodes", episodes),
         ("--references", references),
-        ("--workers", workers),
         ("--repeats", repeats),
     ):
         if value < 1:

@@ -202,8 +202,7 @@ def results_table(ev: Evaluation, width: int = 120) -> Table:
     caption = (
         "AUC (ROC) and AP (average precision) rank altered against normal held-out tracks; "
         "P/R/F1 at each detector's calibrated threshold; normal/altered: median scores in km "
-        "(steprate: m/s; stepspread: multiples of the model's spread; stepod: rarity; both, "
-        "steplane and steptraffic: multiples of the training tracks' medians)"
+        "(stepspread: multiples of the model's spread)"
     )
     return _evaluation_table(ev.table, title, caption, width)
 
@@ -274,9 +273,19 @@ def _evaluation_table(frame: pd.DataFrame, title: str, caption: str, width: int)
 
 
 # ----------------------------------------------------------------------------------- detect
-def detection_table(scores: pd.DataFrame, score: str = "lane", limit: int = 15) -> Table:
+RULE_CAPTIONS = {
+    "calibrated": "flagged: score above its model's calibrated threshold",
+    "relative": "flagged by the paper's rule: score above --threshold x the batch's largest",
+    "top": "flagged: the --top-percent highest scores of the batch",
+}
+
+
+def detection_table(
+    scores: pd.DataFrame, score: str = "lane", rule: str = "calibrated", limit: int = 15
+) -> Table:
     """The flagged tracks (or, if none, the top of the ranking) with where they deviate most;
-    the raw score in km, or in the unit of `score` where it is not metres (`score_unit`)."""
+    the score and its threshold in km, or in the unit of `score` where it is not metres
+    (`score_unit`); the caption names the flagging rule."""
     flagged = scores[scores["flagged"]].sort_values("rank")
     shown = flagged if len(flagged) else scores.sort_values("rank")
     title = (
@@ -286,8 +295,16 @@ def detection_table(scores: pd.DataFrame, score: str = "lane", limit: int = 15) 
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     unit = score_unit(score)
-    raw = "mean km" if unit == "m" else unit
-    cols = ["rank", "track", "mmsi", "score", raw, "max km", "at (lat, lon)"]
+    shown_unit = "km" if unit == "m" else unit
+    cols = [
+        "rank",
+        "track",
+        "mmsi",
+        f"score ({shown_unit})",
+        "threshold",
+        "max km",
+        "at (lat, lon)",
+    ]
     several = scores["model"].nunique() > 1
     if several:
         cols.insert(3, "model")
@@ -300,8 +317,8 @@ def detection_table(scores: pd.DataFrame, score: str = "lane", limit: int = 15) 
             str(r.rank),
             str(r.track_id),
             str(r.mmsi),
-            f"{r.score:.3f}",
-            f"{readable_value(r.score_m, unit):,.2f}",
+            f"{readable_value(r.score, unit):,.2f}",
+            f"{readable_value(r.threshold, unit):,.2f}",
             f"{r.max_dev_m / 1000:,.2f}",
             f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         ]
@@ -321,11 +338,12 @@ def detection_table(scores: pd.DataFrame, score: str = "lane", limit: int = 15) 
             min_width=None if col in wraps else whole,
             overflow="fold",
         )
-    score = cols.index("score")
+    score = cols.index(f"score ({shown_unit})")
     for row, flagged in rows:
         cells = [escape(c) for c in row]
         cells[score] = f"[{'red' if flagged else 'white'}]{row[score]}[/]"
         table.add_row(*cells)
+    table.caption = RULE_CAPTIONS[rule]
     if len(shown) > limit:
-        table.caption = f"... and {len(shown) - limit} more in scores.parquet"
+        table.caption += f"; ... and {len(shown) - limit} more in scores.parquet"
     return table

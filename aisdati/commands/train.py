@@ -20,6 +20,7 @@ from aisdati.commands.common import (
     default_method,
     err_console,
     lane_settings,
+    shows_progress,
     warn,
 )
 from aisdati.commands.tables import dati_model_table, route_models_table
@@ -50,25 +51,22 @@ def run(
     max_tracks: int,
     patience: int,
     resume: bool,
-    routes_per_task: int,
-    workers: int,
-    scheduler: str | None,
+    workers: str,
     device: str,
-    quiet: bool,
     as_json: bool,
 ) -> None:
     """`aisdati train` with its options (see `aisdati.cli.train`)."""
-    check_options({"--seed": seed, "--routes-per-task": routes_per_task})
+    check_options({"--seed": seed})
     (method,) = parse_detectors(default_method(method, cluster))[:1]
-    execution = Execution(workers=workers, scheduler=scheduler)
+    execution = Execution.parse(workers)
     device = resolve_device(device)
     if cluster.strip().lower() == "routes":
         local, url = model_folder(out, resume)
         settings = route_settings(data, local, preset, lane, episodes, seed, patience, max_tracks)
         settings = [replace(s, device=device, publish_to=url) for s in settings]
-        return train_every_route(method, settings, execution, routes_per_task, quiet)
+        return train_every_route(method, settings, execution, as_json)
     if execution.distributed:
-        warn("one model trains in this process: --workers and --scheduler spread --cluster routes")
+        warn("one model trains in this process: --workers spreads --cluster routes")
     select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
     stem = model_name(cluster.strip().lower(), method)
     local, url = model_folder(out, resume, [stem + x for x in MODEL_SUFFIXES])
@@ -86,11 +84,9 @@ def run(
         device=device,
     )
     resuming = resume and local is not None and (local / f"{stem}.ckpt").is_file()
-    result = train_with_bars(method, settings, resuming, disable=quiet or as_json)
+    result = train_with_bars(method, settings, resuming, disable=not shows_progress(as_json))
     if as_json:
         print(json.dumps({"model": str(result.model), "card": result.card}, default=str))
-    elif quiet:
-        return
     elif method != "dati":
         console.print(
             f"{method} model of cluster {escape(repr(settings.cluster))} on "
@@ -204,8 +200,7 @@ def train_every_route(
     method: str,
     settings: list[TrainSettings],
     execution: Execution,
-    routes_per_task: int,
-    quiet: bool,
+    as_json: bool,
 ) -> None:
     """Every route's model, the routes trained as tasks (`aisdati.detectors.train`) here or on
     the Dask cluster of `execution`."""
@@ -214,11 +209,12 @@ def train_every_route(
     )
     with (
         open_runner(execution) as runner,
-        routes_bar(method, settings, label, disable=quiet) as bar,
+        routes_bar(method, settings, label, disable=not shows_progress(as_json)) as bar,
     ):
         trained = train_routes(
-            method, settings, on_step=bar.on_step, runner=runner,
-            routes_per_task=routes_per_task, on_task=bar.members_done,
+            method, settings, on_step=bar.on_step, runner=runner, on_task=bar.members_done,
         )  # fmt: skip
-    if not quiet:
+    if as_json:
+        print(json.dumps({"models": [str(t.model) for t in trained]}, default=str))
+    else:
         console.print(route_models_table(method, [s.cluster for s in settings], trained))

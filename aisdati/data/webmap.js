@@ -18,7 +18,7 @@ function table(p) {
 }
 function label(p) {
   if (p.label) return p.label;
-  const s = (p.score_m !== undefined) ? ` — ${p.score_m} m` : '';
+  const s = (p.score !== undefined) ? ` — score ${p.score}` : '';
   return `track ${p.track_id}${s}`;
 }
 function lines(fc, style, popup) {

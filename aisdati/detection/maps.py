@@ -325,7 +325,7 @@ def evidence_figures(
         track = result.tracks[i]
         title = (
             f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
-            f"score {score_text(row.score_m, result.score)}, model {row.model}"
+            f"score {score_text(row.score, result.score)}, model {row.model}"
         )
         args = (track.positions, result.rollouts[i], result.profiles[i], stretches[i], title)
         kwargs = {
@@ -344,7 +344,7 @@ def _track_props(row: Any) -> dict[str, Any]:
         "mmsi": int(row.mmsi),
         "rank": int(row.rank),
         "score": round(float(row.score), 4),
-        "score_m": round(float(row.score_m), 1),
+        "threshold": round(float(row.threshold), 4),
         "max_dev_m": round(float(row.max_dev_m), 1),
         "max_dev_lon": float(row.max_dev_lon),
         "max_dev_lat": float(row.max_dev_lat),
@@ -356,8 +356,10 @@ def _map_title(result: Detection) -> str:
     """What the maps show: the method and score, and how many tracks were flagged by what rule."""
     s = result.settings
     n, f = len(result.scores), int(result.scores["flagged"].sum())
-    rule = f"top {s.top_percent:g}%" if s and s.top_percent else f"score > {s.threshold:g}"
-    if s and s.contamination is not None:
-        rule = f"calibrated, contamination {s.contamination:g}"
+    rule = f"calibrated, contamination {s.contamination:g}" if s else "calibrated"
+    if s and s.rule == "top":
+        rule = f"top {s.top_percent:g}% of the batch"
+    elif s and s.rule == "relative":
+        rule = f"the paper's rule: score > {s.threshold:g} x the batch's largest"
     what = f"{s.method} ({s.score})" if s else "DATI"
     return f"{what} anomalies: {f} of {n} test tracks flagged ({rule})"

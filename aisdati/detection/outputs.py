@@ -38,8 +38,8 @@ SCORES_SCHEMA = pa.schema(
         ("mmsi", pa.int64()),
         ("model", pa.string()),
         ("n_points", pa.int64()),
-        ("score_m", pa.float64()),
         ("score", pa.float64()),
+        ("threshold", pa.float64()),
         ("flagged", pa.bool_()),
         ("rank", pa.int64()),
         ("max_dev_m", pa.float64()),
@@ -49,36 +49,24 @@ SCORES_SCHEMA = pa.schema(
         ("ashore_reports", pa.int64()),
     ]
 )
-"""scores.parquet, one row per test track, sorted by rank (1 = most abnormal). score_m: best-of-K
-mean great-circle distance along the warping path (metres); score: score_m / max over the test
-set; max_dev_*: the track point with the largest distance to its matched rollout point;
+"""scores.parquet, one row per test track, sorted by rank (1 = most abnormal). score: the
+judging model's score, in the unit the file's metadata (`aisdati.score_unit`) and report.json
+name; threshold: what flags it, in the same unit (the model's calibrated threshold, or the
+batch-relative one asked for); max_dev_*: the track point with the largest local deviation;
 ashore_reports: reports well inland (`aisdati.tracks.ashore`; 0 with --no-ashore), which flag
 the track from `AshoreCheck.min_reports` on and rank it above every track at sea."""
 
 SCORE_DEFINITIONS = {
     "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
     "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
-    "steprate": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
-    "errors, each over its report interval (at least the track's median interval) (m/s)",
     "stepspread": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
     "errors, each over the K draws' spread (root mean square distance from their centroid) "
     "plus 10 m (multiples of the spread)",
-    "stepod": "the larger of two rarities among the training tracks' own scores, -log10((1 + "
-    "training tracks scoring as high) / (training tracks + 1)): of stepspread, and of the "
-    "origin-destination distance where it is beyond the 95th percentile of the training "
-    "tracks' own (else 0)",
     "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
     "lane_rollouts free rollouts of twice the track's steps and, with lane_traffic, of one rollout "
     "from each training track's start (nearest: of the training tracks starting within "
     "near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
     "distance d and course difference dcourse (m)",
-    "both": "rollout / median training rollout score + step / median training step score",
-    "steplane": "step / median training step score + lane / median training lane score",
-    "steptraffic": "step / median training step score + distance to the training tracks "
-    "(their lane, as nearest's) / its median over the training tracks",
-    "area": "lane + the track's origin-destination distance to the nearest training track "
-    "(the larger of the starts' and the ends' distances) beyond the 95th percentile of the "
-    "training tracks' own (m)",
     "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
     "track starting within near_km",
 }
@@ -97,7 +85,7 @@ def write_outputs(result: Detection, out: Path, runner: Runner | None = None) ->
         result.scores.sort_values("rank").reset_index(drop=True),
         schema=SCORES_SCHEMA,
         preserve_index=False,
-    )
+    ).replace_schema_metadata(scores_metadata(result))
     path = out / "scores.parquet"
     atomic_write_bytes(path, parquet_bytes(table))
     files.append(path)
@@ -154,7 +142,7 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
             "model": row.model,
             "rank": int(row.rank),
             "score": float(row.score),
-            "score_m": float(row.score_m),
+            "threshold": float(row.threshold),
             "max_dev_m": float(row.max_dev_m),
             "ashore_reports": int(row.ashore_reports),
             "start": str(track.start),
@@ -191,18 +179,40 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
     return {"type": "FeatureCollection", "features": features}
 
 
-def thresholds(result: Detection) -> dict[str, Any] | None:
-    """With `--contamination`, each judging model's calibrated threshold and its bootstrap
-    spread (`Detector.threshold_spread`), in the score's unit."""
+def scores_metadata(result: Detection) -> dict[bytes, bytes]:
+    """scores.parquet's own account of its `score` column: the score, its unit and the rule
+    that flags, so that the file read alone says what its numbers are."""
     s = result.settings
-    if s is None or s.contamination is None:
+    return {
+        b"aisdati.score": (result.score).encode(),
+        b"aisdati.score_unit": score_unit(result.score).encode(),
+        b"aisdati.flag_rule": (s.rule if s else "calibrated").encode(),
+    }
+
+
+FLAG_RULES = {
+    "calibrated": "score above the judging model's calibrated threshold, which flags "
+    "`contamination` of its own training tracks (independent of the batch)",
+    "relative": "score above `threshold` x the largest score of the tracks judged together "
+    "(the paper's rule, section 6.2; depends on the batch)",
+    "top": "the `top_percent` highest scores of the tracks judged together (depends on the batch)",
+}
+"""report.json's `flag_rule_definition`, by `DetectSettings.rule`."""
+
+
+def thresholds(result: Detection) -> dict[str, Any] | None:
+    """By the calibrated rule, each judging model's threshold and its bootstrap spread
+    (`Detector.threshold_spread`), in the score's unit."""
+    s = result.settings
+    if s is None or s.rule != "calibrated":
         return None
     used = set(result.scores["model"])
     out = {}
     for m in result.models:
         if m.name in used:
-            lo, hi = m.threshold_spread(s.how, s.contamination)
-            out[m.name] = {"threshold": round(m.threshold(s.how, s.contamination), 3),
+            how = s.how_for(m)
+            lo, hi = m.threshold_spread(how, s.contamination)
+            out[m.name] = {"threshold": round(m.threshold(how, s.contamination), 3),
                            "spread_5_95": [round(lo, 3), round(hi, 3)]}  # fmt: skip
     return out
 
@@ -217,13 +227,16 @@ def report_dict(result: Detection) -> dict[str, Any]:
         if s
         else {},
         "models": [m.name for m in result.models],
-        "warnings": [w for m in result.models for w in card_warnings(m.card, m.name)],
+        "warnings": [w for m in result.models for w in card_warnings(m.card, m.name)]
+        + result.notes,
         "test_tracks": len(sc),
         "coverage": result.coverage.as_dict() if result.coverage else None,
         "thresholds": thresholds(result),
         "flagged": int(sc["flagged"].sum()),
         "flagged_ashore": int(AshoreCheck().flags(sc["ashore_reports"]).sum()),
-        "max_score_m": float(sc["score_m"].max()) if len(sc) else None,
+        "flag_rule": s.rule if s else None,
+        "flag_rule_definition": FLAG_RULES[s.rule] if s else None,
+        "max_score": float(sc["score"].max()) if len(sc) else None,
         "score_unit": score_unit(result.score) if s else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,

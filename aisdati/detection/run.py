@@ -4,17 +4,16 @@ Each test track goes to a model (`route_test_tracks`): the route or cluster mode
 training tracks are bound as it is (start and end within `near_km`; the paper's rule, by start
 alone, for cards that do not record where their tracks end), else an area model (`--cluster
 all`), which judges any track; a track no model covers is listed with the reason, never dropped
-unsaid. The model's detector (`aisdati.detectors`) scores it: by default DATI, judged by the
-lane its K free rollouts from the track's first point cover (`--score lane`, the default), with
-the origin-destination term added (`--score area`), by its best rollout
-(`--score rollout`, the paper's), by its teacher-forced one-step predictions along the track
-(`--score step`) or by rollout and step together (`--score both`). Higher means more abnormal.
-Flags: scores divided by their maximum over the test set above `threshold` (the paper's
-Λ = 0.75), or the `top_percent` highest, or scores above the model's calibrated threshold
-(`contamination`: the share of its own training tracks it would flag; cross-fitted for an area
-model), which does not depend on the test set; and, unless `ashore` is off, every track with
-reports well inland (`aisdati.tracks.ashore`), which also rank first. For every track the
-point of largest local deviation (the peak of its deviation profile) tells where it strays most.
+unsaid. The model's detector (`aisdati.detectors`) scores it by the model's own score (its card
+says which) or `--score`. Higher means more abnormal.
+
+Flags (`FlagRule`): by default each score above its model's calibrated threshold (the share
+`contamination` of its own training tracks it would flag; cross-fitted for an area model), so a
+track's flag never depends on the other tracks judged with it. Asked for: the paper's rule,
+scores over their maximum in the judged batch above `threshold` (Λ = 0.75), or the
+`top_percent` highest. Unless `ashore` is off, every track with reports well inland
+(`aisdati.tracks.ashore`) is flagged too and ranks first. For every track the point of largest
+local deviation (the peak of its deviation profile) tells where it strays most.
 
 Default test set (section 6.2): tracks of the `other` cluster, not used in training; `--cluster
 all`: every track of the ingest.
@@ -28,7 +27,7 @@ import math
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,21 +38,13 @@ from aisdati.ais import AREA_METHOD
 from aisdati.ais.card import card_methods, training_mask
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detectors import DETECTORS, SCORES, Detector, ScoreSettings, load_detectors
-from aisdati.detectors.base import score_each
+from aisdati.detectors.base import DEFAULT_CONTAMINATION, score_each
 from aisdati.detectors.od import track_ends
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
-
-
-def score_settings(settings: Any, **override: Any) -> ScoreSettings:
-    """The `ScoreSettings` of a command's settings (`DetectSettings`, `EvaluateSettings`): every
-    field of ScoreSettings that `settings` has by the same name is taken from it, the others
-    keep their defaults, and `override` has the last word."""
-    names = [f.name for f in fields(ScoreSettings) if hasattr(settings, f.name)]
-    return ScoreSettings(**{**{n: getattr(settings, n) for n in names}, **override})
 
 
 @dataclass(frozen=True)
@@ -74,15 +65,13 @@ class DetectSettings:
     """Explicit test tracks (overrides the cluster and the start rule)."""
     score: str | None = None
     """None: each judging model's own (`ModelCard.score`: lane; step for the area preset)."""
-    rollouts: int = 10
-    lane_rollouts: int = ScoreSettings().lane_rollouts
-    lane_course_km: float = ScoreSettings().lane_course_km
-    lane_traffic: bool = ScoreSettings().lane_traffic
-    threshold: float = 0.75
+    threshold: float | None = None
+    """The paper's rule: flag scores over the batch's largest above this (Λ); asked for only."""
     top_percent: float | None = None
-    contamination: float | None = None
+    contamination: float = DEFAULT_CONTAMINATION
+    """The calibrated rule, the default: each model's threshold flags this share of its own
+    training tracks."""
     near_km: float = 10.0
-    seed: int = 0
     labels: Path | None = None
     """CSV of hand labels (track_id or mmsi + start, label 0/1) for precision/recall/F1/AUC."""
     device: str = "cpu"
@@ -97,55 +86,56 @@ class DetectSettings:
         return self.models_shown or self.models_dir
 
     @property
-    def how(self) -> ScoreSettings:
-        return score_settings(self)
+    def rule(self) -> str:
+        """How tracks are flagged: `calibrated` (the default), `relative` (`--threshold`, the
+        paper's) or `top` (`--top-percent`)."""
+        if self.top_percent is not None:
+            return "top"
+        return "calibrated" if self.threshold is None else "relative"
+
+    def how_for(self, model: Detector) -> ScoreSettings:
+        """How `model` scores: the judging score, with the lane settings its calibration was
+        computed with (`load_detector` reads them from its card), so that its threshold
+        holds."""
+        return replace(model.how, score=self.score or model.card.score)
 
 
 EVIDENCE = {
     "rollout": "best rollout",
-    "both": "best rollout",
-    "steplane": "one-step predictions",
-    "steptraffic": "one-step predictions",
     "lane": "best rollout",
-    "area": "best rollout",
     "step": "one-step predictions",
-    "steprate": "one-step predictions",
     "stepspread": "one-step predictions",
-    "stepod": "one-step predictions",
     "nearest": "nearest training track",
 }
 """What a track was compared with, by score (by method for `nearest`)."""
 STEP_ERRORS = "one-step prediction error (m)"
 PROFILES = {
     "rollout": "distance to the best rollout (m)",
-    "both": STEP_ERRORS,
-    "steplane": STEP_ERRORS,
-    "steptraffic": STEP_ERRORS,
     "lane": "distance to the lane (m)",
-    "area": "distance to the lane (m)",
     "step": STEP_ERRORS,
-    "steprate": STEP_ERRORS,
     "stepspread": STEP_ERRORS,
-    "stepod": STEP_ERRORS,
     "nearest": "distance to the nearest training track (m)",
 }
 """What a track's profile (profiles.parquet, the evidence figures' lower panel) measures at
-each report, by score (by method for `nearest`): the sums of two scores show the one-step
-errors (`aisdati.detectors.policy`), `area` its lane's distances."""
+each report, by score (by method for `nearest`)."""
 
 
-NOT_JUDGED_TRAINING = "a training track of every model in reach"
 NOT_JUDGED_FAR = "no model covers its start and end (none within --near-km, no area model)"
 
 
 @dataclass(frozen=True)
 class Coverage:
-    """What became of every track of the chosen test set: judged (by which model) or not, and
-    why (with the ids), so that no track leaves it uncounted."""
+    """What became of every track of the chosen test set: a training track of the models that
+    could judge it (not a candidate: a model does not judge what it learnt from), judged (by
+    which model), or not judged and why (with the ids), so that no track leaves it
+    uncounted."""
 
     candidates: int
+    """The tracks asked to be judged, the models' own training tracks left out."""
     judged_by: dict[str, int]
     not_judged: dict[str, list[int]]
+    training: list[int] = field(default_factory=list)
+    """Ids of the tracks left out as training tracks of every model in reach."""
 
     @property
     def judged(self) -> int:
@@ -158,6 +148,8 @@ class Coverage:
             "judged_by": self.judged_by,
             "not_judged": {k: len(v) for k, v in self.not_judged.items()},
             "not_judged_tracks": self.not_judged,
+            "training_tracks": len(self.training),
+            "training_track_ids": self.training,
         }
 
 
@@ -175,6 +167,8 @@ class Detection:
     settings: DetectSettings | None = None
     metrics: dict[str, Any] | None = None
     coverage: Coverage | None = None
+    notes: list[str] = field(default_factory=list)
+    """Warnings about the run itself (`small_batch_note`), printed and in report.json."""
 
     @property
     def score(self) -> str:
@@ -274,16 +268,12 @@ def route_test_tracks(
     names = [m.name for m in models]
     judged = pd.Series([names[o] for o in owner if o >= 0], dtype=object).value_counts()
     left = owner < 0
-    not_judged = {
-        reason: [int(i) for i in ids[mask]]
-        for reason, mask in ((NOT_JUDGED_TRAINING, left & trained_any),
-                             (NOT_JUDGED_FAR, left & ~trained_any))
-        if mask.any()
-    }  # fmt: skip
+    far = left & ~trained_any
     coverage = Coverage(
-        candidates=n,
+        candidates=n - int((left & trained_any).sum()),
         judged_by={str(k): int(v) for k, v in judged.sort_index().items()},
-        not_judged=not_judged,
+        not_judged={NOT_JUDGED_FAR: [int(i) for i in ids[far]]} if far.any() else {},
+        training=[int(i) for i in ids[left & trained_any]],
     )
     return owner, coverage
 
@@ -315,30 +305,44 @@ def check_region(models: Sequence[Detector], tracks: Sequence[Track]) -> None:
         )
 
 
-def flag(scores: np.ndarray, threshold: float, top_percent: float | None) -> np.ndarray:
-    if top_percent is not None:
-        count = math.ceil(len(scores) * top_percent / 100.0)
-        order = np.argsort(-scores, kind="stable")
-        flagged = np.zeros(len(scores), dtype=bool)
-        flagged[order[:count]] = True
-        return flagged
-    return scores > threshold
+MIN_RELATIVE_BATCH = 10
+"""Fewest judged tracks for which a batch-relative rule (`--threshold`, `--top-percent`) flags
+without a warning: over fewer, the batch says little of what is normal (a lone track is always
+its own maximum, so `--threshold` flags it)."""
+
+
+def small_batch_note(n: int, settings: DetectSettings) -> str | None:
+    """The warning a batch-relative rule over fewer than `MIN_RELATIVE_BATCH` tracks earns."""
+    if settings.rule == "calibrated" or n >= MIN_RELATIVE_BATCH:
+        return None
+    option = "--threshold" if settings.rule == "relative" else "--top-percent"
+    return (
+        f"{option} flags relative to the judged batch, and {n} judged track(s) are too few to "
+        f"say what is normal (at least {MIN_RELATIVE_BATCH}): leave it out to flag by the "
+        "models' calibrated thresholds"
+    )
+
+
+def relative_thresholds(raw: np.ndarray, settings: DetectSettings) -> np.ndarray:
+    """[N] the threshold of a batch-relative rule in each score's unit: Λ x the batch's largest
+    score (`--threshold`), or just below the score of the `top_percent`-th highest track."""
+    n = len(raw)
+    if settings.rule == "relative":
+        return np.full(n, settings.threshold * float(np.max(raw)))
+    count = math.ceil(n * settings.top_percent / 100.0)
+    kth = float(np.sort(raw)[::-1][count - 1])
+    return np.full(n, np.nextafter(kth, -np.inf))
 
 
 def check_settings(settings: DetectSettings) -> None:
-    if not (0.0 < settings.threshold <= 1.0):
+    if settings.threshold is not None and not (0.0 < settings.threshold <= 1.0):
         raise UserError(f"--threshold must be in (0, 1], got {settings.threshold:g}")
     if settings.top_percent is not None and not (0.0 < settings.top_percent <= 100.0):
         raise UserError(f"--top-percent must be in (0, 100], got {settings.top_percent:g}")
-    if settings.contamination is not None and not (0.0 < settings.contamination < 1.0):
+    if not (0.0 < settings.contamination < 1.0):
         raise UserError(f"--contamination must be in (0, 1), got {settings.contamination:g}")
-    if settings.top_percent is not None and settings.contamination is not None:
-        raise UserError("give --top-percent or --contamination, not both")
-    if settings.rollouts < 1 or settings.lane_rollouts < 1:
-        raise UserError(
-            f"--rollouts and --lane-rollouts must be at least 1, got {settings.rollouts} and "
-            f"{settings.lane_rollouts}"
-        )
+    if settings.top_percent is not None and settings.threshold is not None:
+        raise UserError("give --threshold or --top-percent, not both")
     if not settings.near_km > 0:
         raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
     if settings.score is not None and settings.score not in SCORES:
@@ -385,19 +389,17 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner, runner)
     timings["score_s"] = time.perf_counter() - t1
     n = len(tracks)
-    top = float(np.max(raw)) if n else 1.0
-    norm = raw / top if top > 0 else np.zeros(n)
-    if settings.contamination is not None:
-        flagged = raw > threshold
-    else:
-        flagged = flag(norm, settings.threshold, settings.top_percent)
+    if settings.rule != "calibrated":
+        threshold = relative_thresholds(raw, settings)
+    flagged = raw > threshold
     check = AshoreCheck()
     ashore = np.zeros(n, np.int64)
     if settings.ashore:
         ashore = ashore_counts(models, tracks, owner, runner)
     flagged = flagged | check.flags(ashore)
     lengths = np.array([len(t.positions) for t in tracks])
-    order = np.argsort(-check.ranked(norm, ashore, lengths), kind="stable")
+    top = float(np.max(raw)) if n else 1.0
+    order = np.argsort(-check.ranked(raw / top if top > 0 else raw, ashore, lengths), kind="stable")
     rank = np.empty(n, dtype=np.int64)
     rank[order] = np.arange(1, n + 1)
     peak = [int(np.argmax(p)) for p in profiles]
@@ -407,8 +409,8 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
             "mmsi": [t.mmsi for t in tracks],
             "model": [models[o].name for o in owner],
             "n_points": lengths,
-            "score_m": raw,
-            "score": norm,
+            "score": raw,
+            "threshold": threshold,
             "flagged": flagged,
             "rank": rank,
             "max_dev_m": [float(p[k]) for p, k in zip(profiles, peak, strict=True)],
@@ -419,9 +421,11 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
         }
     )
     timings["total_s"] = time.perf_counter() - t0
+    note = small_batch_note(n, settings)
     result = Detection(
-        scores, tracks, evidence, models, profiles, timings, settings, coverage=coverage
-    )
+        scores, tracks, evidence, models, profiles, timings, settings, coverage=coverage,
+        notes=[note] if note else [],
+    )  # fmt: skip
     if settings.labels is not None:
         result.metrics = evaluate_labels(scores, tracks, settings.labels)
     return result
@@ -476,28 +480,27 @@ def _score_by_model(
     owner: list[int],
     runner: Runner | None,
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]:
-    """Each track scored by the model that judges it: (score in metres, that model's calibrated
-    threshold or NaN without `contamination`, evidence, deviation profile), in track order."""
+    """Each track scored by the model that judges it: (score, that model's calibrated
+    threshold, evidence, deviation profile), in track order."""
     n = len(tracks)
     raw = np.full(n, np.nan)
     threshold = np.full(n, np.nan)
     evidence: list[np.ndarray] = [np.empty((0, 2))] * n
     profiles: list[np.ndarray] = [np.empty(0)] * n
     used = sorted({int(o) for o in owner})
+    how = {m: settings.how_for(models[m]) for m in used}
     cut: dict[int, float] = {}  # calibrated thresholds, before any scoring: fail fast
-    if settings.contamination is not None:
+    if settings.rule == "calibrated":
         for m in used:
-            cut[m] = models[m].threshold(settings.how, settings.contamination)
+            cut[m] = models[m].threshold(how[m], settings.contamination)
     rows = {m: [i for i in range(n) if owner[i] == m] for m in used}
-    scored = score_each(
-        [(models[m], [tracks[i] for i in rows[m]]) for m in used], settings.how, (), runner
-    )
+    jobs = [(models[m], [tracks[i] for i in rows[m]], how[m]) for m in used]
+    scored = score_each(jobs, (), runner)
     for m, got in zip(used, scored, strict=True):
         idx = rows[m]
-        if settings.contamination is not None:
-            threshold[idx] = cut[m]
+        threshold[idx] = cut.get(m, np.nan)
         for j, i in enumerate(idx):
-            raw[i] = got.score_m[j]
+            raw[i] = got.score[j]
             evidence[i] = got.evidence[j]
             profiles[i] = got.profiles[j]
     return raw, threshold, evidence, profiles

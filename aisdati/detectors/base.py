@@ -23,7 +23,6 @@ from typing import ClassVar, TypeVar
 
 import numpy as np
 
-from aisdati.ais import LANE_SCORES
 from aisdati.ais.card import CalibratedWith, DataCard, ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.training import TrainSettings, check_settings
@@ -154,7 +153,7 @@ class Detector(ABC):
         abnormal), and compute the kinds in `also` in the same pass (into `Scores.parts`), in
         chunks (`score_chunks`) run as tasks of `runner` (default: here). Numbers a kernel
         refuses (`aisdati.dtw`: NaN or inf) are a one-line `UserError` naming the model."""
-        return score_each([(self, tracks)], how, also, runner)[0]
+        return score_each([(self, tracks, how or self.how)], also, runner)[0]
 
     @abstractmethod
     def score_tracks(
@@ -169,8 +168,9 @@ class Detector(ABC):
         del device  # only DATI's networks move (`DATIDetector.to_device`)
 
     def decision_function(self, tracks: Sequence[Track]) -> np.ndarray:
-        """Each track's score (metres, higher = more abnormal) of the detector's `how`."""
-        return self.score(tracks).score_m
+        """Each track's score (higher = more abnormal) of the detector's `how`, in its unit
+        (`aisdati.ais.score_unit`: metres, or multiples of the draws' spread)."""
+        return self.score(tracks).score
 
     def calibration_key(self, how: ScoreSettings) -> str:
         return how.score
@@ -188,13 +188,12 @@ class Detector(ABC):
                 "retrain it, or flag with --threshold / --top-percent"
             )
         recorded = self.card.calibrated_with or CalibratedWith()
-        for name in self.lane_settings if key in LANE_SCORES else ():
+        for name in self.lane_settings if key == "lane" else ():
             was, now = getattr(recorded, name), getattr(how, name)
             if not math.isclose(float(was), float(now)):
                 raise UserError(
-                    f"model {self.name}'s lane scores were calibrated with "
-                    f"{_as_option(name, was)}, not {_as_option(name, now, named=False)}: pass "
-                    "that, retrain, or flag with --threshold / --top-percent"
+                    f"model {self.name}'s lane scores were calibrated with {name}={was}, not "
+                    f"{now}: score with its card's settings (`calibrated_with`) or retrain it"
                 )
         return float(np.quantile(np.asarray(cal, np.float64), 1.0 - contamination))
 
@@ -281,39 +280,31 @@ class Detector(ABC):
             atomic_write_bytes(stem.with_suffix(".corridor.npz"), self.corridor.to_bytes())
 
 
-def _as_option(key: str, value: float | bool, named: bool = True) -> str:
-    """`--lane-course-km 2` (or `2` unnamed) / `--lane-traffic` / `--no-lane-traffic`."""
-    if isinstance(value, bool):
-        return f"--{'' if value else 'no-'}{key.replace('_', '-')}"
-    return f"--{key.replace('_', '-')} {value:g}" if named else f"{value:g}"
-
-
 def score_each(
-    work: Sequence[tuple[Detector, Sequence[Track]]],
-    how: ScoreSettings | None = None,
+    work: Sequence[tuple[Detector, Sequence[Track], ScoreSettings]],
     also: Sequence[str] = (),
     runner: Runner | None = None,
 ) -> list[Scores]:
-    """`Detector.score` of several detectors, each on its own tracks, as one set of tasks
-    (every detector's chunks at once, so that many models of a few tracks each still fill the
-    workers)."""
+    """`Detector.score` of several detectors, each on its own tracks and with its own settings,
+    as one set of tasks (every detector's chunks at once, so that many models of a few tracks
+    each still fill the workers)."""
     jobs = [
-        (k, detector, list(tracks[r.start : r.stop]))
-        for k, (detector, tracks) in enumerate(work)
+        (k, detector, list(tracks[r.start : r.stop]), how)
+        for k, (detector, tracks, how) in enumerate(work)
         for r in score_chunks(len(tracks))
     ]
-    done = (runner or InProcess()).map(functools.partial(score_chunk, how, tuple(also)), jobs)
-    return [joined([c for (j, _, _), c in zip(jobs, done, strict=True) if j == k])
+    done = (runner or InProcess()).map(functools.partial(score_chunk, tuple(also)), jobs)
+    return [joined([c for (j, *_), c in zip(jobs, done, strict=True) if j == k])
             for k in range(len(work))]  # fmt: skip
 
 
 def score_chunk(
-    how: ScoreSettings | None, also: tuple[str, ...], job: tuple[int, Detector, list[Track]]
+    also: tuple[str, ...], job: tuple[int, Detector, list[Track], ScoreSettings]
 ) -> Scores:
     """One scoring task of `score_each`: a chunk of one detector's tracks."""
-    _, detector, tracks = job
+    _, detector, tracks, how = job
     try:
-        return detector.score_tracks(tracks, how or detector.how, also)
+        return detector.score_tracks(tracks, how, also)
     except ValueError as exc:
         where = detector.loaded_from or f"model {detector.name}"
         raise UserError(f"cannot score with {where}: {first_line(exc)}") from None

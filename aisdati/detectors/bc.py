@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from aisdati.ais.card import DataCard, ModelCard, NetworkCard, TrainingReport
-from aisdati.ais.policy import Act, member_decisions, member_rows
+from aisdati.ais.policy import Act, Draws, member_decisions, member_rows
 from aisdati.ais.source import build_source, make_env
 from aisdati.ais.space import AISSpace
 from aisdati.ais.training import (
@@ -28,11 +28,12 @@ from aisdati.ais.training import (
     member_seeds,
     member_sources,
 )
-from aisdati.detectors.policy import PolicyDetector, save_traffic, saved_corridor, saved_traffic
+from aisdati.detectors.policy import PolicyDetector, saved_corridor
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.model.bc import BCConfig, BCPolicy, BCTrainer, sample_decisions
 from aisdati.model.networks import one_member
+from aisdati.model.noise import KeyedNoise
 from aisdati.model.persistence import load_weights
 from aisdati.model.readers import first_line
 from aisdati.model.trainer import Callback
@@ -70,7 +71,7 @@ class BCDetector(PolicyDetector):
         source = build_source(tracks, config)
         self.card = base_card("bc", self.settings, source.space, self.describe(tracks, data))
         folds = (
-            crossfit_folds(tracks, members, self.settings.seed, lane.fold_by)
+            crossfit_folds(tracks, members, self.settings.seed)
             if lane.crossfit
             else np.full(len(tracks), -1)
         )
@@ -91,25 +92,20 @@ class BCDetector(PolicyDetector):
         self.card.training.wall_seconds = time.perf_counter() - t0
         return self
 
-    def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
+    def make_act(self, rows: Draws, temporal: bool, member: int | None = None) -> Act:
         """BC's Gaussian policy, member `member` (a one-member copy, `one_member`) or every
-        member in turn (`member_rows`). One member draws its noise as its row of the whole
-        ensemble's would be drawn, so its decisions are the ones it made when every member
-        computed every row."""
+        member on its rows (`Draws.members`); each row's standard normal draws are keyed
+        (`aisdati.model.noise.KeyedNoise`), so they do not depend on its batch."""
+        del temporal  # BC's draws are independent from step to step
         policy = self.trained()
-        members = len(policy.seeds)
-        gen = torch.Generator().manual_seed(int(seed))
         acting = policy if member is None else one_member(policy, member)
-        grid, valid = member_rows(n, members if member is None else 1)
-        rows = grid.numpy()
-
-        def draw(shape: torch.Size) -> torch.Tensor:
-            if member is None:
-                return torch.randn(shape, generator=gen)
-            return torch.randn((members, *shape[1:]), generator=gen)[member : member + 1]
+        count = len(acting.seeds)
+        grid, valid = member_rows(rows.members(count), count)
+        noise = KeyedNoise(rows.keys, 3)
 
         def act(obs: np.ndarray) -> np.ndarray:
-            out = torch.as_tensor(sample_decisions(acting, obs[rows], draw))
+            eta = noise.sample()[grid]
+            out = torch.as_tensor(sample_decisions(acting, obs[grid.numpy()], lambda _: eta))
             return member_decisions(out, grid, valid)
 
         return act
@@ -123,7 +119,6 @@ class BCDetector(PolicyDetector):
         buf = io.BytesIO()
         torch.save(self.trained().state_dict(), buf)
         atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
-        save_traffic(stem, self.training_tracks)  # before the card that names them
         self.save_card(stem)
         self.save_corridor(stem)
 
@@ -138,5 +133,4 @@ class BCDetector(PolicyDetector):
         load_weights(policy, stem.with_suffix(".pt"))
         det = cls(name=stem.name)
         det.card, det.bc, det.corridor = card, policy, saved_corridor(stem, card)
-        det.training_tracks = saved_traffic(stem, card)
         return det

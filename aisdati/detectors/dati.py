@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from aisdati.ais.card import DataCard, ModelCard
-from aisdati.ais.policy import Act, dati_act
+from aisdati.ais.policy import Act, Draws, dati_act
 from aisdati.ais.training import (
     LaneRoute,
     TrainResult,
@@ -17,7 +17,7 @@ from aisdati.ais.training import (
     train_lanes,
 )
 from aisdati.detectors.base import Detector
-from aisdati.detectors.policy import PolicyDetector, save_traffic, saved_corridor, saved_traffic
+from aisdati.detectors.policy import PolicyDetector, saved_corridor
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig
@@ -92,15 +92,11 @@ class DATIDetector(PolicyDetector):
         self.card, self.resumed_from = result.card, result.resumed_from
         self.card.training.finished = True
         lane = self.card.lane_config
-        folds = (
-            crossfit_folds(tracks, lane.members, self.card.seed, lane.fold_by)
-            if lane.crossfit
-            else None
-        )
+        folds = crossfit_folds(tracks, lane.members, self.card.seed) if lane.crossfit else None
         self.calibrate(tracks, folds=folds)
 
-    def make_act(self, n: int, seed: int, temporal: bool, member: int | None = None) -> Act:
-        return dati_act(self.trained(), self.config, member)(n, seed, temporal)
+    def make_act(self, rows: Draws, temporal: bool, member: int | None = None) -> Act:
+        return dati_act(self.trained(), self.config, member)(rows, temporal)
 
     def to_device(self, device: str) -> None:
         self.trained().to(device)
@@ -111,7 +107,6 @@ class DATIDetector(PolicyDetector):
         return self.nets
 
     def save(self, stem: Path) -> None:
-        save_traffic(stem, self.training_tracks)  # before the card that names them
         save_networks(stem, self.trained(), self.config, self.card.to_dict())
         self.save_corridor(stem)
 
@@ -124,5 +119,4 @@ class DATIDetector(PolicyDetector):
         det = cls(name=stem.name)
         det.card, det.nets, det.config = card, nets, config
         det.corridor = saved_corridor(stem, card)
-        det.training_tracks = saved_traffic(stem, card)
         return det

@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from aisdati.ais.card import read_card
+from aisdati.ais.card import CalibratedWith, read_card
 from aisdati.errors import UserError
 from aisdati.options import parse_names
 
@@ -52,7 +52,14 @@ def load_detector(stem: Path) -> Detector:
     path = stem.with_suffix(".json")
     card = read_card(path)  # size, types, ranges: one line naming the field
     det = detector_class(card.method).from_files(stem, card)
-    det.how = replace(det.how, score=card.score)  # `decision_function` judges by its own score
+    recorded = card.calibrated_with or CalibratedWith()
+    # `decision_function` judges by its own score, with the settings its threshold was made with
+    det.how = replace(
+        det.how,
+        score=card.score,
+        lane_course_km=recorded.lane_course_km,
+        lane_traffic=recorded.lane_traffic,
+    )
     det.loaded_from = path
     return det
 

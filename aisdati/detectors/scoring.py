@@ -6,11 +6,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from aisdati.ais import RATIO_SCORES
 from aisdati.ais.card import CalibratedWith
 from aisdati.geo import draw_spread
 
@@ -19,17 +17,6 @@ SCORE_CHUNK = 64
 the scores are the same whatever runs the tasks. Each chunk regenerates the lane traffic (one
 rollout per training track, at most 170), which 64 tracks of 30 lane rollouts each outweigh
 more than 10 times; smaller chunks would spread a few hundred tracks wider over workers."""
-
-
-def error_rates(errors_m: np.ndarray, dts_h: np.ndarray) -> np.ndarray:
-    """A track's one-step errors (metres; report i predicting report i + 1) as rates, m/s: each
-    over its time step, at least the track's median step. A prediction across a gap strays in
-    proportion to the gap, so in metres a normal track with a few long intervals outranks a
-    position jump of a track reported every minute; per second of the interval it does not. The
-    floor keeps the jitter of reports seconds apart from counting as fast errors. `steprate`;
-    measured forward in time in docs/results/forward.md."""
-    seconds = np.maximum(dts_h, np.median(dts_h)) * 3600.0
-    return errors_m / seconds
 
 
 POSITION_ACCURACY_M = 10.0
@@ -63,11 +50,8 @@ def tail_mean(values: np.ndarray, fraction: float) -> float:
 @dataclass(frozen=True, kw_only=True)
 class ScoreSettings:
     score: str = "lane"
-    """lane, rollout (the paper's), step (teacher-forced; steprate and stepspread the same
-    errors over their report intervals or the draws' spread), both (rollout + step), steplane
-    (step + lane), area (lane plus the origin-destination term, `aisdati.detectors.od`) or
-    stepod (the rarer of stepspread and that term, `aisdati.detectors.od.stepod_scores`); see
-    `aisdati.ais.policy` and `RATIO_SCORES`."""
+    """lane, rollout (the paper's), step (teacher-forced) or stepspread (the same errors over
+    the draws' spread); see `aisdati.ais.policy`."""
     rollouts: int = 10
     """K: free rollouts per track (the rollout score is the best of K), and one-step draws
     per report."""
@@ -112,34 +96,26 @@ class ScoreSettings:
         return CalibratedWith(lane_course_km=self.lane_course_km, lane_traffic=self.lane_traffic)
 
 
-def ratio_sum(parts: dict[str, Any], medians_of: dict[str, Any], name: str) -> np.ndarray:
-    """`RATIO_SCORES[name]` of the scores in `parts`, each over the median of its kind in
-    `medians_of` (the training tracks' own scores)."""
-    return sum(
-        np.asarray(parts[k], np.float64) / float(np.median(medians_of[k]))
-        for k in RATIO_SCORES[name]
-    )
-
-
 @dataclass
 class Scores:
     """What a detector says about N tracks."""
 
-    score_m: np.ndarray
-    """[N] raw scores, metres; higher = more abnormal."""
+    score: np.ndarray
+    """[N] the scores, in their kind's unit (`aisdati.ais.score_unit`); higher = more
+    abnormal."""
     profiles: list[np.ndarray]
     """Per track, the local deviation (m) at each of its points: where it strays."""
     evidence: list[np.ndarray]
     """Per track, what it was compared with ([m, 2] lon/lat): best rollout, nearest training
     track, or the one-step predictions."""
     parts: dict[str, np.ndarray] = field(default_factory=dict)
-    """Every score computed in the pass, by kind ([N] each, `score_m` among them)."""
+    """Every score computed in the pass, by kind ([N] each, `score`'s among them)."""
 
 
 def joined(chunks: list[Scores]) -> Scores:
     """The scores of consecutive chunks of tracks as one."""
     return Scores(
-        np.concatenate([c.score_m for c in chunks]),
+        np.concatenate([c.score for c in chunks]),
         [p for c in chunks for p in c.profiles],
         [e for c in chunks for e in c.evidence],
         {k: np.concatenate([c.parts[k] for c in chunks]) for k in chunks[0].parts},

@@ -1,7 +1,7 @@
 """`aisdati evaluate`: a detection benchmark on the user's own ingested data.
 
 1. Split one cluster's (or route's, or the whole area's: `all`) tracks by vessel into training
-   and held-out sets (seeded), or by time (`split="time"`: the tracks that start before
+   and held-out sets (seeded), or by time (`before` given: the tracks that start before
    `before` train, every later one is judged: the forward protocol), or take the training set
    from existing model cards (`models_dir`).
 2. Write anomalies of the chosen kinds (at `strength` x their usual distances) into a seeded
@@ -11,8 +11,8 @@
 4. Score the held-out tracks and report, per detector, score and anomaly kind: ROC AUC, average
    precision, precision / recall / F1 at the detector's calibrated flagging rule (the
    (1 - contamination) quantile of its training tracks' scores), and the median score of normal
-   and altered tracks. Policy detectors (dati, bc) are scored all three ways (rollout, step,
-   both) from one scoring pass. For them the median normal rollout score is the *lane
+   and altered tracks. Policy detectors (dati, bc) are scored every way (rollout, step, lane,
+   stepspread) in one scoring pass. For them the median normal rollout score is the *lane
    fidelity*: how far (mean metres along the DTW path) the best of K rollouts stays from unseen
    normal tracks.
 """
@@ -31,7 +31,7 @@ import pandas as pd
 from aisdati.ais import DEFAULT_PRESET, score_unit
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
-from aisdati.detection.run import ashore_counts, score_settings
+from aisdati.detection.run import ashore_counts
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
@@ -41,7 +41,6 @@ from aisdati.execution import Runner
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
-SPLITS = ("vessel", "time")
 POSITION_KINDS = ("detour", "jump", "loiter")
 """The summary row the README's targets use: anomalies a position-only score can see."""
 
@@ -57,12 +56,6 @@ class EvaluateSettings:
     train_fraction: float = 0.6
     seed: int = 0
     episodes: int = 170
-    patience: int = 10
-    rollouts: int = 10
-    lane_rollouts: int = ScoreSettings().lane_rollouts
-    lane_course_km: float = ScoreSettings().lane_course_km
-    lane_traffic: bool = ScoreSettings().lane_traffic
-    near_km: float = 10.0
     contamination: float = 0.05
     models_dir: Path | None = None
     models_shown: str | None = None
@@ -70,9 +63,9 @@ class EvaluateSettings:
     (`aisdati.storage.fetched_models`); None: `models_dir`."""
     preset: str = DEFAULT_PRESET
     lane: LaneConfig = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
-    split: str = "vessel"
-    """vessel (held-out vessels, seeded) or time (tracks from `before` on are judged)."""
     before: pd.Timestamp | None = None
+    """None: split by vessel (held-out vessels, seeded); a time: the tracks from then on are
+    judged, forward in time."""
     altered: float = 0.5
     """Share of the held-out tracks that take an anomaly."""
     strength: float = 1.0
@@ -90,6 +83,11 @@ class EvaluateSettings:
     def models_named(self) -> str | Path | None:
         """The model folder as messages name it (`models_shown`)."""
         return self.models_shown or self.models_dir
+
+    @property
+    def split(self) -> str:
+        """vessel or time (`before` given)."""
+        return "vessel" if self.before is None else "time"
 
     @property
     def anomaly_params(self) -> dict[str, Any]:
@@ -115,14 +113,8 @@ def check(settings: EvaluateSettings) -> None:
         raise UserError(f"--train-fraction must be in [0.1, 0.9], got {settings.train_fraction:g}")
     if not 0.0 < settings.contamination < 0.5:
         raise UserError(f"--contamination must be in (0, 0.5), got {settings.contamination:g}")
-    if min(settings.rollouts, settings.lane_rollouts, settings.episodes) < 1:
-        raise UserError("--rollouts, --lane-rollouts and --episodes must be at least 1")
-    if not np.isfinite(settings.near_km) or settings.near_km <= 0:
-        raise UserError(f"--near-km must be a positive number, got {settings.near_km:g}")
-    if settings.split not in SPLITS:
-        raise UserError(f"--split must be one of {', '.join(SPLITS)}, got {settings.split!r}")
-    if (settings.split == "time") != (settings.before is not None):
-        raise UserError("--split time needs --before DATE (and --before needs --split time)")
+    if settings.episodes < 1:
+        raise UserError("--episodes must be at least 1")
     if not 0.05 <= settings.altered <= 0.95:
         raise UserError(f"--altered must be in [0.05, 0.95], got {settings.altered:g}")
     with_strength({}, settings.strength)  # a --strength out of range fails here
@@ -189,7 +181,6 @@ class _Prepared:
             episodes=s.episodes,
             seed=s.seed,
             max_tracks=None,
-            patience=s.patience,
             track_ids=tuple(self.split.train_ids),
             preset=s.preset,
             lane=s.lane,
@@ -197,9 +188,9 @@ class _Prepared:
         )
 
 
-def _how(settings: EvaluateSettings) -> ScoreSettings:
-    """How the held-out tracks are scored: `both`, whose one pass yields every score."""
-    return score_settings(settings, score="both")
+HOW = ScoreSettings(score="rollout")
+"""How the held-out tracks are scored: as `detect` scores (the default settings), every score
+in one pass (`scored_kinds`)."""
 
 
 def _checked_models(settings: EvaluateSettings) -> dict[str, Detector]:
@@ -209,7 +200,7 @@ def _checked_models(settings: EvaluateSettings) -> dict[str, Detector]:
     if existing:
         _same_region(settings, existing)
         for det in existing.values():  # calibrated as this run scores
-            det.threshold(replace(_how(settings), score="lane"), settings.contamination)
+            det.threshold(replace(HOW, score="lane"), settings.contamination)
     return existing
 
 
@@ -258,7 +249,7 @@ def evaluate(
             detectors[method] = prepared.existing[method]
         else:
             say(f"training {method}")
-            trained = train(method, prepared.train_settings(), _how(settings))
+            trained = train(method, prepared.train_settings(), HOW)
             detectors[method] = _load(trained.model.with_suffix(""), settings)
         train_s[method] = time.perf_counter() - t0
     return _score(prepared, detectors, train_s, say, runner)
@@ -273,7 +264,7 @@ def _score(
 ) -> Evaluation:
     """Score the held-out tracks with every detector and tabulate (see the module docstring)."""
     settings, split = prepared.settings, prepared.split
-    how = _how(settings)
+    how = HOW
     heldout = load_tracks(prepared.data, split.heldout_ids)
     labels = split.labels.set_index("track_id").loc[split.heldout_ids]
     rule = AshoreCheck()
@@ -318,19 +309,11 @@ def _score(
 
 def scored_kinds(det: Detector) -> list[str]:
     """The scores a detector gives the held-out tracks in one pass: nearest's two; a policy's
-    four, `steprate`, `stepspread`, `steplane` and `steptraffic` where its card was calibrated
-    with them (cards from before those scores are not), and `od` and `area` where its card
-    records where its training tracks end (`stepod` too where it was calibrated)."""
+    four (`stepspread` where its card was calibrated with it: cards from before it are not)."""
     if det.method == "nearest":
         return ["nearest", "lane"]
-    since = [
-        k
-        for k in ("steprate", "stepspread", "steplane", "steptraffic")
-        if det.card.calibration.get(k)
-    ]
-    od = ["od", "area"] if det.end_points is not None else []
-    od += ["stepod"] if det.card.calibration.get("stepod") else []
-    return ["rollout", "step", "lane", "both", *since, *od]
+    spread = ["stepspread"] if det.card.calibration.get("stepspread") else []
+    return ["rollout", "step", "lane", *spread]
 
 
 ALL_ROUTES = "routes"
@@ -396,11 +379,9 @@ def evaluate_routes(
         t0 = time.perf_counter()
         if method == "dati":
             group = [prepared[k].train_settings() for k in todo]
-            models = [t.model for t in train_all(method, group, _how(settings))]
+            models = [t.model for t in train_all(method, group, HOW)]
         else:
-            models = [
-                train(method, prepared[k].train_settings(), _how(settings)).model for k in todo
-            ]
+            models = [train(method, prepared[k].train_settings(), HOW).model for k in todo]
         share = (time.perf_counter() - t0) / len(todo)  # an ensemble's time, shared out
         for k, model in zip(todo, models, strict=True):
             detectors[k][method] = _load(model.with_suffix(""), settings)

@@ -6,7 +6,7 @@ the number of workers, and hands them to a `Runner`: `InProcess` runs them one a
 in this process (the default; `InThreads` on threads, for a stage whose work releases the GIL),
 `DaskRunner` as tasks
 of a dask.distributed cluster, local processes started here (`--workers N`) or an existing
-cluster (`--scheduler tcp://HOST:PORT`). The same tasks with the same inputs give the same
+cluster (`--workers tcp://HOST:PORT`). The same tasks with the same inputs give the same
 outputs, so the results do not depend on where they ran.
 
 A task that dies with its worker (killed, out of memory) is run again on another one, up to
@@ -32,7 +32,8 @@ R = TypeVar("R")
 RETRIES = 3
 """Times a task lost with its worker is started again elsewhere (local clusters)."""
 CONNECT_TIMEOUT_S = 10
-"""How long `--scheduler` waits for the scheduler to answer before giving up, in one line."""
+"""How long `--workers ADDRESS` waits for the scheduler to answer before giving up, in one
+line."""
 WORKER_MEMORY = "auto"
 """Each local worker's memory limit: the machine's memory shared equally (Dask's `auto`)."""
 CLUSTER_LOG_LEVEL = logging.CRITICAL
@@ -55,7 +56,22 @@ class Execution:
         if self.workers < 1:
             raise UserError(f"--workers must be at least 1, got {self.workers}")
         if self.scheduler is not None and self.workers != 1:
-            raise UserError("give --workers or --scheduler, not both")
+            raise UserError("an existing cluster brings its own workers: a count or an address")
+
+    @classmethod
+    def parse(cls, text: str | int) -> Execution:
+        """`--workers`: a number of local processes, or the address of an existing Dask
+        scheduler (tcp://HOST:PORT, or any SCHEME://...)."""
+        text = str(text).strip()
+        if "://" in text:
+            return cls(scheduler=text)
+        try:
+            return cls(workers=int(text))
+        except ValueError:
+            raise UserError(
+                f"--workers {text!r}: expected a number of processes or a scheduler address "
+                "(tcp://HOST:PORT)"
+            ) from None
 
     @property
     def distributed(self) -> bool:

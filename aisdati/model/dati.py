@@ -44,9 +44,15 @@ from aisdati.model.noise import LatentNoise, NoiseProcess
 from aisdati.model.trainer import EpisodeLog, Trainer
 
 KEPT_PARAMETERS = ("forward_actor.", "time2vec.")
-"""What a member ends with (and what `DATIConfig.actor_average` averages)."""
+"""What a member ends with."""
 WARMUP_SPREAD = 5.0 / 180.0
 """Spread of the warm-up decisions around the perfect ones, in scaled units (5° of heading)."""
+
+
+REMOVED_SETTINGS = {"pretrain_variety": 1, "actor_average": 0.0}
+"""Settings of earlier releases, measured and not adopted (docs/results/tried.md), with the value
+that meant "off", at which a saved configuration still loads."""
+REMOVED_NETWORK_SETTINGS = {"conditional_critic": False}
 
 
 @dataclass(frozen=True)
@@ -80,27 +86,14 @@ class DATIConfig:
     pairs before the adversarial training (`DATITrainer.pretrain`). 0 is the paper's way, random
     actors; a warm start is a departure (as GAIL is often started from BC) that the AIS lanes
     measure."""
-    pretrain_variety: int = 1
-    """Latent-noise draws per pair in the warm start, the pull going to the best of them (the
-    variety loss of Social GAN, Gupta et al. 2018): with more than 1 the actor learns to spread
-    its draws over the decisions a state allows, as a score that keeps the best of K draws
-    assumes; 1 pulls every draw to the perfect decision, so the actor learns to ignore its
-    noise."""
     adversarial_time2vec: bool = True
     """Whether the actors' adversarial loss also updates the shared Time2Vec (through the
     critics' time features). The paper's code freezes it there (critic.trainable = False when
     compiling the GAN); the critic and L1 losses update it either way."""
-    actor_average: float = 0.0
-    """Decay of an exponential moving average of the forward actor (and Time2Vec), updated after
-    every training batch; when above 0 the average, not the live actor, is validated and kept.
-    Averaging a GAN's generator over its iterates damps the oscillation of adversarial training
-    (Yazici et al. 2019). 0 is the paper's way: the live actor."""
 
     def __post_init__(self) -> None:
         if self.keep not in ("best", "final"):
             raise ValueError(f"keep must be 'best' or 'final', got {self.keep!r}")
-        if not 0.0 <= self.actor_average < 1.0:
-            raise ValueError(f"actor_average must be in [0, 1), got {self.actor_average}")
 
     @property
     def noise_process(self) -> NoiseProcess:
@@ -123,8 +116,15 @@ class DATIConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> DATIConfig:
+        """A saved configuration; a setting removed since (`REMOVED_SETTINGS`) is dropped where
+        it is at the paper's value, refused where it is not."""
         data = dict(data)
-        net = NetworkConfig(**data.pop("network", {}))
+        network = dict(data.pop("network", {}))
+        for where, removed in ((data, REMOVED_SETTINGS), (network, REMOVED_NETWORK_SETTINGS)):
+            for key, off in removed.items():
+                if key in where and where.pop(key) != off:
+                    raise ValueError(f"{key} was removed (measured, not adopted): retrain")
+        net = NetworkConfig(**network)
         for key in ("betas", "l1_betas"):
             if key in data:
                 data[key] = tuple(data[key])
@@ -146,27 +146,6 @@ def gradient_penalty(
     x = (u * real + (1 - u) * fake).requires_grad_(True)
     (grad,) = torch.autograd.grad(critic(x, reward, t).sum(), x, create_graph=True)
     return ((grad.norm(dim=-1) - 1) ** 2).mean(dim=1)
-
-
-def nearest_draws(
-    actor: Callable[[Tensor, Tensor, list[Tensor]], Tensor],
-    s: Tensor,
-    t: list[Tensor],
-    a: Tensor,
-    eta: Tensor,
-    variety: int,
-) -> Tensor:
-    """Of `variety` latent-noise draws per (state, perfect decision) pair (`eta` [E, K * B,
-    latent], draw j of pair b at row j * B + b), the one whose decision is nearest (L1) the
-    perfect one [E, B, latent]: the variety loss's pick (`DATIConfig.pretrain_variety`)."""
-    e, b = s.shape[:2]
-    if variety == 1:
-        return eta
-    with torch.no_grad():
-        out = actor(s.repeat(1, variety, 1), eta, [x.repeat(1, variety, 1) for x in t])
-        miss = (out - a.repeat(1, variety, 1)).abs().mean(-1).view(e, variety, b)
-        rows = miss.argmin(dim=1) * b + torch.arange(b, device=eta.device)
-    return torch.gather(eta, 1, rows[..., None].expand(-1, -1, eta.shape[-1]))
 
 
 class DATITrainer(Trainer[DATINetworks]):
@@ -198,8 +177,6 @@ class DATITrainer(Trainer[DATINetworks]):
         self.nets = DATINetworks(self.state_dim, self.decision_dim, self.cfg.network, self.seeds)
         self.nets.to(self.device)
         self.final = copy.deepcopy(self.nets)  # receives each member's best forward actor
-        self.average = copy.deepcopy(self.nets) if self.cfg.actor_average else None
-        """The moving average of the live forward actors (`DATIConfig.actor_average`)."""
         self._build_optimizers()
         # member-indexed state (envs, generators, noise, buffer, the running episodes),
         # compacted together when members leave the ensemble
@@ -287,10 +264,7 @@ class DATITrainer(Trainer[DATINetworks]):
             u_b = torch.stack([torch.rand(c.batch_size, 1, generator=g) for g in self.generators])
             u_f, u_b = u_f.to(self.device), u_b.to(self.device)
             cf, cb = nets.forward_critic, nets.backward_critic
-            real_f = nets.forward_critic_input(a_real, s)
-            fake_f = nets.forward_critic_input(fake_a, s)
-            real_b = nets.backward_critic_input(s, a_hat)
-            fake_b = nets.backward_critic_input(fake_s, a_hat)
+            real_f, fake_f, real_b, fake_b = a_real, fake_a, s, fake_s
             loss_f = (cf(fake_f, r, t).mean(1) - cf(real_f, r, t).mean(1)).squeeze(-1)
             loss_b = (cb(fake_b, r, t).mean(1) - cb(real_b, r, t).mean(1)).squeeze(-1)
             loss_f = loss_f + c.gradient_penalty * gradient_penalty(cf, real_f, fake_f, r, t, u_f)
@@ -309,8 +283,7 @@ class DATITrainer(Trainer[DATINetworks]):
         gen_a = nets.forward_actor(s, eta, t)
         gen_s = nets.backward_actor(a_hat, eta, t)
         adv = -(
-            nets.forward_critic(nets.forward_critic_input(gen_a, s), r, t).mean(1)
-            + nets.backward_critic(nets.backward_critic_input(gen_s, a_hat), r, t).mean(1)
+            nets.forward_critic(gen_a, r, t).mean(1) + nets.backward_critic(gen_s, r, t).mean(1)
         )
         adv = adv.squeeze(-1)
         self.opt_actor.zero_grad(set_to_none=True)
@@ -369,14 +342,12 @@ class DATITrainer(Trainer[DATINetworks]):
                 torch.stack([d[i][p] for d, p in zip(data, picks, strict=True)]) for i in range(3)
             )
             t = nets.time_features(step[..., None])
-            k = c.pretrain_variety
-            eta = torch.stack([self.noise.draw(m, c.batch_size * k) for m in range(len(data))])
-            eta = nearest_draws(nets.forward_actor, s, t, a, eta.to(self.device), k)
+            eta = torch.stack([self.noise.draw(m, c.batch_size) for m in range(len(data))])
+            eta = eta.to(self.device)
             pull = (nets.forward_actor(s, eta, t) - a).abs().mean(dim=(1, 2))
             self.opt_l1.zero_grad(set_to_none=True)
             (pull.sum() * c.l1_weight).backward()
             self.opt_l1.step()
-        self._update_average(0.0)  # the average starts from the warm start
         if self.validate is not None:
             # the warm start is a candidate like any episode's actor (episode 0): the
             # adversarial training must beat it on validation to replace it
@@ -384,22 +355,6 @@ class DATITrainer(Trainer[DATINetworks]):
                 metric = self.validate(self, k)
                 self.pretrained_metric[k] = self.best_loss[k] = metric
                 self._save_best(k)
-
-    @property
-    def candidate(self) -> DATINetworks:
-        """The networks whose forward actors are validated and kept: the moving average where
-        the configuration keeps one, else the live networks."""
-        return self.nets if self.average is None else self.average
-
-    def _update_average(self, decay: float) -> None:
-        """Move the average's forward actors and Time2Vec towards the live ones (decay 0: copy)."""
-        if self.average is None:
-            return
-        live = dict(self.nets.named_parameters())
-        with torch.no_grad():
-            for name, p in self.average.named_parameters():
-                if name.startswith(KEPT_PARAMETERS):
-                    p.lerp_(live[name], 1.0 - decay)
 
     def _act(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Every member's state, decision, latent noise and time input, on the CPU (where the
@@ -413,7 +368,6 @@ class DATITrainer(Trainer[DATINetworks]):
     def step(self) -> list[EpisodeLog]:
         """One environment step of every active member (with its training batch first)."""
         losses = self.train_batch().cpu()
-        self._update_average(self.cfg.actor_average)
         state, action, eta, t = self._act()
         rewards, perfect, ended = [], [], []
         for k, env in enumerate(self.envs):
@@ -480,10 +434,10 @@ class DATITrainer(Trainer[DATINetworks]):
         return log
 
     def _save_best(self, k: int) -> None:
-        """Copy member k's candidate forward actor and Time2Vec into the final networks (the
+        """Copy member k's live forward actor and Time2Vec into the final networks (the
         kept one)."""
         member = self.active[k]
-        live = dict(self.candidate.named_parameters())
+        live = dict(self.nets.named_parameters())
         with torch.no_grad():
             for name, p in self.final.named_parameters():
                 if name.startswith(KEPT_PARAMETERS):
@@ -508,8 +462,6 @@ class DATITrainer(Trainer[DATINetworks]):
                     for key in ("exp_avg", "exp_avg_sq"):
                         st[key] = st[key][keep].clone()
                     opt.state[new] = st
-        if self.average is not None:
-            slice_members(self.average, keep)
         self.envs = [self.envs[k] for k in keep]
         self._obs = [self._obs[k] for k in keep]
         self.generators = [self.generators[k] for k in keep]
@@ -520,8 +472,8 @@ class DATITrainer(Trainer[DATINetworks]):
 
     # ---------------------------------------------------------------- resume
     def state_dict(self) -> dict[str, Any]:
-        """Everything the next steps depend on, taken between two steps: the live, final and
-        averaged networks, the three Adam optimisers, the replay buffer, every random stream
+        """Everything the next steps depend on, taken between two steps: the live and final
+        networks, the three Adam optimisers, the replay buffer, every random stream
         (the members' generators, which also drive their latent noise, and the environments'
         numpy generators), the latent noise, the episode counters, the early-stopping state,
         the history, the current observations and each environment's running episode. Only
@@ -532,7 +484,6 @@ class DATITrainer(Trainer[DATINetworks]):
         return {
             "nets": self.nets.state_dict(),
             "final": self.final.state_dict(),
-            "average": None if self.average is None else self.average.state_dict(),
             "opt_critic": self.opt_critic.state_dict(),
             "opt_actor": self.opt_actor.state_dict(),
             "opt_l1": self.opt_l1.state_dict(),
@@ -568,8 +519,6 @@ class DATITrainer(Trainer[DATINetworks]):
             self.remove_members([k for k, m in enumerate(self.active) if m not in active])
         self.nets.load_state_dict(state["nets"])
         self.final.load_state_dict(state["final"])
-        if self.average is not None:
-            self.average.load_state_dict(state["average"])
         self.opt_critic.load_state_dict(state["opt_critic"])
         self.opt_actor.load_state_dict(state["opt_actor"])
         self.opt_l1.load_state_dict(state["opt_l1"])

@@ -81,16 +81,8 @@ class ReferenceSource(ABC):
     def time_high(self) -> float:
         return float(self.max_steps)
 
-    def features(
-        self,
-        positions: np.ndarray,
-        previous: np.ndarray,
-        dts: np.ndarray,
-        goals: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """States [..., d] of agents at `positions` that were at `previous` `dts` earlier, whose
-        references end at `goals` (where each agent is bound: a source may show it the agent,
-        the default does not)."""
+    def features(self, positions: np.ndarray, previous: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """States [..., d] of agents at `positions` that were at `previous` `dts` earlier."""
         lo, hi = self.bounds
         return np.clip((np.asarray(positions, np.float64) - lo) / (hi - lo), 0.0, 1.0)
 
@@ -102,7 +94,7 @@ class ReferenceSource(ABC):
         pos = ref.positions[:-1]
         prev = np.vstack([pos[:1], pos[:-1]])
         dts = np.r_[0.0, ref.dts[:-1]]
-        return self.features(pos, prev, dts, np.broadcast_to(ref.positions[-1], pos.shape))
+        return self.features(pos, prev, dts)
 
 
 class TrajectoryImitationEnv(gym.Env):
@@ -226,7 +218,6 @@ class TrajectoryImitationEnv(gym.Env):
         return self._observation(), reward, terminated, False, info
 
     def _observation(self) -> np.ndarray:
-        goal = self.reference.positions[-1] if self.reference is not None else None
-        state = self.source.features(self.position, self.previous, self.last_dt, goal)
+        state = self.source.features(self.position, self.previous, self.last_dt)
         time = self.source.time_input(self.t, self.horizon)
         return np.r_[state, time].astype(np.float32)

@@ -41,10 +41,6 @@ class NetworkConfig:
     """Ablation switch (Table 2): without it the networks get no time input."""
     reward_input: bool = True
     """Ablation switch (Table 2): without it the critics do not see the reward."""
-    conditional_critic: bool = False
-    """A departure from the paper (AIS lever `critic="state"`): the forward critic also sees the
-    state the decision is taken in and the backward critic the decision, so the adversarial
-    term matches p(a | s, t, r) rather than p(a | t, r) averaged over states."""
 
 
 def _glorot_(weight: Tensor, generators: Sequence[torch.Generator]) -> None:
@@ -220,17 +216,8 @@ class DATINetworks(nn.Module):
         self.time2vec = Time2Vec(cfg.time_embedding_dim, gens) if cfg.time_embedding else None
         self.forward_actor = Actor(state_dim, decision_dim, cfg, gens)
         self.backward_actor = Actor(decision_dim, state_dim, cfg, gens)
-        both = state_dim + decision_dim if cfg.conditional_critic else 0
-        self.forward_critic = Critic(both or decision_dim, cfg, gens)
-        self.backward_critic = Critic(both or state_dim, cfg, gens)
-
-    def forward_critic_input(self, decision: Tensor, state: Tensor) -> Tensor:
-        """What the forward critic judges: the decision, with its state when conditional."""
-        return torch.cat([decision, state], -1) if self.cfg.conditional_critic else decision
-
-    def backward_critic_input(self, state: Tensor, decision: Tensor) -> Tensor:
-        """What the backward critic judges: the state, with its decision when conditional."""
-        return torch.cat([state, decision], -1) if self.cfg.conditional_critic else state
+        self.forward_critic = Critic(decision_dim, cfg, gens)
+        self.backward_critic = Critic(state_dim, cfg, gens)
 
     def time_features(self, t: Tensor) -> list[Tensor]:
         """Time2Vec blocks of the step index t [E, B, 1], computed once and fed to every network

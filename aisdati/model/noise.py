@@ -95,3 +95,58 @@ class OUNoise:
 
     def reset(self, k: int) -> None:
         self.state[k] = 0.0
+
+
+# ------------------------------------------------------------------- noise keyed by row, not batch
+GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+def mix64(x: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser on uint64 values: a bijection whose outputs look independent,
+    so that a key and a counter give random bits without a generator's state."""
+    with np.errstate(over="ignore"):
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return x ^ (x >> np.uint64(31))
+
+
+def keyed_normal(keys: np.ndarray, counter: int, dim: int) -> np.ndarray:
+    """[n, dim] standard normal draws (Box-Muller), row i a function of `keys[i]` and `counter`
+    alone: a row's noise is the same whatever other rows share its batch, in whichever order or
+    chunk they come (scoring: a track's score never depends on the tracks judged with it)."""
+    keys = np.asarray(keys, np.uint64)
+    with np.errstate(over="ignore"):
+        base = mix64(keys + np.uint64(counter + 1) * GOLDEN)
+        lanes = mix64(np.arange(1, 2 * dim + 1, dtype=np.uint64) * GOLDEN)
+        bits = mix64(base[:, None] ^ lanes[None, :])
+    u = (bits >> np.uint64(11)).astype(np.float64) * 2.0**-53
+    radius = np.sqrt(-2.0 * np.log1p(-u[:, :dim]))
+    return radius * np.cos(2.0 * np.pi * u[:, dim:])
+
+
+class KeyedNoise:
+    """Latent noise of rows that each draw from their own key (`keyed_normal`), Gaussian
+    N(0, σ²) or Ornstein-Uhlenbeck (started at 0) as `process` says: the scoring counterpart of
+    `LatentNoise`, whose streams are the batch's."""
+
+    def __init__(
+        self,
+        keys: np.ndarray,
+        dim: int,
+        sigma: float = 1.0,
+        theta: float = 0.0,
+        process: NoiseProcess = NoiseProcess(),
+    ):
+        self.keys, self.dim, self.sigma, self.theta = keys, dim, sigma, theta
+        self.process, self.count = process, 0
+        self.state = np.zeros((len(keys), dim))
+
+    def sample(self) -> Tensor:
+        """The next draw of every row ([n, dim])."""
+        draw = keyed_normal(self.keys, self.count, self.dim) * self.sigma
+        self.count += 1
+        if self.process.kind == "ou":
+            self.state = ou_step(self.state, draw, self.theta, self.process.ou_dt)
+        else:
+            self.state = draw
+        return torch.as_tensor(self.state, dtype=torch.float32)

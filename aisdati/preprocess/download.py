@@ -15,7 +15,7 @@ on disk, so the retry loop is ours: each attempt asks for the missing bytes with
 header, waits longer after each failure (exponential back-off), and only a file whose archive
 checks out (every zip CRC via `zipfile.testzip`, every zstd frame decoded to its end by
 `zstandard`) is renamed from `<name>.part` to its final name. A file under its final name is
-therefore always complete, and is skipped unless `force`.
+therefore always complete, and is skipped (delete it to fetch it again).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import re
 import time
 import zipfile
 from dataclasses import dataclass
+from datetime import date, timedelta
 from pathlib import Path
 
 import requests
@@ -63,63 +64,80 @@ class DownloadSettings:
     chunk_bytes: int = 1 << 20
 
 
-def parse_numbers(text: str, lo: int, hi: int, option: str) -> list[int]:
-    """'1-3,7' -> [1, 2, 3, 7], each within [lo, hi]."""
-    numbers: set[int] = set()
-    for part in text.replace(" ", "").split(","):
-        match = re.fullmatch(r"(\d+)(?:-(\d+))?", part)
-        if not match:
-            raise UserError(f"{option} {text!r}: expected numbers and ranges such as 1-3,7")
-        first, last = int(match[1]), int(match[2] or match[1])
-        if not lo <= first <= last <= hi:
-            raise UserError(f"{option} {text!r}: values must lie in {lo}..{hi}, ranges ascending")
-        numbers.update(range(first, last + 1))
-    return sorted(numbers)
+DOWNLOAD_HELP = (
+    "YYYY, YYYY-MM or YYYY-MM-DD, or a range A..B of the same form (2018-07-01..2018-07-07)"
+)
 
 
-def marinecadastre_files(
-    year: int, months: str = "1-12", days: str | None = None, zone: int | None = None
-) -> list[RemoteFile]:
-    """The files of a year in that year's layout. Options that do not fit the layout (a zone for
-    a daily national year, days for a monthly zone year, a year before 2015) are errors."""
-    if year < FIRST_CSV_YEAR:
+def parse_period(spec: str) -> tuple[list[date], bool]:
+    """`--download`'s period: the days it spans and whether it was given by month (a year or
+    months: True; days: False). One-line `UserError` on anything else."""
+    first, sep, last = spec.strip().partition("..")
+    start, by_month = _period_end(first, spec, start=True)
+    end, last_by_month = _period_end(last if sep else first, spec, start=False)
+    if sep and by_month != last_by_month:
+        raise UserError(f"--download {spec!r}: both ends of a range are days, or both months")
+    if end < start:
+        raise UserError(f"--download {spec!r}: the range ends before it starts")
+    return [start + timedelta(days=k) for k in range((end - start).days + 1)], by_month
+
+
+def _period_end(text: str, spec: str, start: bool) -> tuple[date, bool]:
+    """The first (or last) day of `YYYY`, `YYYY-MM` or `YYYY-MM-DD`, and whether it named a
+    month or a year."""
+    match = re.fullmatch(r"(\d{4})(?:-(\d{1,2})(?:-(\d{1,2}))?)?", text.strip())
+    if not match:
+        raise UserError(f"--download {spec!r}: expected {DOWNLOAD_HELP}")
+    year, month, day = int(match[1]), match[2], match[3]
+    try:
+        if day is not None:
+            return date(year, int(month), int(day)), False
+        if month is not None:
+            m = int(month)
+            return date(year, m, 1 if start else calendar.monthrange(year, m)[1]), True
+        return date(year, 1, 1) if start else date(year, 12, 31), True
+    except ValueError:
+        raise UserError(f"--download {spec!r}: {text!r} is no date") from None
+
+
+def utm_zones(lon_min: float, lon_max: float) -> list[int]:
+    """The UTM zones (1..60) a longitude span crosses: what the 2015-2017 files are cut by."""
+    zone = lambda lon: min(60, max(1, int((lon + 180.0) // 6.0) + 1))  # noqa: E731
+    return list(range(zone(lon_min), zone(lon_max) + 1))
+
+
+def marinecadastre_files(spec: str, zones: list[int] | None = None) -> list[RemoteFile]:
+    """The files of a period (`parse_period`) in each year's layout: for 2015-2017 one monthly
+    file per month and UTM zone (`zones`, from the region of interest), from 2018 on one
+    national file per day. A period that does not fit its years' layout is one line."""
+    days, by_month = parse_period(spec)
+    if days[0].year < FIRST_CSV_YEAR:
         raise UserError(
-            f"--year {year}: MarineCadastre publishes 2009-2014 as File Geodatabases, which "
+            f"--download {spec}: MarineCadastre publishes 2009-2014 as File Geodatabases, which "
             "aisdati does not read; use 2015 or later"
         )
-    month_list = parse_numbers(months, 1, 12, "--months")
-    if year < FIRST_DAILY_YEAR:
-        if zone is None:
-            raise UserError(
-                f"--year {year}: files of 2015-2017 are monthly per UTM zone; add --zone "
-                "(e.g. --zone 17 for Florida)"
-            )
-        if days is not None:
-            raise UserError(f"--year {year}: files of 2015-2017 are monthly; --days does not apply")
-        if not 1 <= zone <= 60:
-            raise UserError(f"--zone {zone}: UTM zones are numbered 1..60")
-        return [RemoteFile(year, f"AIS_{year}_{m:02d}_Zone{zone:02d}.zip") for m in month_list]
-    if zone is not None:
-        raise UserError(
-            f"--year {year}: files from 2018 on are national daily files, not per zone; drop "
-            "--zone and choose the area with --roi"
-        )
-    day_list = parse_numbers(days, 1, 31, "--days") if days else list(range(1, 32))
-    files = []
-    for m in month_list:
-        last_day = calendar.monthrange(year, m)[1]
-        for d in day_list:
-            if d <= last_day:
-                name = (
-                    f"ais-{year}-{m:02d}-{d:02d}.csv.zst"
-                    if year >= FIRST_ZST_YEAR
-                    else f"AIS_{year}_{m:02d}_{d:02d}.zip"
+    files: list[RemoteFile] = []
+    for d in days:
+        if d.year < FIRST_DAILY_YEAR:
+            if not by_month:
+                raise UserError(
+                    f"--download {spec}: files of 2015-2017 are monthly; give months (2016-03)"
                 )
-                files.append(RemoteFile(year, name))
-    if not files:
-        raise UserError(f"--months {months} --days {days}: no such date in {year}")
+            if not zones:
+                raise UserError(
+                    f"--download {spec}: files of 2015-2017 are per UTM zone, chosen by --roi: "
+                    "give a region of interest, not --roi none"
+                )
+            if d.day == 1:
+                files += [
+                    RemoteFile(d.year, f"AIS_{d.year}_{d.month:02d}_Zone{z:02d}.zip")
+                    for z in zones
+                ]
+        elif d.year >= FIRST_ZST_YEAR:
+            files.append(RemoteFile(d.year, f"ais-{d.year}-{d.month:02d}-{d.day:02d}.csv.zst"))
+        else:
+            files.append(RemoteFile(d.year, f"AIS_{d.year}_{d.month:02d}_{d.day:02d}.zip"))
     return files
-
 
 class CorruptArchive(Exception):
     """A downloaded file whose archive does not check out."""
@@ -167,7 +185,6 @@ class _Retryable(Exception):
 def fetch(
     url: str,
     dest: Path,
-    force: bool = False,
     settings: DownloadSettings | None = None,
     progress: Progress | None = None,
     session: requests.Session | None = None,
@@ -175,12 +192,10 @@ def fetch(
     """Make `dest` a complete copy of `url`. Returns False when it was already there (skipped).
     Resumes `<dest>.part` left by an earlier attempt or run."""
     settings = settings or DownloadSettings()
-    if dest.exists() and not force:
+    if dest.exists():
         return False
     dest.parent.mkdir(parents=True, exist_ok=True)
     part = dest.with_name(dest.name + ".part")
-    if force:
-        part.unlink(missing_ok=True)
     session = session or requests.Session()
     task = progress.add_task(f"download {dest.name}", total=None) if progress else None
     last_error = ""
@@ -245,7 +260,6 @@ def download(
     files: list[RemoteFile],
     data_dir: Path,
     base_url: str | None = None,
-    force: bool = False,
     settings: DownloadSettings | None = None,
     progress: Progress | None = None,
 ) -> list[Path]:
@@ -255,6 +269,6 @@ def download(
     paths = []
     for remote in files:
         dest = data_dir / str(remote.year) / remote.name
-        fetch(remote.url(base), dest, force, settings, progress, session)
+        fetch(remote.url(base), dest, settings, progress, session)
         paths.append(dest)
     return paths

@@ -44,6 +44,8 @@ METHODS = {
 """Method names accepted by `--methods`, with their display labels."""
 
 ABLATION = ("dati", "dati-no-time-embedding", "dati-no-reward-input")
+TABLE2 = "table2"
+"""`--methods table2`: the methods of the paper's ablation (`ABLATION`), reported as Table 2."""
 
 
 def parse_methods(text: str | Sequence[str]) -> tuple[str, ...]:

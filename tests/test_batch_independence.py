@@ -1,0 +1,117 @@
+"""A track's score and flag do not depend on the tracks judged with it (issue 58; issue 61,
+item 1): every random draw is keyed by the run's seed and the track's own reports
+(`aisdati.ais.policy.Draws`), and the default rule is each model's calibrated threshold.
+On real Kitimat tracks, the area's default detector (cross-fitted BC, judged by stepspread)
+and DATI's lane score."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from aisdati.ais.policy import draw_rows
+from aisdati.ais.space import PRESETS
+from aisdati.ais.training import TrainSettings
+from aisdati.detectors import ScoreSettings, load_detector
+from aisdati.detectors.bc import BCDetector
+from aisdati.detectors.dati import DATIDetector
+from aisdati.model.noise import keyed_normal
+from aisdati.tracks.store import load_tracks, read_track_table
+
+SMALL = replace(PRESETS["area"], members=2, pretrain=3, validation_tracks=2, validation_rollouts=1)
+"""The area preset, small enough for a test."""
+
+
+@pytest.fixture(scope="module")
+def split(kitimat):
+    """16 tracks of the busiest lane to train on; 50 other tracks to judge."""
+    table = read_track_table(kitimat)
+    train = table[table["route"].isin(["route-1", "route-2"])]["track_id"].tolist()[::3][:16]
+    others = [int(i) for i in table["track_id"] if i not in set(train)][:50]
+    return load_tracks(kitimat, [int(i) for i in train]), load_tracks(kitimat, others)
+
+
+@pytest.fixture(scope="module")
+def area_bc(split, tmp_path_factory):
+    """The area's default model, saved and loaded as `detect` loads it."""
+    settings = TrainSettings(cluster="all", episodes=4, lane=SMALL, preset="area")
+    folder = tmp_path_factory.mktemp("models")
+    trained = BCDetector(settings).fit(split[0])
+    trained.save(folder / trained.name)
+    return load_detector(folder / trained.name)
+
+
+def test_keyed_noise_is_a_function_of_the_key_alone():
+    keys = np.array([1, 2, 3, 2], np.uint64)
+    draws = keyed_normal(keys, 7, 4)
+    np.testing.assert_array_equal(draws[1], draws[3])  # same key, same draw
+    np.testing.assert_array_equal(keyed_normal(keys[2:3], 7, 4)[0], draws[2])  # alone
+    assert not np.allclose(keyed_normal(keys, 8, 4), draws)  # the next draw differs
+    big = keyed_normal(np.arange(20_000, dtype=np.uint64), 0, 2).ravel()
+    assert abs(big.mean()) < 0.02 and abs(big.std() - 1.0) < 0.02  # standard normal
+    rows = draw_rows(np.array([5, 9], np.uint64), range(3))
+    assert rows.index.tolist() == [0, 1, 2, 0, 1, 2]
+    assert sorted(np.bincount(rows[:3].members(3))) == [1, 1, 1]  # a track's draws take turns
+
+
+def test_the_default_detector_scores_a_track_the_same_alone_and_in_a_batch_of_50(
+    area_bc, split
+):
+    batch = split[1]
+    assert len(batch) == 50
+    how = area_bc.how
+    assert how.score == "stepspread"
+    together = area_bc.score(batch, how).score
+    shuffled = [batch[i] for i in np.random.default_rng(0).permutation(50)]
+    again = area_bc.score(shuffled, how).score
+    threshold = area_bc.threshold(how)
+    for k in (0, 17, 49):
+        alone = area_bc.score([batch[k]], how).score[0]
+        assert alone == pytest.approx(together[k], rel=1e-6)
+        assert (alone > threshold) == (together[k] > threshold)
+    order = {t.track_id: i for i, t in enumerate(shuffled)}
+    np.testing.assert_allclose(
+        [again[order[t.track_id]] for t in batch], together, rtol=1e-6
+    )
+
+
+def test_rollouts_and_the_lane_are_the_same_alone_and_in_a_batch(split):
+    """DATI's free rollouts run hundreds of steps: keyed draws keep each track's own."""
+    settings = TrainSettings(cluster="all", episodes=1, lane=replace(SMALL, crossfit=False,
+                             members=1), preset="area")  # fmt: skip
+    how = ScoreSettings(score="lane", rollouts=2, lane_rollouts=3)
+    dati = DATIDetector(settings, how).fit(split[0])
+    batch = split[1][:12]
+    together = dati.score(batch, how, also=("rollout",))
+    for k in (0, 11):
+        alone = dati.score([batch[k]], how, also=("rollout",))
+        assert alone.score[0] == pytest.approx(together.score[k], rel=1e-5)
+        assert alone.parts["rollout"][0] == pytest.approx(together.parts["rollout"][k], rel=1e-5)
+
+
+def test_detect_flags_a_track_alone_as_in_its_batch(cli, kitimat, area_bc, split, tmp_path):
+    """End to end with the defaults: `detect --cluster all` and `detect --track ID`."""
+    models = area_bc.loaded_from.parent
+    batch_out, alone_out = tmp_path / "batch", tmp_path / "alone"
+    r = cli("detect", "--data", kitimat, "--models", models, "--cluster", "all", "--out", batch_out)
+    assert r.exit_code == 0, r.output
+    scores = pd.read_parquet(batch_out / "scores.parquet").set_index("track_id")
+    assert len(scores) >= 50
+    report = json.loads((batch_out / "report.json").read_text())
+    assert report["flag_rule"] == "calibrated" and report["score_unit"] == "x spread"
+    track = int(split[1][3].track_id)
+    r = cli("detect", "--data", kitimat, "--models", models, "--track", track, "--out", alone_out)
+    assert r.exit_code == 0, r.output
+    alone = pd.read_parquet(alone_out / "scores.parquet").set_index("track_id")
+    assert alone.loc[track, "score"] == pytest.approx(scores.loc[track, "score"], rel=1e-6)
+    assert alone.loc[track, "flagged"] == scores.loc[track, "flagged"]
+    assert alone.loc[track, "threshold"] == scores.loc[track, "threshold"]
+    paper = tmp_path / "paper"
+    relative = cli("detect", "--data", kitimat, "--models", models, "--track", track,
+                   "--threshold", "0.75", "--out", paper)  # fmt: skip
+    assert relative.exit_code == 0 and "too few to say what is normal" in relative.output
+    assert any("too few" in w for w in json.loads((paper / "report.json").read_text())["warnings"])
