@@ -1,5 +1,5 @@
 """Speed of the ashore rule (`aisdati.tracks.ashore`), which `detect` and `evaluate` run for every
-judged report (as tasks of `aisdati.detection.run.ASHORE_TRACKS` tracks: on the Dask workers
+judged report (as tasks of `aisdati.tracks.ashore.ASHORE_TRACKS` tracks: on the Dask workers
 with `--workers`). One core, not a test.
 
 Takes the real reports shipped in tests/data (Kitimat July-August 2018, NY Harbor's first week

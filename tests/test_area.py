@@ -14,11 +14,11 @@ import pytest
 
 from aisdati.ais import SCORES, score_text
 from aisdati.ais.card import DataCard
-from aisdati.ais.space import PRESETS, AISSpace
+from aisdati.ais.space import PRESETS
 from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, Validator, crossfit_folds
 from aisdati.detection.outputs import report_dict
+from aisdati.detection.routing import NOT_JUDGED_FAR, od_distances
 from aisdati.detection.run import (
-    NOT_JUDGED_FAR,
     PROFILES,
     STEP_ERRORS,
     Detection,
@@ -31,7 +31,6 @@ from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
-from aisdati.detectors.od import od_distances
 from aisdati.errors import UserError
 from aisdati.geo import draw_spread, haversine_m, moved_m, unit_vectors
 from aisdati.tracks.store import Track, load_tracks, read_track_table
@@ -237,7 +236,7 @@ def test_validation_by_one_step_errors_scores_the_actor_as_the_step_score_does(
 ):
     """`validate_by=step`: the median over validation tracks of each one's mean best-of-R
     one-step error, the errors the `step` score judges by (member 0 here)."""
-    space = AISSpace.from_card(area_dati.card, area_dati.corridor)
+    space = area_dati.card.space(area_dati.corridor)
     lane = replace(area_dati.card.lane_config, validate_by="step", validation_tracks=3)
     check = Validator(space, area_dati.config, lane_tracks, lane, seed=5)
     trainer = SimpleNamespace(nets=area_dati.nets)

@@ -30,7 +30,8 @@ from aisdati.detection.run import DetectSettings, detect
 from aisdati.detectors import load_detector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.geo import EARTH_RADIUS_M, courses_deg
-from aisdati.tracks.ashore import LIFT_M, AshoreCheck
+from aisdati.tracks import ashore
+from aisdati.tracks.ashore import LIFT_M, AshoreCheck, ashore_counts
 from aisdati.tracks.store import Track, load_tracks, read_track_table
 
 RULE = AshoreCheck()
@@ -202,8 +203,8 @@ def test_a_card_records_its_traffics_water_and_old_cards_still_load(ny_tracks, t
     det = NearestDetector(TrainSettings(cluster="all")).fit(ny_tracks)
     det.save(tmp_path / "all")
     loaded = load_detector(tmp_path / "all")
-    assert np.allclose(loaded.ashore_points, RULE.seen([t.positions for t in ny_tracks]))
-    assert len(loaded.ashore_points) > 0
+    assert np.allclose(loaded.card.data.ashore, RULE.seen([t.positions for t in ny_tracks]))
+    assert len(loaded.card.data.ashore) > 0
     card = json.loads((tmp_path / "all.json").read_text())
     card["data"].pop("ashore_points")
     (tmp_path / "old.json").write_text(json.dumps(card))
@@ -211,7 +212,7 @@ def test_a_card_records_its_traffics_water_and_old_cards_still_load(ny_tracks, t
         if f.suffix != ".json":  # all.npz, all.corridor.npz
             shutil.copy2(f, tmp_path / f.name.replace("all.", "old.", 1))
     old = load_detector(tmp_path / "old")
-    assert old.card.data.ashore_points is None and old.ashore_points.shape == (0, 2)
+    assert old.card.data.ashore_points is None and old.card.data.ashore.shape == (0, 2)
 
 
 def test_evaluate_at_sea_writes_only_anomalies_a_vessel_could_sail(cli, kitimat, tmp_path):
@@ -237,21 +238,22 @@ def test_the_check_on_two_dask_workers_counts_as_in_process(ny_tracks, monkeypat
     split into tasks of 16 tracks on a real local cluster of 2 worker processes."""
     import distributed
 
-    from aisdati.detection import run as detection
     from aisdati.execution.runner import DaskRunner
 
     before = pd.Timestamp("2020-12-05", tz="UTC")
     past = [t for t in ny_tracks if t.start < before]
     later = [t for t in ny_tracks if t.start >= before]
     model = NearestDetector(TrainSettings(cluster="all")).fit(past)
-    monkeypatch.setattr(detection, "ASHORE_TRACKS", 16)
-    here = detection.ashore_counts([model], later, [0] * len(later))
+    monkeypatch.setattr(ashore, "ASHORE_TRACKS", 16)
+    seen, positions = [model.card.data.ashore], [t.positions for t in later]
+    owner = [0] * len(later)
+    here = ashore_counts(seen, positions, owner)
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                  dashboard_address=":0") as local,
         distributed.Client(local) as client,
     ):  # fmt: skip
-        there = detection.ashore_counts([model], later, [0] * len(later), DaskRunner(client))
+        there = ashore_counts(seen, positions, owner, DaskRunner(client))
     assert len(later) > 2 * 16 and here.sum() > 0
     np.testing.assert_array_equal(here, there)
     alone = RULE.counts([t.positions for t in later])  # the model's water excuses some
@@ -264,11 +266,11 @@ def test_on_the_coarse_fallback_coastline_the_rule_is_off_with_a_warning(
     """Natural Earth's 1:110m outline puts harbour water on land; the rule then flags nothing
     and says why (the fallback is what an install without roaring-landmask gets)."""
     from aisdati import coastline
-    from aisdati.detection import run as detection
 
     model = NearestDetector(TrainSettings(cluster="all")).fit(ny_tracks[:20])
     assert AshoreCheck.available()
-    with_osm = detection.ashore_counts([model], ny_tracks, [0] * len(ny_tracks))
+    seen, positions = [model.card.data.ashore], [t.positions for t in ny_tracks]
+    with_osm = ashore_counts(seen, positions, [0] * len(ny_tracks))
     coastline.clear_caches()
     monkeypatch.setitem(sys.modules, "roaring_landmask", None)  # its import raises ImportError
     try:
@@ -277,7 +279,7 @@ def test_on_the_coarse_fallback_coastline_the_rule_is_off_with_a_warning(
             pytest.warns(RuntimeWarning, match="ashore rule is off"),
         ):
             assert not AshoreCheck.available()
-            off = detection.ashore_counts([model], ny_tracks, [0] * len(ny_tracks))
+            off = ashore_counts(seen, positions, [0] * len(ny_tracks))
     finally:
         monkeypatch.undo()
         coastline.clear_caches()

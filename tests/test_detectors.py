@@ -344,7 +344,7 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     # the traffic rollouts: one from every training start, added to each track's own lane
     traffic = det.traffic(policy, where)
     assert len(traffic) == len(ids)
-    np.testing.assert_allclose([t[0] for t in traffic], det.start_points)
+    np.testing.assert_allclose([t[0] for t in traffic], det.card.data.starts)
     alone = det.score(few, replace(where, lane_traffic=False))
     for a, b in zip(lane_s.profiles, alone.profiles, strict=True):
         assert np.all(a <= b + 1e-6) and np.any(a < b - 1.0)

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from aisdati.detection.labels import evaluate_labels, match_labels, read_labels
-from aisdati.detection.run import NOT_JUDGED_FAR
+from aisdati.detection.routing import NOT_JUDGED_FAR
 from aisdati.errors import UserError
 from aisdati.tracks.store import load_tracks, read_track_table
 

@@ -32,10 +32,12 @@ import pandas as pd
 
 from aisdati.ais import LAST_RELEASE_WITH_EXPERIMENTS, REMOVED_SCORES, SCORES
 from aisdati.ais.card_fields import CardFields, is_number
+from aisdati.ais.corridor import Corridor
 from aisdati.ais.space import (
     MAX_FOURIER,
     MAX_MEMBERS,
     MAX_PRETRAIN,
+    AISSpace,
     LaneConfig,
     state_width,
 )
@@ -102,6 +104,11 @@ class Region:
             np.array([self.lon[1], self.lat[1]], np.float64),
         )
 
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Whether each [lon, lat] point lies in the box."""
+        lo, hi = self.bounds
+        return np.all((points >= lo) & (points <= hi), axis=-1)
+
     def to_dict(self) -> dict[str, Any]:
         return {"lon": list(self.lon), "lat": list(self.lat)}
 
@@ -143,8 +150,8 @@ class DataCard:
     start_points: list[list[float]]
     """[lon, lat] of each track's first report."""
     end_points: list[list[float]] | None = None
-    """[lon, lat] of each track's last report (where it was bound: goal-conditioned models and
-    the origin-destination score read them); None in cards before 0.2.0."""
+    """[lon, lat] of each track's last report (where it was bound: routing reads it); None in
+    cards before 0.2.0."""
     ashore_points: list[list[float]] | None = None
     """[lon, lat] where the tracks reported ashore by the coastline: water it misses (creeks,
     rivers), which the ashore rule then excuses (`aisdati.tracks.ashore`); None in cards written
@@ -158,6 +165,22 @@ class DataCard:
     tracks_in_cluster: int | None = None
     tracks_used: int | None = None
     time_span: list[str] | None = None
+
+    @property
+    def starts(self) -> np.ndarray:
+        """[n, 2] `start_points` as an array."""
+        return np.asarray(self.start_points, np.float64).reshape(-1, 2)
+
+    @property
+    def ends(self) -> np.ndarray | None:
+        """[n, 2] `end_points` as an array; None in cards from before they were recorded."""
+        ends = self.end_points
+        return None if ends is None else np.asarray(ends, np.float64).reshape(-1, 2)
+
+    @property
+    def ashore(self) -> np.ndarray:
+        """[m, 2] `ashore_points` as an array (none for a card from before the rule)."""
+        return np.asarray(self.ashore_points or [], np.float64).reshape(-1, 2)
 
     @classmethod
     def of_tracks(
@@ -272,6 +295,10 @@ class ModelCard:
     @property
     def format(self) -> str:
         return CARD_FORMATS[self.method]
+
+    def space(self, corridor: Corridor | None = None) -> AISSpace:
+        """The space the saved model moves in (its corridor is saved beside it)."""
+        return AISSpace(self.region.bounds, self.rule.to_rule(), self.lane_config, corridor)
 
     def to_dict(self) -> dict[str, Any]:
         """The card as JSON-ready dicts and lists (what `<stem>.json` holds)."""

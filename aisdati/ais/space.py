@@ -50,7 +50,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -59,9 +59,6 @@ from aisdati.ais.corridor import Corridor
 from aisdati.errors import UserError
 from aisdati.geo import spherical_decision
 from aisdati.model.rules import SphericalRule, mean_course
-
-if TYPE_CHECKING:
-    from aisdati.ais.card import ModelCard
 
 BOX_MARGIN = 0.1
 """The region box is the training tracks' box widened by this fraction of its span."""
@@ -339,10 +336,6 @@ class AISSpace:
             axis=-1,
         )
 
-    @classmethod
-    def from_card(cls, card: ModelCard, corridor: Corridor | None = None) -> AISSpace:
-        """The space a saved model moves in (its corridor is saved beside it)."""
-        return cls(card.region.bounds, card.rule.to_rule(), card.lane_config, corridor)
 
 
 def _on_land():

@@ -264,7 +264,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
     flagged = result.scores["flagged"].to_numpy()
     stretches = [deviation_stretch(p) for p in result.profiles]
     title = _map_title(result)
-    regions = [m.bounds for m in result.models]
+    regions = [m.card.region.bounds for m in result.models]
     drawn = map_subset(flagged, MAP_UNFLAGGED_TRACKS)
     shown = flagged[drawn]
     if len(drawn) < len(flagged):

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -35,14 +34,14 @@ import numpy as np
 import pandas as pd
 
 from aisdati.ais import AREA_METHOD
-from aisdati.ais.card import card_methods, training_mask
+from aisdati.ais.card import card_methods
 from aisdati.detection.labels import evaluate_labels, read_labels
+from aisdati.detection.routing import Coverage, check_region, route_test_tracks
 from aisdati.detectors import DETECTORS, SCORES, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import DEFAULT_CONTAMINATION, score_each
-from aisdati.detectors.od import track_ends
 from aisdati.errors import UserError
-from aisdati.execution import InProcess, Runner
-from aisdati.tracks.ashore import AshoreCheck
+from aisdati.execution import Runner
+from aisdati.tracks.ashore import AshoreCheck, ashore_counts
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -120,37 +119,6 @@ PROFILES = {
 each report, by score (by method for `nearest`)."""
 
 
-NOT_JUDGED_FAR = "no model covers its start and end (none within --near-km, no area model)"
-
-
-@dataclass(frozen=True)
-class Coverage:
-    """What became of every track of the chosen test set: a training track of the models that
-    could judge it (not a candidate: a model does not judge what it learnt from), judged (by
-    which model), or not judged and why (with the ids), so that no track leaves it
-    uncounted."""
-
-    candidates: int
-    """The tracks asked to be judged, the models' own training tracks left out."""
-    judged_by: dict[str, int]
-    not_judged: dict[str, list[int]]
-    training: list[int] = field(default_factory=list)
-    """Ids of the tracks left out as training tracks of every model in reach."""
-
-    @property
-    def judged(self) -> int:
-        return sum(self.judged_by.values())
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "candidates": self.candidates,
-            "judged": self.judged,
-            "judged_by": self.judged_by,
-            "not_judged": {k: len(v) for k, v in self.not_judged.items()},
-            "not_judged_tracks": self.not_judged,
-            "training_tracks": len(self.training),
-            "training_track_ids": self.training,
-        }
 
 
 @dataclass
@@ -224,60 +192,6 @@ def load_models(settings: DetectSettings) -> list[Detector]:
 
 
 # --------------------------------------------------------------------------------- test set
-def is_area_model(model: Detector) -> bool:
-    """A model of a whole area (`--cluster all`): it judges any track of its region."""
-    return model.card.cluster == AREA
-
-
-def reach_km(model: Detector, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """How far (km) each track (its first and last positions) is from being bound the way the
-    model's training tracks are (`Detector.od_m`: start and end, or start alone for older
-    cards, the paper's rule)."""
-    return model.od_m(starts, ends) / 1000.0
-
-
-def route_test_tracks(
-    settings: DetectSettings, models: Sequence[Detector], table: pd.DataFrame, tracks: list[Track]
-) -> tuple[np.ndarray, Coverage]:
-    """For each track (rows of `table`, loaded as `tracks`), the index of the model that judges
-    it (-1: none) and the `Coverage`. A model never judges its own training tracks. A route or
-    cluster model judges the tracks bound as its own are (`reach_km` within `near_km`), the
-    nearest in reach; a track no such model reaches goes to an area model; with none, it is
-    listed as not judged, with the reason. `track_ids` given: the nearest model judges."""
-    n = len(tracks)
-    starts, ends = track_ends([t.positions for t in tracks])
-    reach = np.stack([reach_km(m, starts, ends) for m in models], axis=1)
-    trained_any = np.zeros(n, dtype=bool)
-    if not settings.track_ids:
-        for m, model in enumerate(models):
-            trained = training_mask(model.card, table)  # by vessel and time where it can
-            reach[trained, m] = np.inf
-            trained_any |= trained
-    area = np.array([is_area_model(m) for m in models])
-    local = (
-        reach
-        if settings.track_ids
-        else np.where(area[None, :] | (reach > settings.near_km), np.inf, reach)
-    )
-    owner = np.where(np.isfinite(local).any(axis=1), local.argmin(axis=1), -1)
-    if area.any():
-        spare = np.where(area[None, :], reach, np.inf)
-        fallback = np.where(np.isfinite(spare).any(axis=1), spare.argmin(axis=1), -1)
-        owner = np.where(owner < 0, fallback, owner)
-    ids = table["track_id"].to_numpy()
-    names = [m.name for m in models]
-    judged = pd.Series([names[o] for o in owner if o >= 0], dtype=object).value_counts()
-    left = owner < 0
-    far = left & ~trained_any
-    coverage = Coverage(
-        candidates=n - int((left & trained_any).sum()),
-        judged_by={str(k): int(v) for k, v in judged.sort_index().items()},
-        not_judged={NOT_JUDGED_FAR: [int(i) for i in ids[far]]} if far.any() else {},
-        training=[int(i) for i in ids[left & trained_any]],
-    )
-    return owner, coverage
-
-
 def candidate_table(settings: DetectSettings) -> pd.DataFrame:
     """The chosen test set's rows of tracks.parquet (`track_ids`, a cluster, or all)."""
     table = read_track_table(settings.data_dir)
@@ -289,20 +203,6 @@ def candidate_table(settings: DetectSettings) -> pd.DataFrame:
     if settings.cluster != AREA:
         return select_cluster(table, settings.cluster, settings.data_dir, needed=1)
     return table
-
-
-def check_region(models: Sequence[Detector], tracks: Sequence[Track]) -> None:
-    """Refuse models of another region, in one line."""
-    starts = np.array([t.positions[0] for t in tracks])
-    inside = np.zeros(len(tracks), dtype=bool)
-    for model in models:
-        inside |= model.contains(starts)
-    if not inside.any():
-        lo, hi = models[0].bounds
-        raise UserError(
-            f"no test track starts inside the model's region (lon {lo[0]:.2f}..{hi[0]:.2f}, "
-            f"lat {lo[1]:.2f}..{hi[1]:.2f}): is the model from another region?"
-        )
 
 
 MIN_RELATIVE_BATCH = 10
@@ -375,7 +275,8 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     table = candidate_table(settings)
     candidates = load_tracks(settings.data_dir, [int(i) for i in table["track_id"]])
     check_region(models, candidates)
-    owners, coverage = route_test_tracks(settings, models, table, candidates)
+    named = bool(settings.track_ids)
+    owners, coverage = route_test_tracks(models, table, candidates, settings.near_km, named)
     if coverage.judged == 0:
         raise UserError(
             f"no test track is judged by any model ({', '.join(coverage.not_judged)}): train an "
@@ -395,7 +296,8 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     check = AshoreCheck()
     ashore = np.zeros(n, np.int64)
     if settings.ashore:
-        ashore = ashore_counts(models, tracks, owner, runner)
+        seen = [m.card.data.ashore for m in models]
+        ashore = ashore_counts(seen, [t.positions for t in tracks], owner, runner)
     flagged = flagged | check.flags(ashore)
     lengths = np.array([len(t.positions) for t in tracks])
     top = float(np.max(raw)) if n else 1.0
@@ -429,48 +331,6 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     if settings.labels is not None:
         result.metrics = evaluate_labels(scores, tracks, settings.labels)
     return result
-
-
-ASHORE_TRACKS = 1024
-"""Tracks per task of the ashore check (`ashore_counts`): ~2 M reports/s, so a task of 1,024
-tracks of a few hundred reports takes a fraction of a second, well above a task's overhead."""
-
-
-def ashore_counts(
-    models: Sequence[Detector],
-    tracks: Sequence[Track],
-    owner: Sequence[int],
-    runner: Runner | None = None,
-) -> np.ndarray:
-    """Each track's reports ashore (`aisdati.tracks.ashore`), excusing the water that its
-    judging model's training traffic sailed; in chunks of `ASHORE_TRACKS`, as tasks of
-    `runner` (default: here)."""
-    out = np.zeros(len(tracks), np.int64)
-    if not AshoreCheck.available():
-        warnings.warn(
-            "the ashore rule is off: only the coarse fallback coastline is installed (pip "
-            "install roaring-landmask for the harbour-scale one)",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        return out
-    owner_of = np.asarray(owner, np.int64)
-    rows = []
-    jobs = []
-    for m in np.unique(owner_of):
-        mine = np.flatnonzero(owner_of == m)
-        for lo in range(0, len(mine), ASHORE_TRACKS):
-            rows.append(mine[lo : lo + ASHORE_TRACKS])
-            jobs.append((models[m].ashore_points, [tracks[i].positions for i in rows[-1]]))
-    for idx, counts in zip(rows, (runner or InProcess()).map(ashore_job, jobs), strict=True):
-        out[idx] = counts
-    return out
-
-
-def ashore_job(job: tuple[np.ndarray, list[np.ndarray]]) -> np.ndarray:
-    """One task of `ashore_counts`: (seen water, positions of each track) -> counts."""
-    seen, positions = job
-    return AshoreCheck().counts(positions, seen)
 
 
 def _score_by_model(

@@ -20,15 +20,14 @@ from aisdati.detectors.nearest import NearestDetector
 # isort: on
 from aisdati.ais import SCORES
 from aisdati.ais.training import TrainSettings
-from aisdati.detectors.base import DEFAULT_CONTAMINATION, Detector
-from aisdati.detectors.registry import (
+from aisdati.detectors.base import (
+    DEFAULT_CONTAMINATION,
     DETECTORS,
+    Detector,
     detector_class,
     load_detector,
-    load_detectors,
-    model_name,
-    parse_detectors,
 )
+from aisdati.detectors.registry import load_detectors, model_name, parse_detectors
 from aisdati.detectors.scoring import Scores, ScoreSettings
 
 __all__ = [

@@ -18,16 +18,15 @@ import json
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import ClassVar, TypeVar
 
 import numpy as np
 
-from aisdati.ais.card import CalibratedWith, DataCard, ModelCard
+from aisdati.ais.card import CalibratedWith, DataCard, ModelCard, read_card
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.training import TrainSettings, check_settings
-from aisdati.detectors.od import od_distances
-from aisdati.detectors.registry import load_detector, register
 from aisdati.detectors.scoring import Scores, ScoreSettings, joined, score_chunks
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
@@ -41,6 +40,23 @@ DEFAULT_CONTAMINATION = 0.05
 SPREAD_DRAWS = 200
 SPREAD_SEED = 0
 D = TypeVar("D", bound="Detector")
+
+DETECTORS: dict[str, type[Detector]] = {}
+"""Every registered detector class by method, in the order they were defined."""
+
+
+def register(cls: type[Detector]) -> None:
+    """Make `cls` the detector of `cls.method` (`--method`, the card's format)."""
+    known = DETECTORS.get(cls.method)
+    if known is not None and known.__qualname__ != cls.__qualname__:
+        raise ValueError(f"two detectors named {cls.method!r}: {known} and {cls}")
+    DETECTORS[cls.method] = cls
+
+
+def detector_class(method: str) -> type[Detector]:
+    if method not in DETECTORS:
+        raise UserError(f"unknown detector {method!r}; choose from {', '.join(DETECTORS)}")
+    return DETECTORS[method]
 
 
 class Detector(ABC):
@@ -218,40 +234,6 @@ class Detector(ABC):
         cut = self.threshold(contamination=contamination)  # no calibration: fail before scoring
         return self.decision_function(tracks) > cut
 
-    # ----------------------------------------------------------------------------- the area
-    @property
-    def start_points(self) -> np.ndarray:
-        return np.asarray(self.card.data.start_points, np.float64).reshape(-1, 2)
-
-    @property
-    def end_points(self) -> np.ndarray | None:
-        """Where each training track ends; None in cards from before they were recorded."""
-        ends = self.card.data.end_points
-        return None if ends is None else np.asarray(ends, np.float64).reshape(-1, 2)
-
-    def od_m(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """Each track's origin-destination distance (m) to the training tracks, from its first
-        and last positions (`aisdati.detectors.od.track_ends`); for a card from before end
-        points were recorded, the distance between starts (the paper's rule for which model
-        judges a track)."""
-        if self.end_points is None:
-            return od_distances(starts, starts, self.start_points, self.start_points)
-        return od_distances(starts, ends, self.start_points, self.end_points)
-
-    @property
-    def ashore_points(self) -> np.ndarray:
-        """[m, 2] where the training tracks reported ashore (`aisdati.tracks.ashore`: water
-        the coastline misses); none for a card from before they were recorded."""
-        return np.asarray(self.card.data.ashore_points or [], np.float64).reshape(-1, 2)
-
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.card.region.bounds
-
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        lo, hi = self.bounds
-        return np.all((points >= lo) & (points <= hi), axis=-1)
-
     # ------------------------------------------------------------------------------- files
     @abstractmethod
     def save(self, stem: Path) -> None:
@@ -278,6 +260,24 @@ class Detector(ABC):
     def save_corridor(self, stem: Path) -> None:
         if self.corridor is not None:
             atomic_write_bytes(stem.with_suffix(".corridor.npz"), self.corridor.to_bytes())
+
+
+def load_detector(stem: Path) -> Detector:
+    """Any saved detector, by its card's format (`DETECTORS`); damage or a foreign file is one
+    line."""
+    path = stem.with_suffix(".json")
+    card = read_card(path)  # size, types, ranges: one line naming the field
+    det = detector_class(card.method).from_files(stem, card)
+    recorded = card.calibrated_with or CalibratedWith()
+    # `decision_function` judges by its own score, with the settings its threshold was made with
+    det.how = replace(
+        det.how,
+        score=card.score,
+        lane_course_km=recorded.lane_course_km,
+        lane_traffic=recorded.lane_traffic,
+    )
+    det.loaded_from = path
+    return det
 
 
 def score_each(

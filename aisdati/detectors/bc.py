@@ -19,7 +19,6 @@ import torch
 from aisdati.ais.card import DataCard, ModelCard, NetworkCard, TrainingReport
 from aisdati.ais.policy import Act, Draws, member_decisions, member_rows
 from aisdati.ais.source import build_source, make_env
-from aisdati.ais.space import AISSpace
 from aisdati.ais.training import (
     TrainSettings,
     base_card,
@@ -127,7 +126,7 @@ class BCDetector(PolicyDetector):
         assert card.networks is not None  # a bc card has them (`ModelCard.from_dict`)
         try:  # the card's sizes are bounded (`ModelCard.from_dict`), its other entries not
             cfg = BCConfig.from_dict(card.networks.config)
-            policy = BCPolicy(AISSpace.from_card(card).state_dim, 3, cfg, card.networks.seeds)
+            policy = BCPolicy(card.space().state_dim, 3, cfg, card.networks.seeds)
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             raise UserError(f"cannot load model {stem}: {first_line(exc)}") from None
         load_weights(policy, stem.with_suffix(".pt"))

@@ -18,7 +18,6 @@ from aisdati.ais import SCORE_UNITS, STEP_SCORES
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy, Draws, best_draws, track_keys
-from aisdati.ais.space import AISSpace
 from aisdati.detectors.base import Detector
 from aisdati.detectors.scoring import Scores, ScoreSettings, error_surprises, tail_mean
 from aisdati.dtw import matched_distances
@@ -37,7 +36,7 @@ class PolicyDetector(Detector):
         def make(rows: Draws, temporal: bool) -> Act:
             return self.make_act(rows, temporal, member)
 
-        return AISPolicy(AISSpace.from_card(self.card, self.corridor), make)
+        return AISPolicy(self.card.space(self.corridor), make)
 
     @abstractmethod
     def make_act(self, rows: Draws, temporal: bool, member: int | None = None) -> Act:
@@ -122,7 +121,7 @@ class PolicyDetector(Detector):
         of steps times the lane's reach: where the model's traffic goes, shared by every
         track's lane, so a track that starts off the lane and joins it is judged against the
         lane it joins, not only against where the policy goes from its odd start."""
-        starts = self.start_points
+        starts = self.card.data.starts
         steps = max(1, round(self.card.data.points / len(starts)) - 1)
         keys = track_keys(list(starts[:, None]), how.seed, stream=2)
         horizons = np.full(len(starts), steps)

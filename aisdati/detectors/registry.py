@@ -1,40 +1,15 @@
-"""Which class each detector method is, and loading any saved detector by its card.
-
-Every concrete `Detector` registers itself under its `method` when its class is defined
-(`Detector.__init_subclass__`), as Gymnasium registers environments by id: adding a detector is
-writing its module and importing it in `aisdati.detectors`, and nothing dispatches on names.
-"""
+"""Detectors by name: parsing `--method` / `--detectors`, model file names and the models of a
+folder. Which class each method is lives with the classes (`aisdati.detectors.base.DETECTORS`,
+filled as each concrete detector is defined)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from aisdati.ais.card import CalibratedWith, read_card
+from aisdati.detectors.base import DETECTORS, Detector, detector_class, load_detector
 from aisdati.errors import UserError
 from aisdati.options import parse_names
-
-if TYPE_CHECKING:
-    from aisdati.detectors.base import Detector
-
-DETECTORS: dict[str, type[Detector]] = {}
-"""Every registered detector class by method, in the order they were defined."""
-
-
-def register(cls: type[Detector]) -> None:
-    """Make `cls` the detector of `cls.method` (`--method`, the card's format)."""
-    known = DETECTORS.get(cls.method)
-    if known is not None and known.__qualname__ != cls.__qualname__:
-        raise ValueError(f"two detectors named {cls.method!r}: {known} and {cls}")
-    DETECTORS[cls.method] = cls
-
-
-def detector_class(method: str) -> type[Detector]:
-    if method not in DETECTORS:
-        raise UserError(f"unknown detector {method!r}; choose from {', '.join(DETECTORS)}")
-    return DETECTORS[method]
 
 
 def parse_detectors(text: str | Iterable[str]) -> tuple[str, ...]:
@@ -45,23 +20,6 @@ def parse_detectors(text: str | Iterable[str]) -> tuple[str, ...]:
 def model_name(cluster: str, method: str) -> str:
     """The file stem of `method`'s model of `cluster` (`Detector.model_name`)."""
     return detector_class(method).model_name(cluster)
-
-
-def load_detector(stem: Path) -> Detector:
-    """Any saved detector, by its card's format; damage or a foreign file is one line."""
-    path = stem.with_suffix(".json")
-    card = read_card(path)  # size, types, ranges: one line naming the field
-    det = detector_class(card.method).from_files(stem, card)
-    recorded = card.calibrated_with or CalibratedWith()
-    # `decision_function` judges by its own score, with the settings its threshold was made with
-    det.how = replace(
-        det.how,
-        score=card.score,
-        lane_course_km=recorded.lane_course_km,
-        lane_traffic=recorded.lane_traffic,
-    )
-    det.loaded_from = path
-    return det
 
 
 def load_detectors(models_dir: Path, names: Sequence[str]) -> list[Detector]:

@@ -21,7 +21,7 @@ from typing import Any
 import pandas as pd
 
 from aisdati.ais.training import TrainSettings, check_settings, model_stem, training_set
-from aisdati.detectors.registry import detector_class
+from aisdati.detectors.base import detector_class
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner

@@ -31,14 +31,13 @@ import pandas as pd
 from aisdati.ais import DEFAULT_PRESET, score_unit
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
-from aisdati.detection.run import ashore_counts
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
 from aisdati.evaluation.inject import parse_params, with_strength
 from aisdati.evaluation.metrics import flagging, ranking
 from aisdati.execution import Runner
-from aisdati.tracks.ashore import AshoreCheck
+from aisdati.tracks.ashore import AshoreCheck, ashore_counts
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
 POSITION_KINDS = ("detour", "jump", "loiter")
@@ -150,8 +149,8 @@ def _same_region(settings: EvaluateSettings, models: dict[str, Detector]) -> Non
     ids = [int(i) for i in table["track_id"]]
     starts = np.array([t.positions[0] for t in load_tracks(settings.data_dir, ids)])
     for method, det in models.items():
-        if not det.contains(starts).any():
-            lo, hi = det.bounds
+        if not det.card.region.contains(starts).any():
+            lo, hi = det.card.region.bounds
             raise UserError(
                 f"the {method} model in {settings.models_named} was "
                 "trained on another region "
@@ -282,7 +281,8 @@ def _score(
         timings[method] = {"train_s": train_s[method], "score_s": time.perf_counter() - t1}
         ashore = np.zeros(len(heldout), np.int64)
         if settings.ashore:
-            ashore = ashore_counts([det], heldout, [0] * len(heldout), runner)
+            seen = [det.card.data.ashore]
+            ashore = ashore_counts(seen, [t.positions for t in heldout], [0] * len(heldout), runner)
         per_track.append(pd.DataFrame({"detector": method, "track_id": split.heldout_ids,
                                        "n_points": lengths, "ashore_reports": ashore}))  # fmt: skip
         for kind in kinds:

@@ -30,11 +30,13 @@ fallback, whose outline puts coastal water on land, it is off (`available`), wit
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from aisdati.execution import InProcess, Runner
 from aisdati.geo import haversine_m, moved_m
 
 PROBES = 8
@@ -124,3 +126,45 @@ class AshoreCheck:
         share = np.asarray(counts, np.float64) / np.maximum(np.asarray(lengths, np.float64), 1.0)
         lift = np.where(self.flags(counts), LIFT_M * (1.0 + share), 0.0)
         return np.asarray(score_m, np.float64) + lift
+
+
+ASHORE_TRACKS = 1024
+"""Tracks per task of the ashore check (`ashore_counts`): ~2 M reports/s, so a task of 1,024
+tracks of a few hundred reports takes a fraction of a second, well above a task's overhead."""
+
+
+def ashore_counts(
+    seen: Sequence[np.ndarray],
+    tracks: Sequence[np.ndarray],
+    owner: Sequence[int],
+    runner: Runner | None = None,
+) -> np.ndarray:
+    """Each track's (positions [n, 2]) reports ashore, excusing the water its judging model's
+    training traffic sailed (`seen[owner[i]]`, `aisdati.ais.card.DataCard.ashore`); in chunks
+    of `ASHORE_TRACKS`, as tasks of `runner` (default: here)."""
+    out = np.zeros(len(tracks), np.int64)
+    if not AshoreCheck.available():
+        warnings.warn(
+            "the ashore rule is off: only the coarse fallback coastline is installed (pip "
+            "install roaring-landmask for the harbour-scale one)",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return out
+    owner_of = np.asarray(owner, np.int64)
+    rows = []
+    jobs = []
+    for m in np.unique(owner_of):
+        mine = np.flatnonzero(owner_of == m)
+        for lo in range(0, len(mine), ASHORE_TRACKS):
+            rows.append(mine[lo : lo + ASHORE_TRACKS])
+            jobs.append((seen[m], [tracks[i] for i in rows[-1]]))
+    for idx, counts in zip(rows, (runner or InProcess()).map(ashore_job, jobs), strict=True):
+        out[idx] = counts
+    return out
+
+
+def ashore_job(job: tuple[np.ndarray, list[np.ndarray]]) -> np.ndarray:
+    """One task of `ashore_counts`: (seen water, positions of each track) -> counts."""
+    seen, positions = job
+    return AshoreCheck().counts(positions, seen)
