@@ -12,15 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aisdati.ais import SCORES, score_text
 from aisdati.ais.card import DataCard
 from aisdati.ais.space import PRESETS
 from aisdati.ais.training import EnsembleRun, LaneRoute, TrainSettings, Validator, crossfit_folds
 from aisdati.detection.outputs import report_dict
 from aisdati.detection.routing import NOT_JUDGED_FAR, od_distances
 from aisdati.detection.run import (
-    PROFILES,
-    STEP_ERRORS,
     Detection,
     DetectSettings,
     detect,
@@ -33,6 +30,7 @@ from aisdati.detectors.dati import DATIDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.errors import UserError
 from aisdati.geo import draw_spread, haversine_m, moved_m, unit_vectors
+from aisdati.scores import NEAREST, SCORES, STEP_ERRORS, score
 from aisdati.tracks.store import Track, load_tracks, read_track_table
 
 AUGUST = pd.Timestamp("2018-08-01", tz="UTC")
@@ -252,17 +250,17 @@ def test_validation_by_one_step_errors_scores_the_actor_as_the_step_score_does(
 
 
 def test_each_scores_profile_is_what_its_label_says(area_dati, months):
-    """The evidence figures' lower panel is labelled by `PROFILES`: `stepspread` draws the
-    one-step errors, as `step` does."""
+    """The evidence figures' lower panel is labelled by each score's `profile`: `stepspread`
+    draws the one-step errors, as `step` does."""
     august = months[1][:3]
-    assert set(PROFILES) == {*SCORES, "nearest"}
+    assert set(SCORES) == {"rollout", "lane", "step", "stepspread"} and NEAREST.unit == "m"
 
     def profiles(score: str) -> list[np.ndarray]:
         return area_dati.score_tracks(august, replace(HOW, score=score), ()).profiles
 
     own = {STEP_ERRORS: profiles("step"), "distance to the lane (m)": profiles("lane")}
-    for score in ("stepspread",):
-        for got, expected in zip(profiles(score), own[PROFILES[score]], strict=True):
+    for name in ("stepspread",):
+        for got, expected in zip(profiles(name), own[score(name).profile], strict=True):
             np.testing.assert_array_equal(got, expected)
 
 
@@ -314,7 +312,7 @@ def test_stepspread_is_each_one_step_error_over_the_spread_of_the_models_draws(
     cal = area_dati.card.calibration
     assert len(cal["stepspread"]) == len(cal["step"])
     assert area_dati.threshold(how, 0.05) == pytest.approx(np.quantile(cal["stepspread"], 0.95))
-    assert score_text(1.234, "stepspread") == "1.23 x spread"
+    assert score("stepspread").text(1.234) == "1.23 x spread"
     refused_without_its_calibration(area_dati, how, tmp_path)
 
 

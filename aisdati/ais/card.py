@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.ais import LAST_RELEASE_WITH_EXPERIMENTS, REMOVED_SCORES, SCORES
+from aisdati.ais import LAST_RELEASE_WITH_EXPERIMENTS
 from aisdati.ais.card_fields import CardFields, is_number
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.space import (
@@ -45,6 +45,7 @@ from aisdati.errors import UserError
 from aisdati.model.persistence import MAX_LAYERS, MAX_UNITS, NETWORKS_FORMAT
 from aisdati.model.readers import read_json
 from aisdati.model.rules import SphericalRule
+from aisdati.scores import REMOVED_SCORES, SCORES
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track
 
@@ -74,6 +75,8 @@ MAX_EPISODES = 1_000_000
 """Training episodes (the paper: 170): a million episodes of the shortest track take weeks."""
 MAX_VALIDATION_ROLLOUTS = 1000
 """Rollouts per validation track (the lanes preset: 3)."""
+MAX_DRAWS = 1000
+"""Most rollouts or one-step draws per track a card may record its calibration with."""
 RULE_NAME = "spherical (eq. 5)"
 RULE_DECISIONS = ("sog_kn", "cog_deg", "dt_h")
 
@@ -242,6 +245,10 @@ class CalibratedWith:
 
     lane_course_km: float = 0.0
     lane_traffic: bool = False
+    rollouts: int = 10
+    """K: rollouts and one-step draws per track (cards before it: the CLI's 10)."""
+    lane_rollouts: int = 30
+    """Rollouts that make up a track's lane (cards before it: the CLI's 30)."""
 
 
 @dataclass(kw_only=True)
@@ -482,7 +489,7 @@ def _read_score(f: CardFields) -> str:
             f"{LAST_RELEASE_WITH_EXPERIMENTS} (measured, not adopted): use that release to read "
             "this model, or retrain"
         )
-    return f.choice("score", SCORES)
+    return f.choice("score", tuple(SCORES))
 
 
 def _read_calibration(f: CardFields) -> dict[str, list[float]]:
@@ -505,6 +512,9 @@ def _read_calibrated_with(f: CardFields) -> CalibratedWith | None:
         settings["lane_course_km"] = f.number("calibrated_with.lane_course_km", 0.0, 1000.0)
     if recorded.get("lane_traffic") is not None:  # older cards: without the traffic rollouts
         settings["lane_traffic"] = f.boolean("calibrated_with.lane_traffic")
+    for key in ("rollouts", "lane_rollouts"):  # older cards: the command line's defaults
+        if recorded.get(key) is not None:
+            settings[key] = f.integer(f"calibrated_with.{key}", 1, MAX_DRAWS)
     return CalibratedWith(**settings)
 
 

@@ -13,8 +13,8 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from aisdati.ais import readable_value, score_unit
 from aisdati.preprocess.report import REASONS, IngestCounts
+from aisdati.scores import score as score_named
 
 if TYPE_CHECKING:
     from aisdati.detectors.train import Trained
@@ -229,7 +229,7 @@ def _distance(value: float | None, unit: str) -> str:
     """A median of the table: km for metres, else the ratio itself."""
     if value is None or value != value:
         return "-"
-    return f"{readable_value(value, unit):.2f}"
+    return f"{value / 1000 if unit == 'm' else value:.2f}"
 
 
 def _figure(v: float | None, digits: int = 3) -> str:
@@ -285,7 +285,7 @@ def detection_table(
 ) -> Table:
     """The flagged tracks (or, if none, the top of the ranking) with where they deviate most;
     the score and its threshold in km, or in the unit of `score` where it is not metres
-    (`score_unit`); the caption names the flagging rule."""
+    (`aisdati.scores.Score`); the caption names the flagging rule."""
     flagged = scores[scores["flagged"]].sort_values("rank")
     shown = flagged if len(flagged) else scores.sort_values("rank")
     title = (
@@ -294,8 +294,8 @@ def detection_table(
         else f"no track flagged among {len(scores)}; the highest scores"
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    unit = score_unit(score)
-    shown_unit = "km" if unit == "m" else unit
+    kind = score_named(score)
+    shown_unit = kind.readable_unit
     cols = [
         "rank",
         "track",
@@ -317,8 +317,8 @@ def detection_table(
             str(r.rank),
             str(r.track_id),
             str(r.mmsi),
-            f"{readable_value(r.score, unit):,.2f}",
-            f"{readable_value(r.threshold, unit):,.2f}",
+            f"{kind.readable(r.score):,.2f}",
+            f"{kind.readable(r.threshold):,.2f}",
             f"{r.max_dev_m / 1000:,.2f}",
             f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         ]

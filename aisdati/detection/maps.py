@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from aisdati.ais import score_text
 from aisdati.detection.webmap import html_detection_map
 from aisdati.execution import InProcess, Runner
 from aisdati.outdir import atomic_write_bytes
@@ -325,7 +324,7 @@ def evidence_figures(
         track = result.tracks[i]
         title = (
             f"rank {int(row.rank)}: track {int(row.track_id)} (MMSI {int(row.mmsi)}), "
-            f"score {score_text(row.score, result.score)}, model {row.model}"
+            f"score {result.judged_by.text(row.score)}, model {row.model}"
         )
         args = (track.positions, result.rollouts[i], result.profiles[i], stretches[i], title)
         kwargs = {

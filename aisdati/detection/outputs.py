@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from aisdati.ais import score_unit
 from aisdati.ais.card import card_warnings
 from aisdati.detection.run import Detection
 from aisdati.execution import Runner
@@ -55,23 +54,6 @@ name; threshold: what flags it, in the same unit (the model's calibrated thresho
 batch-relative one asked for); max_dev_*: the track point with the largest local deviation;
 ashore_reports: reports well inland (`aisdati.tracks.ashore`; 0 with --no-ashore), which flag
 the track from `AshoreCheck.min_reports` on and rank it above every track at sea."""
-
-SCORE_DEFINITIONS = {
-    "rollout": "best of K free rollouts: great-circle DTW / warping-path length (m)",
-    "step": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction errors (m)",
-    "stepspread": "teacher-forced: mean of the largest 10% of best-of-K one-step prediction "
-    "errors, each over the K draws' spread (root mean square distance from their centroid) "
-    "plus 10 m (multiples of the spread)",
-    "lane": "mean of the largest 10% of each report's distance to the nearest point of the "
-    "lane_rollouts free rollouts of twice the track's steps and, with lane_traffic, of one rollout "
-    "from each training track's start (nearest: of the training tracks starting within "
-    "near_km), sqrt(d^2 + (lane_course_km sin(dcourse / 2))^2) for great-circle "
-    "distance d and course difference dcourse (m)",
-    "nearest": "great-circle DTW / warping-path length (m) to the nearest training "
-    "track starting within near_km",
-}
-"""report.json's `score_definition`: what the score of each kind measures."""
-
 
 def write_outputs(result: Detection, out: Path, runner: Runner | None = None) -> list[Path]:
     """Every output of a detection in `out` (the command's staging folder: `OutputSet`), each
@@ -185,7 +167,7 @@ def scores_metadata(result: Detection) -> dict[bytes, bytes]:
     s = result.settings
     return {
         b"aisdati.score": (result.score).encode(),
-        b"aisdati.score_unit": score_unit(result.score).encode(),
+        b"aisdati.score_unit": result.judged_by.unit.encode(),
         b"aisdati.flag_rule": (s.rule if s else "calibrated").encode(),
     }
 
@@ -237,12 +219,8 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "flag_rule": s.rule if s else None,
         "flag_rule_definition": FLAG_RULES[s.rule] if s else None,
         "max_score": float(sc["score"].max()) if len(sc) else None,
-        "score_unit": score_unit(result.score) if s else None,
+        "score_unit": result.judged_by.unit if s else None,
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,
-        "score_definition": SCORE_DEFINITIONS[
-            "nearest" if s.method == "nearest" and s.score != "lane" else s.score
-        ]
-        if s
-        else None,
+        "score_definition": result.judged_by.definition if s else None,
     }

@@ -37,10 +37,11 @@ from aisdati.ais import AREA_METHOD
 from aisdati.ais.card import card_methods
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detection.routing import Coverage, check_region, route_test_tracks
-from aisdati.detectors import DETECTORS, SCORES, Detector, ScoreSettings, load_detectors
+from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import DEFAULT_CONTAMINATION, score_each
 from aisdati.errors import UserError
 from aisdati.execution import Runner
+from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
@@ -99,28 +100,6 @@ class DetectSettings:
         return replace(model.how, score=self.score or model.card.score)
 
 
-EVIDENCE = {
-    "rollout": "best rollout",
-    "lane": "best rollout",
-    "step": "one-step predictions",
-    "stepspread": "one-step predictions",
-    "nearest": "nearest training track",
-}
-"""What a track was compared with, by score (by method for `nearest`)."""
-STEP_ERRORS = "one-step prediction error (m)"
-PROFILES = {
-    "rollout": "distance to the best rollout (m)",
-    "lane": "distance to the lane (m)",
-    "step": STEP_ERRORS,
-    "stepspread": STEP_ERRORS,
-    "nearest": "distance to the nearest training track (m)",
-}
-"""What a track's profile (profiles.parquet, the evidence figures' lower panel) measures at
-each report, by score (by method for `nearest`)."""
-
-
-
-
 @dataclass
 class Detection:
     scores: pd.DataFrame
@@ -145,20 +124,24 @@ class Detection:
         return self.settings.score if self.settings and self.settings.score else "lane"
 
     @property
+    def judged_by(self) -> Score:
+        """The score the tracks were judged by (`aisdati.scores`)."""
+        return score(self.score)
+
+    @property
     def evidence_kind(self) -> str:
-        """What `rollouts` holds, in words (`EVIDENCE`), for legends and the GeoJSON."""
-        return EVIDENCE.get(self._judged_by, "")
+        """What `rollouts` holds, in words, for legends and the GeoJSON: the judging score's
+        evidence; for `nearest`, whatever the score, the nearest training track."""
+        return NEAREST.evidence if self.by_nearest else self.judged_by.evidence
 
     @property
     def profile_kind(self) -> str:
-        """What `profiles` hold, in words with their unit (`PROFILES`), for the figures."""
-        return PROFILES.get(self._judged_by, "deviation (m)")
+        """What `profiles` hold, in words with their unit, for the figures."""
+        return NEAREST.profile if self.by_nearest else self.judged_by.profile
 
     @property
-    def _judged_by(self) -> str:
-        """The score the tracks were judged by, or `nearest` for that method."""
-        s = self.settings
-        return s.method if s and s.method == "nearest" else s.score if s else ""
+    def by_nearest(self) -> bool:
+        return self.settings is not None and self.settings.method == "nearest"
 
 
 # ------------------------------------------------------------------------------------ models

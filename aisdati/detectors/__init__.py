@@ -18,7 +18,6 @@ from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.nearest import NearestDetector
 
 # isort: on
-from aisdati.ais import SCORES
 from aisdati.ais.training import TrainSettings
 from aisdati.detectors.base import (
     DEFAULT_CONTAMINATION,
@@ -33,7 +32,6 @@ from aisdati.detectors.scoring import Scores, ScoreSettings
 __all__ = [
     "DEFAULT_CONTAMINATION",
     "DETECTORS",
-    "SCORES",
     "BCDetector",
     "DATIDetector",
     "Detector",

@@ -169,6 +169,7 @@ class Detector(ABC):
         abnormal), and compute the kinds in `also` in the same pass (into `Scores.parts`), in
         chunks (`score_chunks`) run as tasks of `runner` (default: here). Numbers a kernel
         refuses (`aisdati.dtw`: NaN or inf) are a one-line `UserError` naming the model."""
+        self.card  # noqa: B018 (refuses, in one line, a detector not fitted or loaded)
         return score_each([(self, tracks, how or self.how)], also, runner)[0]
 
     @abstractmethod
@@ -185,7 +186,7 @@ class Detector(ABC):
 
     def decision_function(self, tracks: Sequence[Track]) -> np.ndarray:
         """Each track's score (higher = more abnormal) of the detector's `how`, in its unit
-        (`aisdati.ais.score_unit`: metres, or multiples of the draws' spread)."""
+        (`aisdati.scores.Score.unit`: metres, or multiples of the draws' spread)."""
         return self.score(tracks).score
 
     def calibration_key(self, how: ScoreSettings) -> str:
@@ -275,6 +276,8 @@ def load_detector(stem: Path) -> Detector:
         score=card.score,
         lane_course_km=recorded.lane_course_km,
         lane_traffic=recorded.lane_traffic,
+        rollouts=recorded.rollouts,
+        lane_rollouts=recorded.lane_rollouts,
     )
     det.loaded_from = path
     return det

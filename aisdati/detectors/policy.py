@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from aisdati.ais import SCORE_UNITS, STEP_SCORES
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy, Draws, best_draws, track_keys
@@ -22,6 +21,7 @@ from aisdati.detectors.base import Detector
 from aisdati.detectors.scoring import Scores, ScoreSettings, error_surprises, tail_mean
 from aisdati.dtw import matched_distances
 from aisdati.geo import lane_distances
+from aisdati.scores import SCORES, scores_from
 from aisdati.tracks.store import Track
 
 
@@ -45,13 +45,13 @@ class PolicyDetector(Detector):
     def score_tracks(
         self, tracks: Sequence[Track], how: ScoreSettings, also: Sequence[str]
     ) -> Scores:
-        """Every score by the whole ensemble, but `stepspread` of a cross-fitted model member
-        by member (`member_wise`), as its threshold was calibrated."""
+        """Every score by the whole ensemble, but the `member_wise` scores of a cross-fitted
+        model (`aisdati.scores.Score`) member by member, as their threshold was calibrated."""
         scores = self.score_with(self.policy(), tracks, how, also)
-        if "stepspread" in {how.score, *also} and self.card.lane_config.crossfit:
-            scores.parts |= self.member_wise(tracks, how, ("stepspread",))
-            if how.score == "stepspread":
-                scores.score = scores.parts["stepspread"]
+        wise = tuple(k for k in dict.fromkeys((how.score, *also)) if SCORES[k].member_wise)
+        if wise and self.card.lane_config.crossfit:
+            scores.parts |= self.member_wise(tracks, how, wise)
+            scores.score = scores.parts[how.score]
         return scores
 
     def member_wise(
@@ -77,7 +77,7 @@ class PolicyDetector(Detector):
         parts: dict[str, np.ndarray] = {}
         profiles: dict[str, list[np.ndarray]] = {}
         evidence: dict[str, list[np.ndarray]] = {}
-        if wanted & {"rollout", "lane"}:
+        if wanted & set(scores_from("rollouts")):
             reach = how.lane_reach if "lane" in wanted else 1.0
             lane = how.lane_rollouts if "lane" in wanted else how.rollouts
             parts["rollout"], best, every = policy.rollout_scores(
@@ -95,7 +95,7 @@ class PolicyDetector(Detector):
                 for p, e in zip(positions, every, strict=True)
             ]
             parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
-        if wanted & set(STEP_SCORES):
+        if wanted & set(scores_from("steps")):
             draws = policy.step_draws(positions, [t.dts for t in tracks], how.rollouts, how.seed)
             errors, predicted = best_draws(*draws)
             parts["step"] = np.array([tail_mean(e, how.tail) for e in errors])
@@ -107,7 +107,7 @@ class PolicyDetector(Detector):
             )
             profile = [np.concatenate([[0.0], e]) for e in errors]
             shown = [np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)]
-            for name in STEP_SCORES:
+            for name in scores_from("steps"):
                 profiles[name], evidence[name] = profile, shown
         return Scores(
             np.asarray(parts[how.score], np.float64),
@@ -137,7 +137,7 @@ class PolicyDetector(Detector):
         (cross-fitting), the tracks of fold m are scored by member m alone, which did not train
         on them; without, by the whole model that did."""
         how = replace(how or self.how, score="rollout")
-        kinds = ("rollout", *STEP_SCORES, "lane")
+        kinds = tuple(SCORES)
         if folds is None:
             parts = self.score_with(self.policy(), tracks, how, kinds[1:]).parts
         else:
@@ -147,7 +147,7 @@ class PolicyDetector(Detector):
                 got = self.score_with(self.policy(int(m)), [tracks[i] for i in rows], how, kinds)
                 for k in kinds:
                     parts[k][rows] = got.parts[k]
-        cal = {k: [round(float(v), 4 if k in SCORE_UNITS else 2) for v in parts[k]] for k in kinds}
+        cal = {k: [round(float(v), SCORES[k].digits) for v in parts[k]] for k in kinds}
         self.card.calibration = cal
         self.card.calibrated_with = how.calibrated_with()
 

@@ -93,7 +93,12 @@ class ScoreSettings:
     def calibrated_with(self) -> CalibratedWith:
         """What a card records of the settings its calibration scores were computed with:
         `Detector.threshold` refuses to flag with others."""
-        return CalibratedWith(lane_course_km=self.lane_course_km, lane_traffic=self.lane_traffic)
+        return CalibratedWith(
+            lane_course_km=self.lane_course_km,
+            lane_traffic=self.lane_traffic,
+            rollouts=self.rollouts,
+            lane_rollouts=self.lane_rollouts,
+        )
 
 
 @dataclass
@@ -101,7 +106,7 @@ class Scores:
     """What a detector says about N tracks."""
 
     score: np.ndarray
-    """[N] the scores, in their kind's unit (`aisdati.ais.score_unit`); higher = more
+    """[N] the scores, in their kind's unit (`aisdati.scores.Score.unit`); higher = more
     abnormal."""
     profiles: list[np.ndarray]
     """Per track, the local deviation (m) at each of its points: where it strays."""

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.ais import DEFAULT_PRESET, score_unit
+from aisdati.ais import DEFAULT_PRESET
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
@@ -37,6 +37,7 @@ from aisdati.evaluation import dataset
 from aisdati.evaluation.inject import parse_params, with_strength
 from aisdati.evaluation.metrics import flagging, ranking
 from aisdati.execution import Runner
+from aisdati.scores import score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
 
@@ -295,7 +296,7 @@ def _score(
             result.evidence[key] = scored.evidence
             for tid, v, f in zip(split.heldout_ids, values, flagged, strict=True):
                 score_rows.append((method, kind, tid, float(v), float(threshold), bool(f)))
-            unit = score_unit(kind)
+            unit = score(kind).unit
             rows += _rows(
                 method, kind, labels, values, ranked, flagged, threshold, settings.kinds, unit
             )
@@ -423,7 +424,7 @@ def _rows(
 ) -> list[dict[str, Any]]:
     """The table's rows of one detector and score: per anomaly kind (and pooled), how `ranked`
     orders and `flagged` flags the altered tracks against the normal ones, and the median
-    `values` of each, in `unit` (`score_unit`)."""
+    `values` of each, in `unit` (`aisdati.scores.Score.unit`)."""
     y = labels["label"].to_numpy()
     kind = labels["kind"].to_numpy()
     normal = y == 0
