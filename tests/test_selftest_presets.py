@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 import torch
 
-from aisdati.cli import SELFTEST_PRESET_OPTION
+from aisdati.commands.options import SelftestOptions
 from aisdati.errors import UserError
 from aisdati.model.bc import BC_PAPER, BCPolicy, BCTrainer
 from aisdati.model.dati import DATIConfig, DATITrainer
@@ -77,7 +77,7 @@ def test_presets_record_the_authors_choices():
     )
     assert not ours.exact_region and not ours.distinct_references
     assert next(iter(SELFTEST_PRESETS)) == "paper"
-    assert SELFTEST_PRESET_OPTION.default == "paper"
+    assert SelftestOptions().preset == "paper"
     assert SelftestSettings() == preset_settings()  # the dataclass defaults are the default preset
     with pytest.raises(UserError, match="unknown self-test preset"):
         preset_settings("nosuch")

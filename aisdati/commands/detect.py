@@ -12,6 +12,7 @@ from rich.markup import escape
 
 from aisdati.ais.card import unfinished_models
 from aisdati.commands.common import console, shows_progress, spinner, warn
+from aisdati.commands.options import DetectOptions
 from aisdati.commands.tables import detection_table
 from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
 from aisdati.detection.run import (
@@ -30,74 +31,62 @@ from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.ashore import AshoreCheck
 
 
-def run(
-    data: Path,
-    models_dir: str,
-    model: list[str] | None,
-    method: str | None,
-    score: str | None,
-    out: Path | None,
-    cluster: str,
-    track: list[int] | None,
-    ashore: bool,
-    threshold: float | None,
-    top_percent: float | None,
-    contamination: float,
-    near_km: float,
-    labels: Path | None,
-    workers: str,
-    device: str,
-    as_json: bool,
-) -> None:
-    """`aisdati detect` with its options (see `aisdati.cli.detect`)."""
-    check_options(
-        {
-            "--threshold": threshold,
-            "--top-percent": top_percent,
-            "--contamination": contamination,
-            "--near-km": near_km,
-        }
-    )
-    settings = DetectSettings(
-        data_dir=data,
-        models_dir=Path(models_dir),
-        out_dir=out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
-        models=tuple(model or ()),
-        method=parse_detectors(method)[0] if method else None,
-        cluster=cluster.strip().lower(),
-        track_ids=tuple(track or ()),
-        score=score.strip().lower() if score is not None else None,
-        ashore=ashore,
-        threshold=threshold,
-        top_percent=top_percent,
-        contamination=contamination,
-        near_km=near_km,
-        labels=labels,
-        device=resolve_device(device),
-    )
-    check_settings(settings)
-    execution = Execution.parse(workers)
+def run(o: DetectOptions) -> None:
+    """`aisdati detect` with its options (`aisdati.commands.options.DetectOptions`)."""
+    settings = detect_settings(o)
+    execution = Execution.parse(o.workers)
     with (
-        fetched_models(models_dir, settings.models, "--models") as local,  # a URL: a copy
+        fetched_models(o.models_dir, settings.models, "--models") as local,  # a URL: a copy
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
         open_runner(execution) as runner,
     ):
-        shown = shown_folder(models_dir)
+        shown = shown_folder(o.models_dir)
         settings = with_own_method(replace(settings, models_dir=local, models_shown=shown))
         for message in unfinished_models(local, settings.models, settings.method):
             warn(message)
         where = f"scoring on {execution.describe()}" if execution.distributed else "scoring"
-        with spinner(console, where, show=shows_progress(as_json)):
+        with spinner(console, where, show=shows_progress(o.as_json)):
             result = detect(settings, runner)
             for note in result.notes:
                 warn(note)
             files = [outputs.final(f) for f in write_outputs(result, outputs.folder, runner)]
         outputs.commit()
-    if as_json:
+    if o.as_json:
         doc = {**report_dict(result), "files": [str(f) for f in files]}
         print(json.dumps(doc, default=str))
     else:
         print_detection(result, files, settings.out_dir)
+
+
+def detect_settings(o: DetectOptions) -> DetectSettings:
+    """The library's settings of the command's options, checked before any work."""
+    check_options(
+        {
+            "--threshold": o.threshold,
+            "--top-percent": o.top_percent,
+            "--contamination": o.contamination,
+            "--near-km": o.near_km,
+        }
+    )
+    settings = DetectSettings(
+        data_dir=o.data,
+        models_dir=Path(o.models_dir),
+        out_dir=o.out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}",
+        models=tuple(o.model or ()),
+        method=parse_detectors(o.method)[0] if o.method else None,
+        cluster=o.cluster.strip().lower(),
+        track_ids=tuple(o.track or ()),
+        score=o.score.strip().lower() if o.score is not None else None,
+        ashore=o.ashore,
+        threshold=o.threshold,
+        top_percent=o.top_percent,
+        contamination=o.contamination,
+        near_km=o.near_km,
+        labels=o.labels,
+        device=resolve_device(o.device),
+    )
+    check_settings(settings)
+    return settings
 
 
 SHOWN_IDS = 8

@@ -16,6 +16,7 @@ from rich.markup import escape
 
 from aisdati.ais.training import TrainSettings
 from aisdati.commands.common import console, err_console, lane_settings, shows_progress, spinner
+from aisdati.commands.options import EvaluateOptions
 from aisdati.commands.tables import pooled_table, results_table
 from aisdati.detectors import ScoreSettings, parse_detectors
 from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
@@ -44,64 +45,41 @@ from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
 
 
-def run(
-    cluster: str,
-    data: Path,
-    out: Path | None,
-    detectors: str,
-    kinds: str,
-    param: list[str] | None,
-    before: datetime | None,
-    altered: float,
-    strength: float,
-    at_sea: bool,
-    models: str | None,
-    preset: str | None,
-    lane: list[str] | None,
-    episodes: int,
-    ashore: bool,
-    contamination: float,
-    seed: int,
-    workers: str,
-    device: str,
-    as_json: bool,
-) -> None:
-    """`aisdati evaluate` with its options (see `aisdati.cli.evaluate`)."""
+def run(o: EvaluateOptions) -> None:
+    """`aisdati evaluate` with its options (`aisdati.commands.options.EvaluateOptions`)."""
     check_options(
         {
-            "--contamination": contamination,
-            "--seed": seed,
+            "--contamination": o.contamination,
+            "--seed": o.seed,
         }
     )
     settings = EvaluateSettings(
-        data_dir=data,
-        cluster=cluster.strip().lower(),
-        out_dir=out or Path("runs") / f"evaluate-{datetime.now():%Y%m%d-%H%M%S}",
-        detectors=parse_detectors(detectors),
-        kinds=parse_kinds(kinds),
-        params=parse_params(param),
-        seed=seed,
-        episodes=episodes,
-        ashore=ashore,
-        contamination=contamination,
+        data_dir=o.data,
+        cluster=o.cluster.strip().lower(),
+        out_dir=o.out or Path("runs") / f"evaluate-{datetime.now():%Y%m%d-%H%M%S}",
+        detectors=parse_detectors(o.detectors),
+        kinds=parse_kinds(o.kinds),
+        params=parse_params(o.param),
+        seed=o.seed,
+        episodes=o.episodes,
+        ashore=o.ashore,
+        contamination=o.contamination,
         models_dir=None,
-        before=None if before is None else pd.Timestamp(before, tz="UTC"),
-        altered=altered,
-        strength=strength,
-        at_sea=at_sea,
-        device=resolve_device(device),
-        **lane_settings(preset, lane, cluster),
+        before=None if o.before is None else pd.Timestamp(o.before, tz="UTC"),
+        altered=o.altered,
+        strength=o.strength,
+        at_sea=o.at_sea,
+        device=resolve_device(o.device),
+        **lane_settings(o.preset, o.lane, o.cluster),
     )
-    with fetched_models(models, (), "--models") if models else nullcontext(None) as local:
+    with fetched_models(o.models, (), "--models") if o.models else nullcontext(None) as local:
         # a URL's models: a local copy, named by the URL in messages
-        settings = replace(settings, models_dir=local, models_shown=shown_folder(models))
+        settings = replace(settings, models_dir=local, models_shown=shown_folder(o.models))
         check(settings)
-        evaluate_with(settings, Execution.parse(workers), as_json)
+        evaluate_with(settings, Execution.parse(o.workers), o.as_json)
 
 
-def evaluate_with(
-    settings: EvaluateSettings, execution: Execution, as_json: bool
-) -> None:
+def evaluate_with(settings: EvaluateSettings, execution: Execution, as_json: bool) -> None:
     """Evaluate with the settings checked, models (if any) in a local folder."""
     with (
         staged_outputs(settings.out_dir, owned_outputs(settings), REPORT) as outputs,

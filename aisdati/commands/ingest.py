@@ -4,7 +4,6 @@ summary (or JSON)."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from rich.console import Console
 from rich.markup import escape
@@ -12,6 +11,7 @@ from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeR
 from shapely.geometry import MultiPolygon, Polygon
 
 from aisdati.commands.common import console, shows_progress, warn
+from aisdati.commands.options import IngestOptions
 from aisdati.commands.tables import routes_table, summary_table
 from aisdati.errors import UserError
 from aisdati.execution.runner import Execution
@@ -26,41 +26,25 @@ from aisdati.preprocess.roi import load_roi
 from aisdati.preprocess.settings import IngestSettings, parse_duration
 
 
-def run(
-    inputs: list[str] | None,
-    download: str | None,
-    data_dir: Path,
-    out: Path,
-    roi: str,
-    min_sog: float,
-    max_speed: float,
-    stop_gap: str,
-    min_points: int,
-    dwell_radius: float,
-    dwell_time: str,
-    route_min_tracks: int,
-    route_eps_km: str,
-    keep_rejects: bool,
-    workers: str,
-    as_json: bool,
-) -> None:
-    """`aisdati ingest` with its options (see `aisdati.cli.ingest`): its tasks on `workers`
-    local processes, or on the Dask cluster at that address (whose workers must see the inputs
-    and --out at the same paths: ingest's spill files and staged outputs live in --out)."""
-    check_options({"--min-sog": min_sog, "--max-speed": max_speed})
-    execution = Execution.parse(workers)
-    if not inputs and download is None:
+def run(o: IngestOptions) -> None:
+    """`aisdati ingest` with its options (`aisdati.commands.options.IngestOptions`): its tasks
+    on `--workers` local processes, or on the Dask cluster at that address (whose workers must
+    see the inputs and --out at the same paths: ingest's spill files and staged outputs live in
+    --out)."""
+    check_options({"--min-sog": o.min_sog, "--max-speed": o.max_speed})
+    execution = Execution.parse(o.workers)
+    if not o.inputs and o.download is None:
         raise UserError("nothing to ingest: give --input FILES or --download PERIOD")
     settings = IngestSettings(
-        min_sog_kn=min_sog,
-        max_speed_kn=max_speed,
-        stop_gap_s=parse_duration(stop_gap),
-        min_points=min_points,
-        keep_rejects=keep_rejects,
-        dwell_radius_m=dwell_radius,
-        dwell_time_s=parse_duration(dwell_time, "--dwell-time", allow_zero=True),
-        route_min_tracks=route_min_tracks,
-        route_eps_km=parse_route_eps(route_eps_km),
+        min_sog_kn=o.min_sog,
+        max_speed_kn=o.max_speed,
+        stop_gap_s=parse_duration(o.stop_gap),
+        min_points=o.min_points,
+        keep_rejects=o.keep_rejects,
+        dwell_radius_m=o.dwell_radius,
+        dwell_time_s=parse_duration(o.dwell_time, "--dwell-time", allow_zero=True),
+        route_min_tracks=o.route_min_tracks,
+        route_eps_km=parse_route_eps(o.route_eps_km),
     )
     check_options(
         {
@@ -70,16 +54,16 @@ def run(
             "--route-eps-km": settings.route_eps_km,
         }
     )
-    area = load_roi(roi, warn=warn)
-    remote = marinecadastre_files(download, roi_zones(area)) if download is not None else []
-    local = expand_inputs(inputs) if inputs else []
-    prepare_output_dir(out, "--out", OUTPUT_NAMES, DATASET_NAMES)
+    area = load_roi(o.roi, warn=warn)
+    remote = marinecadastre_files(o.download, roi_zones(area)) if o.download is not None else []
+    local = expand_inputs(o.inputs) if o.inputs else []
+    prepare_output_dir(o.out, "--out", OUTPUT_NAMES, DATASET_NAMES)
     if remote:
-        prepare_output_dir(data_dir, "--data-dir")
-    with download_progress(console, shows_progress(as_json)) as progress:
-        files = fetch_files(remote, data_dir, progress=progress) + local
-        result = ingest(files, out, settings, area, roi, progress, execution)
-    if as_json:
+        prepare_output_dir(o.data_dir, "--data-dir")
+    with download_progress(console, shows_progress(o.as_json)) as progress:
+        files = fetch_files(remote, o.data_dir, progress=progress) + local
+        result = ingest(files, o.out, settings, area, o.roi, progress, execution)
+    if o.as_json:
         print(json.dumps(result.as_dict(), default=str))
     else:
         console.print(summary_table(result.counts))

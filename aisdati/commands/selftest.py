@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
 from rich.markup import escape
 
 from aisdati.commands.common import console, shows_progress
+from aisdati.commands.options import SelftestOptions
 from aisdati.commands.tables import ablation_table, selftest_table
 from aisdati.errors import UserError
 from aisdati.execution import Execution, resolve_device
@@ -21,56 +23,42 @@ from aisdati.selftest.protocol import run_selftest
 from aisdati.selftest.settings import ABLATION, QUICK, TABLE2, parse_methods, preset_settings
 
 
-def run(
-    family: list[str],
-    methods: str,
-    seeds: int,
-    episodes: int,
-    steps: int | None,
-    references: int,
-    workers: str,
-    device: str,
-    preset: str,
-    repeats: int,
-    quick: bool,
-    out: Path | None,
-    as_json: bool,
-) -> None:
-    """`aisdati selftest` with its options (see `aisdati.cli.selftest`)."""
-    ablation = methods.strip().lower() == TABLE2
-    names = family_names(family, ablation)
-    method_names = ABLATION if ablation else parse_methods(methods)
+def run(o: SelftestOptions) -> None:
+    """`aisdati selftest` with its options (`aisdati.commands.options.SelftestOptions`)."""
+    ablation = o.methods.strip().lower() == TABLE2
+    names = family_names(o.family, ablation)
+    method_names = ABLATION if ablation else parse_methods(o.methods)
     for name in names:
         if name not in FAMILIES:
             raise UserError(f"unknown family {name!r}; choose from {', '.join(FAMILIES)}")
-    if quick:
-        seeds, references, steps, episodes = (
-            QUICK[k] for k in ("seeds", "references", "steps", "episodes")
-        )
-    check_counts(seeds, episodes, references, repeats, steps)
-    execution = Execution.parse(workers)
+    if o.quick:
+        o = replace(o, **QUICK)
+    check_counts(o.seeds, o.episodes, o.references, o.repeats, o.steps)
+    execution = Execution.parse(o.workers)
     settings = preset_settings(
-        preset,
-        episodes,
+        o.preset,
+        o.episodes,
         families=tuple(names),
-        seeds=seeds,
-        references=references,
-        steps=steps,
+        seeds=o.seeds,
+        references=o.references,
+        steps=o.steps,
         workers=execution.workers,
         scheduler=execution.scheduler,
-        device=resolve_device(device),
+        device=resolve_device(o.device),
         methods=tuple(method_names),
-        repeats=repeats,
+        repeats=o.repeats,
     )
-    out = out or Path("runs") / f"selftest-{datetime.now():%Y%m%d-%H%M%S}"
+    out = o.out or Path("runs") / f"selftest-{datetime.now():%Y%m%d-%H%M%S}"
     prepare_output_dir(out, "--out")
-    total = len(method_names) * len(names) * seeds * repeats
+    total = len(method_names) * len(names) * o.seeds * o.repeats
     label = "training DATI" if list(method_names) == ["dati"] else "training"
-    with EpisodeProgress(total, episodes, label, disable=not shows_progress(as_json)) as progress:
+    with EpisodeProgress(
+        total, o.episodes, label, disable=not shows_progress(o.as_json)
+    ) as progress:
         result = run_selftest(settings, progress.update)
     files = write_outputs(result, out)
     rows = result_rows(result)
-    if as_json:
+    if o.as_json:
         print(json.dumps({"results": rows, "wall_seconds": result.wall_seconds, "out": str(out)}))
     else:
         make_table = ablation_table if ablation else selftest_table

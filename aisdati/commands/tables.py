@@ -14,6 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from aisdati.preprocess.report import REASONS, IngestCounts
+from aisdati.scores import Score
 from aisdati.scores import score as score_named
 
 if TYPE_CHECKING:
@@ -295,38 +296,15 @@ def detection_table(
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     kind = score_named(score)
-    shown_unit = kind.readable_unit
-    cols = [
-        "rank",
-        "track",
-        "mmsi",
-        f"score ({shown_unit})",
-        "threshold",
-        "max km",
-        "at (lat, lon)",
-    ]
     several = scores["model"].nunique() > 1
-    if several:
-        cols.insert(3, "model")
     ashore = bool((scores["ashore_reports"] > 0).any())
-    if ashore:
-        cols.append("ashore")
-    rows = []
-    for r in shown.head(limit).itertuples():
-        row = [
-            str(r.rank),
-            str(r.track_id),
-            str(r.mmsi),
-            f"{kind.readable(r.score):,.2f}",
-            f"{kind.readable(r.threshold):,.2f}",
-            f"{r.max_dev_m / 1000:,.2f}",
-            f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
-        ]
-        if several:
-            row.insert(3, str(r.model))
-        if ashore:
-            row.append(str(r.ashore_reports))
-        rows.append((row, bool(r.flagged)))
+    cols = [
+        "rank", "track", "mmsi", *(["model"] if several else []),
+        f"score ({kind.readable_unit})", "threshold", "max km", "at (lat, lon)",
+        *(["ashore"] if ashore else []),
+    ]  # fmt: skip
+    rows = [(detection_row(r, kind, several, ashore), bool(r.flagged))
+            for r in shown.head(limit).itertuples()]  # fmt: skip
     # every figure whole at 80 columns (a log, a pipe): only the place and the model wrap
     wraps = ("model", "at (lat, lon)")
     for k, col in enumerate(cols):
@@ -338,12 +316,22 @@ def detection_table(
             min_width=None if col in wraps else whole,
             overflow="fold",
         )
-    score = cols.index(f"score ({shown_unit})")
-    for row, flagged in rows:
+    at = cols.index(f"score ({kind.readable_unit})")
+    for row, is_flagged in rows:
         cells = [escape(c) for c in row]
-        cells[score] = f"[{'red' if flagged else 'white'}]{row[score]}[/]"
+        cells[at] = f"[{'red' if is_flagged else 'white'}]{row[at]}[/]"
         table.add_row(*cells)
     table.caption = RULE_CAPTIONS[rule]
     if len(shown) > limit:
         table.caption += f"; ... and {len(shown) - limit} more in scores.parquet"
     return table
+
+
+def detection_row(r: Any, kind: Score, several: bool, ashore: bool) -> list[str]:
+    """One track's cells of `detection_table`, the model's where several judged."""
+    return [
+        str(r.rank), str(r.track_id), str(r.mmsi), *([str(r.model)] if several else []),
+        f"{kind.readable(r.score):,.2f}", f"{kind.readable(r.threshold):,.2f}",
+        f"{r.max_dev_m / 1000:,.2f}", f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
+        *([str(r.ashore_reports)] if ashore else []),
+    ]  # fmt: skip

@@ -23,6 +23,7 @@ from aisdati.commands.common import (
     shows_progress,
     warn,
 )
+from aisdati.commands.options import TrainOptions
 from aisdati.commands.tables import dati_model_table, route_models_table
 from aisdati.detectors import model_name, parse_detectors
 from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
@@ -39,66 +40,60 @@ MODEL_SUFFIXES = (".pt", ".json", ".npz", ".corridor.npz", ".log.jsonl", ".ckpt"
 """The files a model `<stem>` may have in --out: none of them may be a folder."""
 
 
-def run(
-    cluster: str,
-    method: str | None,
-    data: Path,
-    out: str,
-    preset: str | None,
-    lane: list[str] | None,
-    episodes: int,
-    seed: int,
-    max_tracks: int,
-    patience: int,
-    resume: bool,
-    workers: str,
-    device: str,
-    as_json: bool,
-) -> None:
-    """`aisdati train` with its options (see `aisdati.cli.train`)."""
-    check_options({"--seed": seed})
-    (method,) = parse_detectors(default_method(method, cluster))[:1]
-    execution = Execution.parse(workers)
-    device = resolve_device(device)
-    if cluster.strip().lower() == "routes":
-        local, url = model_folder(out, resume)
-        settings = route_settings(data, local, preset, lane, episodes, seed, patience, max_tracks)
+def run(o: TrainOptions) -> None:
+    """`aisdati train` with its options (`aisdati.commands.options.TrainOptions`)."""
+    check_options({"--seed": o.seed})
+    (method,) = parse_detectors(default_method(o.method, o.cluster))[:1]
+    execution = Execution.parse(o.workers)
+    device = resolve_device(o.device)
+    cluster = o.cluster.strip().lower()
+    if cluster == "routes":
+        local, url = model_folder(o.out, o.resume)
+        settings = route_settings(
+            o.data, local, o.preset, o.lane, o.episodes, o.seed, o.patience, o.max_tracks
+        )
         settings = [replace(s, device=device, publish_to=url) for s in settings]
-        return train_every_route(method, settings, execution, as_json)
+        return train_every_route(method, settings, execution, o.as_json)
     if execution.distributed:
         warn("one model trains in this process: --workers spreads --cluster routes")
-    select_cluster(read_track_table(data), cluster.strip().lower(), data)  # fail before the bars
-    stem = model_name(cluster.strip().lower(), method)
-    local, url = model_folder(out, resume, [stem + x for x in MODEL_SUFFIXES])
+    select_cluster(read_track_table(o.data), cluster, o.data)  # fail before the bars
+    stem = model_name(cluster, method)
+    local, url = model_folder(o.out, o.resume, [stem + x for x in MODEL_SUFFIXES])
     settings = TrainSettings(
-        data_dir=data,
-        cluster=cluster.strip().lower(),
+        data_dir=o.data,
+        cluster=cluster,
         out_dir=local,
         publish_to=url,
-        **lane_settings(preset, lane, cluster),
-        episodes=episodes,
-        seed=seed,
-        max_tracks=max_tracks or None,
-        patience=patience,
-        resume=resume,
+        **lane_settings(o.preset, o.lane, o.cluster),
+        episodes=o.episodes,
+        seed=o.seed,
+        max_tracks=o.max_tracks or None,
+        patience=o.patience,
+        resume=o.resume,
         device=device,
     )
-    resuming = resume and local is not None and (local / f"{stem}.ckpt").is_file()
-    result = train_with_bars(method, settings, resuming, disable=not shows_progress(as_json))
-    if as_json:
+    resuming = o.resume and local is not None and (local / f"{stem}.ckpt").is_file()
+    result = train_with_bars(method, settings, resuming, disable=not shows_progress(o.as_json))
+    if o.as_json:
         print(json.dumps({"model": str(result.model), "card": result.card}, default=str))
-    elif method != "dati":
+    else:
+        print_trained(method, settings, result)
+
+
+def print_trained(method: str, settings: TrainSettings, result: Trained) -> None:
+    """What was trained, and where it was written."""
+    if method != "dati":
         console.print(
             f"{method} model of cluster {escape(repr(settings.cluster))} on "
             f"{result.card['data']['tracks_used']} tracks in {result.wall_seconds:.1f} s, "
             f"judging by {result.card['score']}: wrote [bold]{escape(str(result.model))}[/]",
             highlight=False,
         )
-    else:
-        console.print(dati_model_table(settings.cluster, result))
-        console.print(
-            f"wrote [bold]{escape(str(result.model))}[/] and its card and log", highlight=False
-        )
+        return
+    console.print(dati_model_table(settings.cluster, result))
+    console.print(
+        f"wrote [bold]{escape(str(result.model))}[/] and its card and log", highlight=False
+    )
 
 
 def train_with_bars(method: str, settings: TrainSettings, resuming: bool, disable: bool) -> Trained:

@@ -251,8 +251,37 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     check_settings(settings)
     if settings.labels is not None:
         read_labels(settings.labels)  # fail on a bad file before the scoring
-    timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    settings, models, tracks, owner, coverage = judged_tracks(settings)
+    timings = {"load_s": time.perf_counter() - t0}
+    t1 = time.perf_counter()
+    raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner, runner)
+    timings["score_s"] = time.perf_counter() - t1
+    if settings.rule != "calibrated":
+        threshold = relative_thresholds(raw, settings)
+    ashore = np.zeros(len(tracks), np.int64)
+    if settings.ashore:
+        seen = [m.card.data.ashore for m in models]
+        ashore = ashore_counts(seen, [t.positions for t in tracks], owner, runner)
+    names = [models[o].name for o in owner]
+    scores = score_table(tracks, names, raw, threshold, profiles, ashore)
+    timings["total_s"] = time.perf_counter() - t0
+    note = small_batch_note(len(tracks), settings)
+    result = Detection(
+        scores, tracks, evidence, models, profiles, timings, settings, coverage=coverage,
+        notes=[note] if note else [],
+    )  # fmt: skip
+    if settings.labels is not None:
+        result.metrics = evaluate_labels(scores, tracks, settings.labels)
+    return result
+
+
+def judged_tracks(
+    settings: DetectSettings,
+) -> tuple[DetectSettings, list[Detector], list[Track], list[int], Coverage]:
+    """The models, the tracks they judge and which model judges each (`route_test_tracks`),
+    the coverage, and the settings with the method and score that judge; none judged is one
+    line that says what would judge them."""
     settings = with_own_method(settings)
     models = load_models(settings)
     table = candidate_table(settings)
@@ -268,35 +297,36 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     tracks = [t for t, o in zip(candidates, owners, strict=True) if o >= 0]
     owner = [int(o) for o in owners if o >= 0]
     settings = with_own_score(settings, [models[m] for m in sorted(set(owner))])
-    timings["load_s"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    raw, threshold, evidence, profiles = _score_by_model(settings, models, tracks, owner, runner)
-    timings["score_s"] = time.perf_counter() - t1
-    n = len(tracks)
-    if settings.rule != "calibrated":
-        threshold = relative_thresholds(raw, settings)
-    flagged = raw > threshold
+    return settings, models, tracks, owner, coverage
+
+
+def score_table(
+    tracks: Sequence[Track],
+    models: Sequence[str],
+    raw: np.ndarray,
+    threshold: np.ndarray,
+    profiles: Sequence[np.ndarray],
+    ashore: np.ndarray,
+) -> pd.DataFrame:
+    """scores.parquet's rows (`aisdati.detection.outputs.SCORES_SCHEMA`): each track flagged
+    above its threshold or for reports ashore, ranked (reports ashore first), with the point
+    where it strays most (the peak of its profile)."""
     check = AshoreCheck()
-    ashore = np.zeros(n, np.int64)
-    if settings.ashore:
-        seen = [m.card.data.ashore for m in models]
-        ashore = ashore_counts(seen, [t.positions for t in tracks], owner, runner)
-    flagged = flagged | check.flags(ashore)
     lengths = np.array([len(t.positions) for t in tracks])
-    top = float(np.max(raw)) if n else 1.0
+    top = float(np.max(raw)) if len(raw) else 1.0
     order = np.argsort(-check.ranked(raw / top if top > 0 else raw, ashore, lengths), kind="stable")
-    rank = np.empty(n, dtype=np.int64)
-    rank[order] = np.arange(1, n + 1)
+    rank = np.empty(len(tracks), dtype=np.int64)
+    rank[order] = np.arange(1, len(tracks) + 1)
     peak = [int(np.argmax(p)) for p in profiles]
-    scores = pd.DataFrame(
+    return pd.DataFrame(
         {
             "track_id": [t.track_id for t in tracks],
             "mmsi": [t.mmsi for t in tracks],
-            "model": [models[o].name for o in owner],
+            "model": list(models),
             "n_points": lengths,
             "score": raw,
             "threshold": threshold,
-            "flagged": flagged,
+            "flagged": (raw > threshold) | check.flags(ashore),
             "rank": rank,
             "max_dev_m": [float(p[k]) for p, k in zip(profiles, peak, strict=True)],
             "max_dev_lon": [t.positions[k, 0] for t, k in zip(tracks, peak, strict=True)],
@@ -305,15 +335,6 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
             "ashore_reports": ashore,
         }
     )
-    timings["total_s"] = time.perf_counter() - t0
-    note = small_batch_note(n, settings)
-    result = Detection(
-        scores, tracks, evidence, models, profiles, timings, settings, coverage=coverage,
-        notes=[note] if note else [],
-    )  # fmt: skip
-    if settings.labels is not None:
-        result.metrics = evaluate_labels(scores, tracks, settings.labels)
-    return result
 
 
 def _score_by_model(

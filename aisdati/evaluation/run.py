@@ -20,7 +20,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -358,18 +358,7 @@ def evaluate_routes(
     train = train_detector or plain_train
     train_all = train_routes or plain_routes
     say = on_stage or (lambda _: None)
-    routes = routes_with(settings.data_dir, "evaluate")
-    prepared: list[_Prepared] = []
-    skipped: dict[str, str] = {}
-    say(f"splitting and injecting {len(routes)} routes")
-    for route in routes:
-        sub = replace(settings, cluster=route, out_dir=settings.out_dir / route)
-        try:
-            prepared.append(_prepare(sub, _checked_models(sub)))
-        except UserError as exc:
-            skipped[route] = str(exc)
-    if not prepared:
-        raise UserError(f"no route of {settings.data_dir} can be split: {skipped[routes[0]]}")
+    prepared, skipped = _prepare_routes(settings, say)
     detectors: list[dict[str, Detector]] = [dict(p.existing) for p in prepared]
     train_s: list[dict[str, float]] = [dict.fromkeys(p.existing, 0.0) for p in prepared]
     for method in settings.detectors:
@@ -390,6 +379,35 @@ def evaluate_routes(
     evaluations = [
         _score(p, d, t, say, runner) for p, d, t in zip(prepared, detectors, train_s, strict=True)
     ]
+    scores, table = _pooled(evaluations, settings.kinds)
+    return RoutesEvaluation(settings, evaluations, skipped, table, scores)
+
+
+def _prepare_routes(
+    settings: EvaluateSettings, say: Callable[[str], None]
+) -> tuple[list[_Prepared], dict[str, str]]:
+    """Every route split and injected on its own, and the routes that could not be (with
+    why); none that could is one line."""
+    routes = routes_with(settings.data_dir, "evaluate")
+    prepared: list[_Prepared] = []
+    skipped: dict[str, str] = {}
+    say(f"splitting and injecting {len(routes)} routes")
+    for route in routes:
+        sub = replace(settings, cluster=route, out_dir=settings.out_dir / route)
+        try:
+            prepared.append(_prepare(sub, _checked_models(sub)))
+        except UserError as exc:
+            skipped[route] = str(exc)
+    if not prepared:
+        raise UserError(f"no route of {settings.data_dir} can be split: {skipped[routes[0]]}")
+    return prepared, skipped
+
+
+def _pooled(
+    evaluations: Sequence[Evaluation], kinds: Sequence[str]
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Every route's held-out scores as one table, each over its own model's threshold
+    (`POOLED_UNIT`), and the pooled results table of them."""
     scores = pd.concat(
         [ev.scores.assign(route=ev.settings.cluster) for ev in evaluations], ignore_index=True
     )
@@ -401,10 +419,8 @@ def evaluate_routes(
         values = g["ratio"].to_numpy()
         ranked = rule.ranked(values, g["ashore_reports"], g["n_points"])
         flagged = g["flagged"].to_numpy()
-        rows += _rows(
-            method, kind, labels, values, ranked, flagged, 1.0, settings.kinds, POOLED_UNIT
-        )
-    return RoutesEvaluation(settings, evaluations, skipped, pd.DataFrame(rows), scores)
+        rows += _rows(method, kind, labels, values, ranked, flagged, 1.0, kinds, POOLED_UNIT)
+    return scores, pd.DataFrame(rows)
 
 
 POOLED_UNIT = "x threshold"
