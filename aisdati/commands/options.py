@@ -230,7 +230,8 @@ class TrainOptions:
             "--cluster",
             "-c",
             help="Tracks to learn: a cluster (up, down, other), a route (route-<n>, unrouted), or "
-            "routes: every route with enough tracks (DATI trains them as one batched ensemble).",
+            "routes: every route with enough tracks, each its own model and task (--workers "
+            "spreads them).",
         ),
     ]
     method: Annotated[

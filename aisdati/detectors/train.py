@@ -1,9 +1,11 @@
 """Training any detector on the tracks of an ingest folder: `aisdati train --method`.
 
 Many routes are trained as tasks (`aisdati.execution`): `route_tasks` cuts the routes into
-groups of `routes_per_task` in route order, and each group is one batched ensemble (DATI) on one
-worker. The cut depends on the routes alone, so the models are the same whatever runs the
-tasks; fewer routes per task spread wider over workers, more batch better in one process.
+groups of `routes_per_task` in route order (the command line: one route a task), and each group
+is one batched ensemble (DATI) on one worker. The cut depends on the routes alone, so the models
+are the same whatever runs the tasks; fewer routes per task spread wider over workers, more
+batch better in one process (the Python API's `train_routes(..., routes_per_task=0)`: all in
+one).
 Models bound for a URL (`TrainSettings.publish_to`) are written into a local folder on the
 machine that trains them and copied there (`aisdati.storage`), so that tasks on other machines
 need no shared disk.
