@@ -82,6 +82,26 @@ STARTED = time.time()
 
 
 # ------------------------------------------------------------------------------ output folders
+def same_folder(a: str | Path, b: str | Path) -> bool:
+    """Whether two folder options name the same folder (whatever the spelling or links)."""
+    return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
+
+
+@contextlib.contextmanager
+def removed_if_left_empty(path: Path) -> Iterator[None]:
+    """For the time of the block: a folder that did not exist before it and that the block
+    leaves empty on failure (an unreachable cluster, a refused input) is removed again, so that
+    a failed command leaves nothing behind that looks like its output."""
+    existed = Path(path).exists()
+    try:
+        yield
+    except BaseException:
+        folder = Path(path)
+        if not existed and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+        raise
+
+
 def prepare_output_dir(
     path: Path, option: str = "--out", outputs: Iterable[str] = (), datasets: Iterable[str] = ()
 ) -> Path:
@@ -200,6 +220,7 @@ class OutputSet:
             for rel in staged:
                 target = self.out / rel
                 try:
+                    self._unlink_linked_folders(rel)
                     target.parent.mkdir(parents=True, exist_ok=True)
                     if rel.as_posix() in self.datasets and (target.exists() or target.is_symlink()):
                         self._set_aside(target)  # a rename cannot replace a folder, or by one
@@ -217,8 +238,26 @@ class OutputSet:
     def _earlier(self) -> list[Path]:
         """The files (and dataset folders) of ours in --out now: what earlier runs left."""
         found = {p for pattern in self.owned for p in self.out.glob(pattern)}
+        found = {p for p in found if not self._linked_folder(p.relative_to(self.out))}
         files = {p for p in found if p.is_file() or p.is_symlink()}
         return sorted(files | {self.out / d for d in self.datasets if _is_folder(self.out / d)})
+
+    def _linked_folder(self, rel: Path) -> Path | None:
+        """The first folder on the way to `rel` under --out that is a link, if any: our outputs
+        never go through one (a link `evidence/` would have the figures written, and old ones
+        deleted, wherever it points)."""
+        for parent in reversed(rel.parents[:-1]):
+            if (self.out / parent).is_symlink():
+                return self.out / parent
+        return None
+
+    def _unlink_linked_folders(self, rel: Path) -> None:
+        """Replace a link on the way to `rel` by the folder of ours it stands for: the link
+        itself is removed, never what it points to."""
+        link = self._linked_folder(rel)
+        while link is not None:
+            link.unlink()
+            link = self._linked_folder(rel)
 
     def _remove(self, path: Path) -> None:
         """Delete one output of ours (a dataset folder: set aside whole), and its folder under

@@ -31,6 +31,9 @@ from aisdati.errors import UserError
 
 URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*://")
 CARD_SUFFIX = ".json"
+PROCESS_LOCAL = ("memory",)
+"""fsspec protocols whose files live in the process that wrote them: a model "written" there is
+gone when the command exits, so they are refused as model folders."""
 NOT_COPIED = (".ckpt",)
 """Files of a model that are neither published nor fetched (checkpoints: only `--resume` reads
 them, in a local folder)."""
@@ -53,6 +56,11 @@ class RemoteFolder:
         whose package is missing is a one-line `UserError`."""
         import fsspec
 
+        if self.scheme in PROCESS_LOCAL:
+            raise UserError(
+                f"{self.option} {self.shown}: {self.scheme}:// keeps files only while this "
+                "command runs; give a folder or a URL that outlives it"
+            )
         try:
             fs, root = fsspec.core.url_to_fs(self.url)
         except ImportError as exc:

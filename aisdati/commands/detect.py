@@ -24,10 +24,12 @@ from aisdati.detection.run import (
     with_own_method,
 )
 from aisdati.detectors import parse_detectors
+from aisdati.detectors.registry import check_model_names
+from aisdati.errors import UserError
 from aisdati.execution import Execution, open_runner, resolve_device
 from aisdati.options import check_options
-from aisdati.outdir import staged_outputs
-from aisdati.storage import fetched_models, shown_folder
+from aisdati.outdir import removed_if_left_empty, same_folder, staged_outputs
+from aisdati.storage import fetched_models, is_url, shown_folder
 from aisdati.tracks.ashore import AshoreCheck
 
 
@@ -36,9 +38,10 @@ def run(o: DetectOptions) -> None:
     settings = detect_settings(o)
     execution = Execution.parse(o.workers)
     with (
+        removed_if_left_empty(settings.out_dir),
         fetched_models(o.models_dir, settings.models, "--models") as local,  # a URL: a copy
+        open_runner(execution) as runner,  # before the outputs: a cluster out of reach
         staged_outputs(settings.out_dir, OUTPUTS, REPORT) as outputs,
-        open_runner(execution) as runner,
     ):
         shown = shown_folder(o.models_dir)
         settings = with_own_method(replace(settings, models_dir=local, models_shown=shown))
@@ -60,6 +63,9 @@ def run(o: DetectOptions) -> None:
 
 def detect_settings(o: DetectOptions) -> DetectSettings:
     """The library's settings of the command's options, checked before any work."""
+    check_model_names(o.model or ())
+    if o.out is not None and not is_url(o.models_dir) and same_folder(o.out, o.models_dir):
+        raise UserError(f"--out {o.out} is the model folder: give the report a folder of its own")
     check_options(
         {
             "--threshold": o.threshold,

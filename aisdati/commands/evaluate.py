@@ -39,7 +39,7 @@ from aisdati.evaluation.run import (
 )
 from aisdati.execution import Execution, Runner, open_runner, resolve_device
 from aisdati.options import check_options
-from aisdati.outdir import OutputSet, staged_outputs
+from aisdati.outdir import OutputSet, removed_if_left_empty, staged_outputs
 from aisdati.progress import TrainingProgress
 from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
@@ -82,8 +82,9 @@ def run(o: EvaluateOptions) -> None:
 def evaluate_with(settings: EvaluateSettings, execution: Execution, as_json: bool) -> None:
     """Evaluate with the settings checked, models (if any) in a local folder."""
     with (
+        removed_if_left_empty(settings.out_dir),
+        open_runner(execution) as runner,  # before the outputs: a cluster out of reach
         staged_outputs(settings.out_dir, owned_outputs(settings), REPORT) as outputs,
-        open_runner(execution) as runner,
     ):
         outputs.retire_earlier()  # the data and models it describes are about to change
         shown = Display(settings, runner, show=shows_progress(as_json))

@@ -16,7 +16,7 @@ from aisdati.commands.tables import routes_table, summary_table
 from aisdati.errors import UserError
 from aisdati.execution.runner import Execution
 from aisdati.options import check_options
-from aisdati.outdir import prepare_output_dir
+from aisdati.outdir import prepare_output_dir, removed_if_left_empty
 from aisdati.preprocess.download import download as fetch_files
 from aisdati.preprocess.download import marinecadastre_files, utm_zones
 from aisdati.preprocess.inputs import expand_inputs
@@ -57,12 +57,13 @@ def run(o: IngestOptions) -> None:
     area = load_roi(o.roi, warn=warn)
     remote = marinecadastre_files(o.download, roi_zones(area)) if o.download is not None else []
     local = expand_inputs(o.inputs) if o.inputs else []
-    prepare_output_dir(o.out, "--out", OUTPUT_NAMES, DATASET_NAMES)
-    if remote:
-        prepare_output_dir(o.data_dir, "--data-dir")
-    with download_progress(console, shows_progress(o.as_json)) as progress:
-        files = fetch_files(remote, o.data_dir, progress=progress) + local
-        result = ingest(files, o.out, settings, area, o.roi, progress, execution)
+    with removed_if_left_empty(o.out):
+        prepare_output_dir(o.out, "--out", OUTPUT_NAMES, DATASET_NAMES)
+        if remote:
+            prepare_output_dir(o.data_dir, "--data-dir")
+        with download_progress(console, shows_progress(o.as_json)) as progress:
+            files = fetch_files(remote, o.data_dir, progress=progress) + local
+            result = ingest(files, o.out, settings, area, o.roi, progress, execution)
     if o.as_json:
         print(json.dumps(result.as_dict(), default=str))
     else:

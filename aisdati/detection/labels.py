@@ -153,10 +153,21 @@ def _label_ints(values: pd.Series, column: str, low: int, high: int, path: Path)
     return pd.Series(out, index=values.index)
 
 
+ISO_TIME = (
+    r"\d{4}-\d{2}-\d{2}"  # the date
+    r"(?:[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?)?"  # a time of day
+    r"(?:Z|[+-]\d{2}(?::?\d{2})?)?"  # a zone
+)
+"""What a label's time may be: ISO 8601, date first, nothing else. Looser parsing read
+`07/08/2018` month-first in one row and day-first in the next, and took `now` as a time."""
+
+
 def _label_times(values: pd.Series, column: str, path: Path) -> pd.Series:
     """A column of times (ISO 8601; with a zone, or UTC), or a `UserError` naming the first row
     that is not one."""
-    times = pd.to_datetime(values.str.strip(), utc=True, errors="coerce", format="mixed")
+    text = values.astype(str).str.strip()
+    times = pd.to_datetime(text, utc=True, errors="coerce", format="ISO8601")
+    times[~text.str.fullmatch(ISO_TIME)] = pd.NaT
     if times.isna().any():
         row = int(np.flatnonzero(times.isna().to_numpy())[0])
         raise UserError(

@@ -27,6 +27,7 @@ from aisdati.tracks.store import Track
 CHUNK = 512
 """Queries per block of `od_distances`: [512, M] distance matrices."""
 NOT_JUDGED_FAR = "no model covers its start and end (none within --near-km, no area model)"
+NOT_JUDGED_OUTSIDE = "it starts outside every model's region (models of another area)"
 
 
 def od_pairs_m(
@@ -118,46 +119,52 @@ def reach_km(card: ModelCard, starts: np.ndarray, ends: np.ndarray) -> np.ndarra
 
 
 def route_test_tracks(
-    models: Sequence[Detector],
-    table: pd.DataFrame,
-    tracks: list[Track],
-    near_km: float,
-    named: bool = False,
+    models: Sequence[Detector], table: pd.DataFrame, tracks: list[Track], near_km: float
 ) -> tuple[np.ndarray, Coverage]:
     """For each track (rows of `table`, loaded as `tracks`), the index of the model that judges
-    it (-1: none) and the `Coverage`. A model never judges its own training tracks. A route or
-    cluster model judges the tracks bound as its own are (`reach_km` within `near_km`), the
-    nearest in reach; a track no such model reaches goes to an area model; with none, it is
-    listed as not judged, with the reason. `named` (tracks named by id): the nearest model
-    judges."""
-    n = len(tracks)
+    it (-1: none) and the `Coverage`. A model judges only tracks that start inside its region
+    and never its own training tracks, whether the tracks were named or chosen by cluster. A
+    route or cluster model judges the tracks bound as its own are (`reach_km` within
+    `near_km`), the nearest in reach; a track no such model reaches goes to an area model of its
+    region; with none, it is listed as not judged, with the reason."""
     starts, ends = track_ends([t.positions for t in tracks])
     reach = np.stack([reach_km(m.card, starts, ends) for m in models], axis=1)
-    trained_any = np.zeros(n, dtype=bool)
-    if not named:
-        for m, model in enumerate(models):
-            trained = training_mask(model.card, table)  # by vessel and time where it can
-            reach[trained, m] = np.inf
-            trained_any |= trained
+    inside = np.stack([m.card.region.contains(starts) for m in models], axis=1)
+    reach[~inside] = np.inf
+    trained = np.stack([training_mask(m.card, table) for m in models], axis=1)
+    reach[trained] = np.inf  # by vessel and time where the card can tell
     area = np.array([is_area_model(m) for m in models])
-    local = reach if named else np.where(area[None, :] | (reach > near_km), np.inf, reach)
+    local = np.where(area[None, :] | (reach > near_km), np.inf, reach)
+    spare = np.where(area[None, :], reach, np.inf)
     owner = np.where(np.isfinite(local).any(axis=1), local.argmin(axis=1), -1)
-    if area.any():
-        spare = np.where(area[None, :], reach, np.inf)
-        fallback = np.where(np.isfinite(spare).any(axis=1), spare.argmin(axis=1), -1)
-        owner = np.where(owner < 0, fallback, owner)
+    fallback = np.where(np.isfinite(spare).any(axis=1), spare.argmin(axis=1), -1)
+    owner = np.where(owner < 0, fallback, owner)
+    return owner, coverage_of(models, table, owner, inside, trained)
+
+
+def coverage_of(
+    models: Sequence[Detector],
+    table: pd.DataFrame,
+    owner: np.ndarray,
+    inside: np.ndarray,
+    trained: np.ndarray,
+) -> Coverage:
+    """What `route_test_tracks` made of each track: judged by which model, a training track of
+    every model whose region holds it (no candidate), or not judged and why."""
     ids = table["track_id"].to_numpy()
     names = [m.name for m in models]
     judged = pd.Series([names[o] for o in owner if o >= 0], dtype=object).value_counts()
     left = owner < 0
-    far = left & ~trained_any
-    coverage = Coverage(
-        candidates=n - int((left & trained_any).sum()),
+    outside = left & ~inside.any(axis=1)
+    training = left & ~outside & (trained | ~inside).all(axis=1)
+    far = left & ~outside & ~training
+    reasons = ((NOT_JUDGED_OUTSIDE, outside), (NOT_JUDGED_FAR, far))
+    return Coverage(
+        candidates=len(ids) - int(training.sum()),
         judged_by={str(k): int(v) for k, v in judged.sort_index().items()},
-        not_judged={NOT_JUDGED_FAR: [int(i) for i in ids[far]]} if far.any() else {},
-        training=[int(i) for i in ids[left & trained_any]],
+        not_judged={r: [int(i) for i in ids[mask]] for r, mask in reasons if mask.any()},
+        training=[int(i) for i in ids[training]],
     )
-    return owner, coverage
 
 
 def check_region(models: Sequence[Detector], tracks: Sequence[Track]) -> None:

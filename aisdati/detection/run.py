@@ -62,7 +62,8 @@ class DetectSettings:
     cluster: str = "other"
     """Test tracks: a cluster (up, down, other), a route (route-<n>, unrouted) or all."""
     track_ids: tuple[int, ...] = ()
-    """Explicit test tracks (overrides the cluster and the start rule)."""
+    """Explicit test tracks instead of a cluster (judged by the same rules: a model does not
+    judge its own training tracks, nor tracks out of its reach)."""
     score: str | None = None
     """None: each judging model's own (`ModelCard.score`: lane; step for the area preset)."""
     threshold: float | None = None
@@ -287,8 +288,7 @@ def judged_tracks(
     table = candidate_table(settings)
     candidates = load_tracks(settings.data_dir, [int(i) for i in table["track_id"]])
     check_region(models, candidates)
-    named = bool(settings.track_ids)
-    owners, coverage = route_test_tracks(models, table, candidates, settings.near_km, named)
+    owners, coverage = route_test_tracks(models, table, candidates, settings.near_km)
     if coverage.judged == 0:
         raise UserError(
             f"no test track is judged by any model ({', '.join(coverage.not_judged)}): train an "

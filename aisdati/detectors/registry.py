@@ -22,8 +22,21 @@ def model_name(cluster: str, method: str) -> str:
     return detector_class(method).model_name(cluster)
 
 
+def check_model_names(names: Sequence[str]) -> None:
+    """Model names (`--model`) are the stems of files in the model folder, never paths: a name
+    that climbs out of the folder or names another one (`../x`, `/abs/x`, `a/b`) would load a
+    model from anywhere the user (or a server behind a URL folder) can reach."""
+    for name in names:
+        if not name or name in (".", "..") or any(c in name for c in "/\\") or ":" in name:
+            raise UserError(
+                f"--model {name!r}: give a model's name in --models (such as route-2 or "
+                "all-bc), not a path"
+            )
+
+
 def load_detectors(models_dir: Path, names: Sequence[str]) -> list[Detector]:
     """The named models of a folder, or every model in it."""
+    check_model_names(names)
     if names:
         stems = [models_dir / n for n in names]
     else:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -31,6 +32,8 @@ R = TypeVar("R")
 
 RETRIES = 3
 """Times a task lost with its worker is started again elsewhere (local clusters)."""
+WORKER_WAIT_S = 60
+"""How long a command waits for the first worker of an existing cluster that has none."""
 CONNECT_TIMEOUT_S = 10
 """How long `--workers ADDRESS` waits for the scheduler to answer before giving up, in one
 line."""
@@ -218,4 +221,21 @@ def _connect(client_class: Any, address: str) -> Iterator[Any]:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise UserError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
     with client:
+        _wait_for_a_worker(client, address)
         yield client
+
+
+def _wait_for_a_worker(client: Any, address: str) -> None:
+    """A scheduler without workers would hold every task forever: say that it waits, and give up
+    after `WORKER_WAIT_S` in one line."""
+    if client.scheduler_info().get("workers"):
+        return
+    print(f"waiting up to {WORKER_WAIT_S} s for a worker of the Dask cluster at {address}",
+          file=sys.stderr)  # fmt: skip
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except TimeoutError:
+        raise UserError(
+            f"the Dask cluster at {address} has no worker (waited {WORKER_WAIT_S} s): start one, "
+            f"e.g. `dask worker {address}`"
+        ) from None
