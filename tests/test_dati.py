@@ -14,7 +14,7 @@ from aisdati.errors import UserError
 from aisdati.model.dati import WARMUP_SPREAD, DATIConfig, DATITrainer
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig
-from aisdati.model.persistence import load_networks, save_networks
+from aisdati.model.persistence import load_networks, network_bytes, network_meta
 from aisdati.model.rollout import dati_policy, rollout_policy
 from aisdati.selftest.families import get_family
 from aisdati.selftest.protocol import evaluation_references
@@ -256,7 +256,9 @@ def saved(tmp_path):
         for p in nets.parameters():
             p.add_(torch.randn(p.shape, generator=g) * 0.05)
     stem = tmp_path / "model"
-    save_networks(stem, nets, cfg, {"family": "circles", "note": "test"})
+    stem.with_suffix(".pt").write_bytes(network_bytes(nets))
+    card = {**network_meta(nets, cfg), "family": "circles", "note": "test"}
+    stem.with_suffix(".json").write_text(json.dumps(card))
     return stem, nets, cfg
 
 

@@ -360,7 +360,8 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     assert det.threshold(replace(lane_how, lane_traffic=False), 0.05) > 0
     # a card from before lane configurations and calibration: the paper's set-up (the paper's
     # state, so a model of the position alone), step score; with a wider state it is refused
-    wide = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
+    before = ("lane_config", "preset", "calibration", "files")  # what older cards lacked
+    wide = {k: v for k, v in card.items() if k not in before}
     (tmp_path / "wide.json").write_text(json.dumps(wide))
     (tmp_path / "wide.pt").write_bytes((tmp_path / "other.pt").read_bytes())
     with pytest.raises(UserError, match="state_dim must be one of 2, got 26"):
@@ -368,7 +369,7 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     plain = replace(settings, lane=replace(lane, fourier=0), stem="plain")
     train_detector("dati", plain, ScoreSettings(rollouts=2))
     card = json.loads((tmp_path / "plain.json").read_text())
-    old = {k: v for k, v in card.items() if k not in ("lane_config", "preset", "calibration")}
+    old = {k: v for k, v in card.items() if k not in before}
     (tmp_path / "old.json").write_text(json.dumps(old))
     (tmp_path / "old.pt").write_bytes((tmp_path / "plain.pt").read_bytes())
     det = load_detector(tmp_path / "old")

@@ -135,3 +135,22 @@ def test_report_json_names_the_reasons_tracks_were_not_judged(area, kitimat, cli
     assert r.exit_code == 0, r.output
     coverage = json.loads((out / "report.json").read_text())["coverage"]
     assert sorted(coverage["training_track_ids"]) == sorted(july)
+
+
+def test_a_model_whose_files_do_not_belong_together_refuses_to_load(kitimat, cli, tmp_path):
+    """Item 6: a retraining into a folder that held another model, stopped between its files,
+    used to leave one run's weights beside another's corridor, and detect scored with both. The
+    card records each file's digest; a mixed model refuses in one line."""
+    models = tmp_path / "models"
+    for seed in ("0", "1"):
+        r = cli("train", "--cluster", "route-1", "--data", kitimat, "--out", models / seed,
+                "--episodes", "1", "--max-tracks", "4", "--seed", seed, "--lane",
+                "validation_tracks=2", "--lane", "validation_rollouts=1")  # fmt: skip
+        assert r.exit_code == 0, r.output
+    card = json.loads((models / "0" / "route-1.json").read_text())
+    assert set(card["files"]) == {".pt", ".corridor.npz"}
+    shutil.copy(models / "1" / "route-1.corridor.npz", models / "0" / "route-1.corridor.npz")
+    r = cli("detect", "--data", kitimat, "--models", models / "0", "--cluster", "route-1",
+            "--out", tmp_path / "r")  # fmt: skip
+    assert r.exit_code == 2
+    assert "route-1.corridor.npz is not the one its card records" in r.output

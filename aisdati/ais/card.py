@@ -22,6 +22,8 @@ survives re-ingesting (vessel and time span), and the warnings a usable card can
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -45,6 +47,7 @@ from aisdati.errors import UserError
 from aisdati.model.persistence import MAX_LAYERS, MAX_UNITS, NETWORKS_FORMAT
 from aisdati.model.readers import read_json
 from aisdati.model.rules import SphericalRule
+from aisdati.outdir import atomic_write_bytes
 from aisdati.scores import REMOVED_SCORES, SCORES
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track
@@ -298,6 +301,10 @@ class ModelCard:
     epsilon_m: float | None = None
     """DATI's ε (metres) and how it is compared with the DTW (`epsilon_interpretation`)."""
     epsilon_interpretation: str | None = None
+    files: dict[str, str] | None = None
+    """The SHA-256 of each file of the model beside the card, by suffix (`.pt`,
+    `.corridor.npz`, `.npz`): a model whose files do not match (an interrupted retraining into a
+    folder that held another) refuses to load (`check_files`). None in cards before it."""
 
     @property
     def format(self) -> str:
@@ -317,6 +324,7 @@ class ModelCard:
                "epsilon_interpretation": self.epsilon_interpretation,
                "training": self.training.to_dict() or None, "calibration": self.calibration or None,
                "calibrated_with": asdict(self.calibrated_with) if self.calibrated_with else None,
+               "files": self.files,
                }  # fmt: skip
         return _present(doc) | (self.networks.to_dict() if self.networks else {})
 
@@ -343,7 +351,7 @@ class ModelCard:
             training=_read_training(f), preset=doc.get("preset"), created=doc.get("created"),
             score=_read_score(f),
             code_version=doc.get("code_version"), epsilon_m=doc.get("epsilon_m"),
-            epsilon_interpretation=doc.get("epsilon_interpretation"),
+            epsilon_interpretation=doc.get("epsilon_interpretation"), files=_read_files(f),
         )  # fmt: skip
 
 
@@ -476,6 +484,51 @@ def _read_points(
         f.number(f"{name}[0]", -180.0, 180.0, value=point[0])
         f.number(f"{name}[1]", -90.0, 90.0, value=point[1])
     return points
+
+
+MODEL_FILES = (".pt", ".corridor.npz", ".npz")
+"""The files a model may have beside its card, whose digests the card records."""
+
+
+def _read_files(f: CardFields) -> dict[str, str] | None:
+    """The digests of the model's files (absent in cards before them)."""
+    files = f.obj("files", None)
+    if files is None:
+        return None
+    for suffix, digest in files.items():
+        if suffix not in MODEL_FILES or not isinstance(digest, str) or len(digest) != 64:
+            raise f.fail(f"files.{suffix}", "a SHA-256 of one of the model's files", digest)
+    return dict(files)
+
+
+def file_digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def write_model(
+    stem: Path, files: dict[str, bytes], card: ModelCard, extra: dict[str, Any] | None = None
+) -> None:
+    """Write a model's files (by suffix), then its card, last, recording their digests
+    (`ModelCard.files`; `extra`: entries of the card file beside the card's own): a model is
+    its card, and a card never names files that are not its own (`check_files`)."""
+    for suffix, data in files.items():
+        atomic_write_bytes(stem.with_suffix(suffix), data)
+    card.files = {suffix: file_digest(data) for suffix, data in files.items()}
+    doc = {**(extra or {}), **card.to_dict()}
+    atomic_write_bytes(stem.with_suffix(".json"), json.dumps(doc, indent=2, default=str).encode())
+
+
+def check_files(stem: Path, card: ModelCard) -> None:
+    """Refuse, in one line, a model whose files are not the ones its card was written with."""
+    for suffix, digest in (card.files or {}).items():
+        path = stem.with_suffix(suffix)
+        found = file_digest(path.read_bytes()) if path.is_file() else None
+        if found != digest:
+            state = "is missing" if found is None else "is not the one its card records"
+            raise UserError(
+                f"model {stem}: {stem.name}{suffix} {state} (an interrupted or failed "
+                "retraining into this folder?): retrain it"
+            )
 
 
 def _read_score(f: CardFields) -> str:

@@ -39,7 +39,15 @@ import torch
 
 from aisdati import __version__
 from aisdati.ais import DEFAULT_PRESET
-from aisdati.ais.card import DataCard, ModelCard, NetworkCard, Region, RuleCard, TrainingReport
+from aisdati.ais.card import (
+    DataCard,
+    ModelCard,
+    NetworkCard,
+    Region,
+    RuleCard,
+    TrainingReport,
+    write_model,
+)
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import AISPolicy, dati_act
 from aisdati.ais.source import EPSILON_M, AISTrackSource, build_source, make_env
@@ -48,7 +56,13 @@ from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks
-from aisdati.model.persistence import load_error, read_checkpoint, save_checkpoint, save_networks
+from aisdati.model.persistence import (
+    load_error,
+    network_bytes,
+    network_meta,
+    read_checkpoint,
+    save_checkpoint,
+)
 from aisdati.model.readers import read_json
 from aisdati.model.trainer import Callback, EpisodeLog
 from aisdati.outdir import atomic_write_bytes
@@ -566,6 +580,13 @@ class EnsembleRun:
                 "(drop --resume to train again)"
             )
 
+    @functools.cache  # noqa: B019 (one run, a few routes: the cache lives as long as the run)
+    def corridor_bytes(self, k: int) -> bytes:
+        """Route k's corridor as its file holds it, serialised once for the run's saves."""
+        corridor = self.sources[k].space.corridor
+        assert corridor is not None
+        return corridor.to_bytes()
+
     def save(self, routes: set[int]) -> None:
         """Write the models of `routes` as they stand, and the checkpoint of a one-route run."""
         wall = self.elapsed()
@@ -574,10 +595,11 @@ class EnsembleRun:
             if stem is None:
                 continue
             nets = self.networks(k)
-            save_networks(stem, nets, self.config, self.card(k, nets, wall).to_dict())
-            corridor = self.sources[k].space.corridor
-            if corridor is not None and not stem.with_suffix(".corridor.npz").is_file():
-                atomic_write_bytes(stem.with_suffix(".corridor.npz"), corridor.to_bytes())
+            files = {".pt": network_bytes(nets)}
+            if self.sources[k].space.corridor is not None:  # this run's, whatever was there
+                files[".corridor.npz"] = self.corridor_bytes(k)
+            card = self.card(k, nets, wall)
+            write_model(stem, files, card, network_meta(nets, self.config))
             atomic_write_bytes(stem.with_suffix(".log.jsonl"), "".join(self.log_lines[k]).encode())
         if self.checkpoint_path is None:
             return

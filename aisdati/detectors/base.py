@@ -14,17 +14,23 @@ configuration) and how to score (`ScoreSettings`); fitting or loading gives it a
 from __future__ import annotations
 
 import functools
-import json
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import ClassVar, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-from aisdati.ais.card import CalibratedWith, DataCard, ModelCard, read_card
+from aisdati.ais.card import (
+    CalibratedWith,
+    DataCard,
+    ModelCard,
+    check_files,
+    read_card,
+    write_model,
+)
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.training import TrainSettings, check_settings
 from aisdati.detectors.scoring import Scores, ScoreSettings, joined, score_chunks
@@ -32,7 +38,6 @@ from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.model.readers import first_line
 from aisdati.model.trainer import Callback
-from aisdati.outdir import atomic_write_bytes
 from aisdati.tracks.store import Track
 
 DEFAULT_CONTAMINATION = 0.05
@@ -254,13 +259,15 @@ class Detector(ABC):
     def from_files(cls: type[D], stem: Path, card: ModelCard) -> D:
         """The detector saved at `stem`, whose card (already read and checked) is `card`."""
 
-    def save_card(self, stem: Path) -> None:
-        text = json.dumps(self.card.to_dict(), indent=2)
-        atomic_write_bytes(stem.with_suffix(".json"), text.encode())
-
-    def save_corridor(self, stem: Path) -> None:
+    def write_model(
+        self, stem: Path, files: dict[str, bytes], card_extra: dict[str, Any] | None = None
+    ) -> None:
+        """Write the model's files (by suffix; the corridor added where there is one), then
+        the card, last, with their digests (`ModelCard.files`): a model is its card, and a card
+        never names files that are not its own (`aisdati.ais.card.check_files`)."""
         if self.corridor is not None:
-            atomic_write_bytes(stem.with_suffix(".corridor.npz"), self.corridor.to_bytes())
+            files = {**files, ".corridor.npz": self.corridor.to_bytes()}
+        write_model(stem, files, self.card, card_extra)
 
 
 def load_detector(stem: Path) -> Detector:
@@ -268,6 +275,7 @@ def load_detector(stem: Path) -> Detector:
     line."""
     path = stem.with_suffix(".json")
     card = read_card(path)  # size, types, ranges: one line naming the field
+    check_files(stem, card)
     det = detector_class(card.method).from_files(stem, card)
     recorded = card.calibrated_with or CalibratedWith()
     # `decision_function` judges by its own score, with the settings its threshold was made with

@@ -36,7 +36,6 @@ from aisdati.model.noise import KeyedNoise
 from aisdati.model.persistence import load_weights
 from aisdati.model.readers import first_line
 from aisdati.model.trainer import Callback
-from aisdati.outdir import atomic_write_bytes
 from aisdati.tracks.store import Track
 
 
@@ -117,9 +116,7 @@ class BCDetector(PolicyDetector):
     def save(self, stem: Path) -> None:
         buf = io.BytesIO()
         torch.save(self.trained().state_dict(), buf)
-        atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
-        self.save_card(stem)
-        self.save_corridor(stem)
+        self.write_model(stem, {".pt": buf.getvalue()})
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> BCDetector:

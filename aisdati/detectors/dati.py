@@ -22,7 +22,7 @@ from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
-from aisdati.model.persistence import load_networks, save_networks
+from aisdati.model.persistence import load_networks, network_bytes, network_meta
 from aisdati.model.trainer import Callback
 from aisdati.tracks.store import Track
 
@@ -107,8 +107,8 @@ class DATIDetector(PolicyDetector):
         return self.nets
 
     def save(self, stem: Path) -> None:
-        save_networks(stem, self.trained(), self.config, self.card.to_dict())
-        self.save_corridor(stem)
+        nets = self.trained()
+        self.write_model(stem, {".pt": network_bytes(nets)}, network_meta(nets, self.config))
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> DATIDetector:

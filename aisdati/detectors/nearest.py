@@ -31,7 +31,6 @@ from aisdati.detectors.scoring import Scores, ScoreSettings
 from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import matched_distances, nearest_mean_dtw_m
 from aisdati.model.trainer import Callback
-from aisdati.outdir import atomic_write_bytes
 from aisdati.tracks.store import Track
 
 
@@ -100,9 +99,8 @@ class NearestDetector(Detector):
 
     # -------------------------------------------------------------------- files
     def save(self, stem: Path) -> None:
-        atomic_write_bytes(stem.with_suffix(".npz"), self.training_tracks.to_bytes())
-        self.save_card(stem)
-        self.save_corridor(stem)  # the training tracks' corridor, as the policies save theirs
+        # with the training tracks' corridor, as the policies save theirs
+        self.write_model(stem, {".npz": self.training_tracks.to_bytes()})
 
     @classmethod
     def from_files(cls, stem: Path, card: ModelCard) -> NearestDetector:

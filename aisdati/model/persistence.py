@@ -14,7 +14,6 @@ or the first size that differs, with both shapes).
 from __future__ import annotations
 
 import io
-import json
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -26,7 +25,7 @@ from torch import nn
 from aisdati.errors import UserError
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.networks import DATINetworks, NetworkConfig
-from aisdati.model.readers import first_line, read_json
+from aisdati.model.readers import first_line, read_json, torch_load_error
 from aisdati.outdir import atomic_write_bytes
 
 NETWORKS_FORMAT = "aisdati-dati/1"
@@ -42,24 +41,27 @@ MAX_SEEDS = 64
 
 
 # ------------------------------------------------------------------------------ networks
-def save_networks(stem: Path, nets: DATINetworks, config: DATIConfig, card: dict[str, Any]) -> None:
-    """Write `<stem>.pt` (state dict) and `<stem>.json` (config, dimensions, seeds, card)."""
+def network_bytes(nets: DATINetworks) -> bytes:
+    """The weights as `<stem>.pt` holds them: the state dict, on the CPU (from any device)."""
     buf = io.BytesIO()
-    torch.save({name: w.cpu() for name, w in nets.state_dict().items()}, buf)  # any device
-    meta = {
+    torch.save({name: w.cpu() for name, w in nets.state_dict().items()}, buf)
+    return buf.getvalue()
+
+
+def network_meta(nets: DATINetworks, config: DATIConfig) -> dict[str, Any]:
+    """What `<stem>.json` holds of the networks beside the card: format, sizes, seeds, config."""
+    return {
         "format": NETWORKS_FORMAT,
         "state_dim": nets.state_dim,
         "decision_dim": nets.decision_dim,
         "seeds": nets.seeds,
         "config": config.to_dict(),
-        **card,
     }
-    atomic_write_bytes(stem.with_suffix(".pt"), buf.getvalue())
-    atomic_write_bytes(stem.with_suffix(".json"), json.dumps(meta, indent=2, default=str).encode())
 
 
 def load_networks(stem: Path) -> tuple[DATINetworks, DATIConfig, dict[str, Any]]:
-    """Read what `save_networks` wrote; any damage is a one-line `UserError`."""
+    """Read `<stem>.pt` and the networks' part of `<stem>.json` (`network_bytes`,
+    `network_meta`); any damage is a one-line `UserError`."""
     weights, card = stem.with_suffix(".pt"), stem.with_suffix(".json")
     for f in (weights, card):
         if not f.is_file():
@@ -103,10 +105,9 @@ def read_weights(path: Path) -> dict[str, torch.Tensor]:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # a damaged archive or pickle: many exception types
-        raise UserError(
-            f"cannot load model weights {path}: the file is damaged, cut short or corrupt "
-            f"({first_line(exc)})"
-        ) from None
+        damaged = "the file is damaged, cut short or corrupt"
+        reason = torch_load_error(exc, "model", damaged)
+        raise UserError(f"cannot load model weights {path}: {reason}") from None
     if not isinstance(state, dict) or not all(
         isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state.items()
     ):
@@ -176,9 +177,8 @@ def read_checkpoint(path: Path, required: Sequence[str] = ()) -> dict[str, Any]:
     try:
         doc = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # damaged or foreign file: many exception types
-        raise UserError(
-            f"cannot read checkpoint {path}: damaged or not a checkpoint ({first_line(exc)})"
-        ) from None
+        reason = torch_load_error(exc, "checkpoint", "damaged or not a checkpoint")
+        raise UserError(f"cannot read checkpoint {path}: {reason}") from None
     trainer = doc.get("trainer") if isinstance(doc, dict) else None
     if not isinstance(trainer, dict) or trainer.get("format") != CHECKPOINT_FORMAT:
         raise UserError(f"{path} is not an aisdati training checkpoint")
