@@ -154,3 +154,20 @@ def test_a_model_whose_files_do_not_belong_together_refuses_to_load(kitimat, cli
             "--out", tmp_path / "r")  # fmt: skip
     assert r.exit_code == 2
     assert "route-1.corridor.npz is not the one its card records" in r.output
+
+
+def test_a_cluster_without_workers_is_waited_for_then_refused(area, kitimat, cli, tmp_path,
+                                                               monkeypatch):  # fmt: skip
+    """Item 13: a scheduler with no worker held every task forever, silently."""
+    import distributed
+
+    from aisdati.execution import runner
+
+    models, _, _ = area
+    monkeypatch.setattr(runner, "WORKER_WAIT_S", 2)
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0") as cluster:
+        r = cli("detect", "--data", kitimat, "--models", models, "--cluster", "all",
+                "--out", tmp_path / "r", "--workers", cluster.scheduler_address)  # fmt: skip
+    assert r.exit_code == 2
+    assert "waiting up to 2 s for a worker" in r.output and "has no worker (waited 2 s)" in r.output
+    assert not (tmp_path / "r").exists()
