@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import json
 import math
+import pickle
+import re
 import zipfile
 import zlib
 from collections.abc import Mapping
@@ -30,12 +32,30 @@ calibration scores each) is about 15 MB."""
 MAX_JSON_DEPTH = 32
 """The deepest nesting read: a card's deepest field (a member's training curve) is 5 levels."""
 KIND_NAMES = {"f": "floats", "i": "integers", "u": "integers", "b": "booleans"}
+PICKLED_CALL = re.compile(r"GLOBAL ([\w.]+)")
+"""What a pickle refused by `torch.load(weights_only=True)` asked to import (torch's words)."""
 
 
 def first_line(exc: BaseException, limit: int = 200) -> str:
     """An exception's message as one short line (its type where it has none)."""
     text = " ".join(str(exc).split())
     return text[:limit] if text else type(exc).__name__
+
+
+def torch_load_error(exc: BaseException, what: str, damaged: str) -> str:
+    """Why `torch.load(weights_only=True)` refused a file, in one line: `damaged` and the cause,
+    or, for a pickle asking to run code, that it is no safe aisdati `what`. Never torch's own
+    text for a pickle, which advises loading the file with `weights_only=False`: that would run
+    whatever code a planted file holds."""
+    if not isinstance(exc, pickle.UnpicklingError):
+        return f"{damaged} ({first_line(exc)})"
+    found = PICKLED_CALL.search(str(exc))
+    if found is None:
+        return f"{damaged} (not a torch file of tensors)"
+    return (
+        f"not a safe aisdati {what}: it asks to run {found.group(1)}, which aisdati never does; "
+        "retrain it, or use a trusted copy"
+    )
 
 
 def read_json(path: Path, what: str = "model card", max_bytes: int = MAX_JSON_BYTES) -> Any:

@@ -3,12 +3,13 @@ MarineCadastre CSV gives: `MMSI, BaseDateTime, LAT, LON, SOG, COG, Heading`.
 
 Sentences are parsed and decoded with pyais; messages of several sentences are reassembled. Only
 position reports become rows (types 1-3 class A, 18-19 class B, 27 long range). Each message needs
-a time, which receivers log in one of three ways:
+a time, which receivers log in one of four ways:
 
 * an NMEA 4.0 tag block before the sentence, `\\c:1606780800,s:r1*hh\\!AIVDM,...` (seconds, or
   milliseconds, since 1970; the tag block's own checksum is not checked, as pyais does not);
 * a timestamp column before the sentence, `2020-12-01T00:00:00Z,!AIVDM,...` or
   `1606780800.25 !AIVDM,...` (ISO 8601, UTC when no zone is given, or seconds since 1970);
+* the same after the sentence's checksum, `!AIVDM,...*hh,1530428400` (several receivers' logs);
 * a Gatehouse `$PGHP,1,<year>,<month>,<day>,<h>,<m>,<s>,<ms>,...` sentence on the line before.
 
 The times are handed on as the text they were written in, for `convert.time_us` to parse like
@@ -16,14 +17,22 @@ any CSV's. AIS's 'not available' values stay the values the cleaner rejects by n
 LON 181, SOG 102.3, COG 360; type 27's SOG 63 and COG 511 become 102.3 and 360), and heading 511
 becomes a missing value. Every line that gives no row is counted under one reason: `not_ais`,
 `bad_checksum`, `truncated` (cut short, empty, or a multi-sentence message with parts missing),
-`not_position` or `no_time`; blank lines and `#` comments are not rows.
+`not_position`, `no_time` or `duplicate_reception`; blank lines and `#` comments are not rows.
+
+A log merged from several receivers holds each message they all heard once per receiver: the
+first copy read is the report, the others (the same payload within `RECEPTION_WINDOW_S`) are
+counted as `duplicate_reception`, so that copies neither double a track's points nor let short
+pieces pass `--min-points`.
 """
 
 from __future__ import annotations
 
+import math
 import re
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
 
 import numpy as np
 import pyarrow as pa
@@ -32,7 +41,7 @@ from pyais.messages import AISSentence, GatehouseSentence, NMEASentence, NMEASen
 
 from aisdati.errors import UserError
 from aisdati.preprocess.clean import SENTINEL_COG, SENTINEL_SOG
-from aisdati.preprocess.convert import canonical_tables
+from aisdati.preprocess.convert import EPOCH_UNITS, canonical_tables
 from aisdati.preprocess.inputs import (
     AIS_SENTENCE,
     SNIFF_BYTES,
@@ -66,6 +75,20 @@ FRAME_SCHEMA = pa.schema(
 POSITION_TYPES = frozenset({1, 2, 3, 18, 19, 27})
 REASONS = ("not_ais", "bad_checksum", "truncated", "not_position", "no_time")
 """Why a line gives no row (`report.REASONS` describes them)."""
+DUPLICATE_RECEPTION = "duplicate_reception"
+"""The reason of a copy of a message already read (another receiver's): listed among the skipped
+lines once a log has one, as a log of one receiver has none."""
+RECEPTION_WINDOW_S = 30.0
+"""Seconds within which the same payload is one message heard again, by another receiver or
+through another feed. In the DMA's recordings (three receivers, 2014) 99% of the copies come
+within 2 s of the first and the slowest 16.5 s after it. A vessel's next report cannot repeat the
+payload that soon: the payload holds the MMSI, the fix's UTC second (the same one only a minute
+later) and the radio's slot state, so only a vessel standing still without a second could, and
+then the copy dropped repeats its position."""
+EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+MAX_RECENT_MESSAGES = 1 << 18
+"""The most payloads remembered to spot copies (about 50 MB): a feed of the whole world brings
+some 5,000 messages a second, 150,000 within `RECEPTION_WINDOW_S`."""
 HEADING_NOT_AVAILABLE = 511
 LONG_RANGE_SOG_NOT_AVAILABLE = 63
 LONG_RANGE_COG_NOT_AVAILABLE = 511
@@ -78,6 +101,8 @@ MAX_KEPT_TEXT = 1 << 26
 log without times would otherwise hold all its lines in memory)."""
 SENTENCE_START = re.compile(rb"[!$\\]")
 STAMP_SEPARATORS = b" \t,;[]"
+TRAILING_STAMP = re.compile(rb"\*[0-9A-Fa-f]{2}[ \t,;]+([^*!$\\]+)$")
+"""A time after a sentence's checksum, `*hh,1530428400`: the group is the time."""
 
 
 class SkippedLines:
@@ -92,7 +117,68 @@ class SkippedLines:
         if self._kept < MAX_KEPT_TEXT:
             text = shorten(line.decode("ascii", errors="replace"))
             self._kept += len(text)
-        self.by_reason[reason].append(text)
+        self.by_reason.setdefault(reason, []).append(text)  # DUPLICATE_RECEPTION, once met
+
+
+class RecentMessages:
+    """The messages read lately, by payload (which holds the MMSI), with the time of the copy
+    kept: tells another receiver's copy of a message from a new report. Entries leave twice
+    `RECEPTION_WINDOW_S` after the times of the messages read since (a merged log is only
+    roughly in time order), or when more than `MAX_RECENT_MESSAGES` are held."""
+
+    def __init__(self, window_s: float = RECEPTION_WINDOW_S) -> None:
+        self.window_us = round(window_s * 1e6)
+        self._kept: dict[bytes, int] = {}  # payload -> microseconds of the copy kept
+        self._order: deque[tuple[int, bytes]] = deque()
+
+    def heard(self, payload: bytes, time: str) -> bool:
+        """Whether `payload` at `time` is a copy of a message kept within the window, at another
+        time (else it is kept now). A copy at the very time of the kept one stays a row: the
+        vessel stage counts it as an exact `duplicate`, as it does a CSV's repeated row. A time
+        Python cannot read makes no copy: the row goes on to the time check."""
+        us = _time_us(time)
+        if us is None:
+            return False
+        self._forget(us - 2 * self.window_us)
+        kept = self._kept.get(payload)
+        if kept is not None and abs(us - kept) <= self.window_us:
+            return us != kept
+        self._kept[payload] = us
+        self._order.append((us, payload))
+        return False
+
+    def _forget(self, before: int) -> None:
+        """Drop the messages kept before `before` (microseconds), and the oldest past the
+        bound."""
+        order, kept = self._order, self._kept
+        while order and (order[0][0] < before or len(order) > MAX_RECENT_MESSAGES):
+            us, payload = order.popleft()
+            if kept.get(payload) == us:  # not kept again since
+                del kept[payload]
+
+
+def _time_us(text: str) -> int | None:
+    """Microseconds since 1970 of a time as `convert.time_us` reads it: a number in the unit
+    its size gives (`EPOCH_UNITS`), or ISO 8601 (UTC when no zone is given); None when
+    unreadable."""
+    try:
+        number = float(text)
+    except ValueError:
+        return _iso_us(text)
+    if not math.isfinite(number):
+        return None
+    _, mul, div = next(unit for unit in EPOCH_UNITS if abs(number) < unit[0])
+    return round(number * (mul / div))
+
+
+def _iso_us(text: str) -> int | None:
+    """Microseconds since 1970 of an ISO 8601 time (UTC when no zone is given), or None."""
+    try:
+        when = datetime.fromisoformat(text[:-1] + "+00:00" if text.endswith("Z") else text)
+    except ValueError:
+        return None
+    when = when if when.tzinfo else when.replace(tzinfo=timezone.utc)
+    return (when - EPOCH) // timedelta(microseconds=1)
 
 
 @dataclass
@@ -106,10 +192,14 @@ class Part:
 
 class NmeaDecoder:
     """Lines in; position rows (taken as record batches of `FRAME_SCHEMA`) and skipped lines
-    (handed to `skip` with their reason) out."""
+    (handed to `skip` with their reason) out. With `recent`, a copy of a message already read
+    (another receiver's) is skipped as `DUPLICATE_RECEPTION`; without, every copy is a row."""
 
-    def __init__(self, skip: Callable[[str, bytes], None]) -> None:
+    def __init__(
+        self, skip: Callable[[str, bytes], None], recent: RecentMessages | None = None
+    ) -> None:
         self.skip = skip
+        self.recent = recent
         self._rows: list[tuple] = []
         self._gatehouse: str | None = None  # the time of the last $PGHP, for the next sentence
         self._parts: dict[tuple, list[Part]] = {}  # unfinished messages by their stream
@@ -128,14 +218,16 @@ class NmeaDecoder:
             self.skip("not_ais", line)
             return
         gatehouse = self._gatehouse
-        sentence = self._parse(line[start.start() :], line)
+        raw, after = _split_trailing_stamp(line[start.start() :])
+        sentence = self._parse(raw, line)
         if isinstance(sentence, GatehouseSentence):
             self._gatehouse = sentence.timestamp.isoformat()
             return
         self._gatehouse = None  # a $PGHP stamps the line after it only
         if isinstance(sentence, AISSentence):
             stamp = line[: start.start()].strip(STAMP_SEPARATORS).decode("ascii", "replace")
-            self._add_part(Part(sentence, _tag_time(sentence) or stamp or gatehouse, line))
+            time = _tag_time(sentence) or stamp or after or gatehouse
+            self._add_part(Part(sentence, time, line))
 
     def finish(self) -> None:
         """The end of the log: messages still missing parts are truncated."""
@@ -213,12 +305,25 @@ class NmeaDecoder:
         if not time:
             self.skip("no_time", text)
             return
+        if self.recent is not None and self.recent.heard(message.payload, time):
+            self.skip(DUPLICATE_RECEPTION, text)
+            return
         if report.msg_type == 27:
             sog = SENTINEL_SOG if sog == LONG_RANGE_SOG_NOT_AVAILABLE else sog
             cog = SENTINEL_COG if cog == LONG_RANGE_COG_NOT_AVAILABLE else cog
         heading = getattr(report, "heading", None)
         heading = None if heading == HEADING_NOT_AVAILABLE else heading
         self._rows.append((report.mmsi, time, report.lat, report.lon, sog, cog, heading))
+
+
+def _split_trailing_stamp(raw: bytes) -> tuple[bytes, str]:
+    """A sentence without the time some receivers write after its checksum
+    (`!AIVDM,...*hh,1530428400`), and that time ("" when there is none)."""
+    found = TRAILING_STAMP.search(raw)
+    if found is None:
+        return raw, ""
+    stamp = found.group(1).strip(STAMP_SEPARATORS).decode("ascii", "replace")
+    return raw[: found.start(1)].rstrip(STAMP_SEPARATORS), stamp
 
 
 def _tag_time(sentence: AISSentence) -> str | None:
@@ -288,7 +393,7 @@ class NmeaReader:
 
     def batches(self) -> Iterator[pa.RecordBatch]:
         stream, self._counter = self.source.open()
-        decoder = NmeaDecoder(self._skipped.add)
+        decoder = NmeaDecoder(self._skipped.add, RecentMessages())
         try:
             for line in read_lines(stream):
                 decoder.feed(line)
