@@ -171,3 +171,22 @@ def test_a_cluster_without_workers_is_waited_for_then_refused(area, kitimat, cli
     assert r.exit_code == 2
     assert "waiting up to 2 s for a worker" in r.output and "has no worker (waited 2 s)" in r.output
     assert not (tmp_path / "r").exists()
+
+
+def test_a_full_disk_is_one_line_wherever_it_strikes(area, kitimat, cli, tmp_path, monkeypatch):
+    """Item 12: numpy, pyarrow and torch raise a full disk without a file name: it was a
+    traceback. Now one line, exit code 1, and no report that looks complete."""
+    import errno
+
+    from aisdati.detection import outputs
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    models, _, _ = area
+    monkeypatch.setattr(outputs, "parquet_bytes", full)
+    out = tmp_path / "r"
+    r = cli("detect", "--data", kitimat, "--models", models, "--cluster", "all", "--out", out)
+    assert r.exit_code == 1 and "Traceback" not in r.output
+    assert r.output.strip().splitlines()[-1] == "error: No space left on device"
+    assert not (out / "report.json").exists()

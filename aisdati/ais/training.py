@@ -511,7 +511,9 @@ class EnsembleRun:
             seeds=nets.seeds, config=self.config.to_dict(), state_dim=nets.state_dim,
             decision_dim=nets.decision_dim,
         )  # fmt: skip
-        card.training.finished = self.route_done(k)
+        # a model is finished once calibrated: the detector's own save says so, after it; a
+        # run stopped between its last episode and its calibration is not (issue 61, item 12)
+        card.training.finished = False
         if len(self.routes) > 1:
             card.training.routes_in_ensemble = len(self.routes)
         return card

@@ -20,6 +20,9 @@ from aisdati.interrupts import Terminated, handle_termination, raise_if_interrup
 console = Console()
 err_console = Console(stderr=True)
 
+FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+"""A disk or quota full: one line and exit code 1, wherever it struck (numpy, pyarrow and torch
+raise it without a file name)."""
 PATH_ERRNOS = (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR, errno.ENOENT)
 """A file system refusing a path the user gave: exit code 2 (a user mistake) rather than 1."""
 
@@ -48,6 +51,10 @@ def user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
             err_console.print("[yellow]interrupted[/]")
             raise typer.Exit(EXIT_INTERRUPTED) from None
         except OSError as exc:  # disk full, permissions changed mid-run: one line, no traceback
+            if exc.errno in FULL_ERRNOS:
+                where = f"{exc.filename}: " if exc.filename else ""
+                error(f"{where}{exc.strerror or 'No space left on device'}")
+                raise typer.Exit(1) from None
             if exc.filename is None:
                 raise
             error(f"{exc.filename}: {exc.strerror or type(exc).__name__}")
