@@ -135,7 +135,7 @@ def run_seed(data: Path, out: Path, seed: int, args: argparse.Namespace) -> dict
             str(seed),
             "--out",
             str(out),
-            "--quiet",
+            "--json",
             *lanes,
             *([] if args.ashore else ["--no-ashore"]),
         )
@@ -145,7 +145,7 @@ def run_seed(data: Path, out: Path, seed: int, args: argparse.Namespace) -> dict
 def ingest(path: Path, min_points: str, data: Path, roi: str = "none") -> None:
     if not (data / "tracks.parquet").is_file():
         aisdati("ingest", "--input", str(path), "--roi", roi, "--min-points", min_points,
-                "--out", str(data), "--quiet")  # fmt: skip
+                "--out", str(data), "--json")  # fmt: skip
 
 
 def run_forward(area: str, train_seed: int, seed: int, args: argparse.Namespace) -> dict:
@@ -174,7 +174,7 @@ def run_forward(area: str, train_seed: int, seed: int, args: argparse.Namespace)
                 "--altered", "0.3", "--strength", str(args.strength),
                 "--detectors", args.detectors, "--kinds", args.kinds,
                 "--episodes", str(args.episodes), "--seed", str(seed), "--out", str(out),
-                "--quiet", *models, *lanes, *([] if args.ashore else ["--no-ashore"]),
+                "--json", *models, *lanes, *([] if args.ashore else ["--no-ashore"]),
                 *(["--at-sea"] if args.at_sea else []))  # fmt: skip
     return json.loads((out / "evaluation.json").read_text())
 

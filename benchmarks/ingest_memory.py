@@ -87,7 +87,7 @@ def build_members(path: Path, members: int) -> int:
 
 def ingest(archive: Path, out: Path) -> tuple[float, float, dict]:
     cmd = [sys.executable, "-c", AISDATI, "ingest", "--input", str(archive), "--out", str(out)]
-    cmd += ["--roi", "none", "--min-points", "20", "--json", "--quiet"]
+    cmd += ["--roi", "none", "--min-points", "20", "--json"]
     seconds, rss, stdout = measure(cmd)
     return seconds, rss, json.loads(stdout)
 

@@ -114,7 +114,7 @@ def _ingest_command() -> list[str]:
 
 def _ingest(source: Path, out: Path, roi: str, workers: int) -> list[str]:
     cmd = [sys.executable, "-c", AISDATI, *_ingest_command(), "--input", str(source)]
-    cmd += ["--out", str(out), "--roi", roi, "--min-points", "5", "--json", "--quiet"]
+    cmd += ["--out", str(out), "--roi", roi, "--min-points", "5", "--json"]
     return [*cmd, "--workers", str(workers)]
 
 

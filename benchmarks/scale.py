@@ -122,11 +122,11 @@ def build(rows: int, rows_per_file: int, work: Path) -> tuple[Path, Path, Path, 
 
 
 def measured(args: list[str], report: bool = True) -> tuple[float, tuple[float, float], dict]:
-    """Run `aisdati ARGS --json` (or `--quiet` where there is no `report`) in a fresh process:
+    """Run `aisdati ARGS --json` in a fresh process (its JSON read where `report`):
     (seconds, peak RSS in MiB of (its largest process, the command's own process), its JSON
     output)."""
     start = time.perf_counter()
-    flag = "--json" if report else "--quiet"
+    flag = "--json"
     with tempfile.TemporaryFile("w+") as stdout:  # a report can outgrow a pipe's buffer
         proc = subprocess.Popen([*AISDATI, *args, flag], stdout=stdout, text=True)
         root, peak, own = psutil.Process(proc.pid), 0, 0
@@ -144,7 +144,8 @@ def measured(args: list[str], report: bool = True) -> tuple[float, tuple[float, 
     if proc.returncode != 0:
         raise SystemExit(f"aisdati {' '.join(args)} failed ({proc.returncode})")
     last = [line for line in out.splitlines() if line.startswith("{")]
-    return seconds, (peak / 2**20, own / 2**20), json.loads(last[-1]) if last else {}
+    doc = json.loads(last[-1]) if report and last else {}
+    return seconds, (peak / 2**20, own / 2**20), doc
 
 
 def stages(

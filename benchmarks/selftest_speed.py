@@ -8,7 +8,7 @@ a worker* of the full protocol, and projects the wall time of
 
 - Table 1: `aisdati selftest --methods dati,bc,bc-paper,ddpg-ti --repeats R` (4 families x 10
   seeds x R repeats; default R = 3), and
-- Table 2: `aisdati selftest --ablation` (3 DATI variants x 10 seeds on Circles),
+- Table 2: `aisdati selftest --methods table2` (3 DATI variants x 10 seeds on Circles),
 
 on W workers (default 2, one per core), assuming every DATI and DDPG-TI member runs the full 100
 episodes x 200 steps (the paper preset does; the `ours` preset's early stopping only shortens it)
