@@ -252,9 +252,29 @@ def _extend(
         row_d[0] = col_d[0] = d
         row_l[0] = col_l[0] = 1
         return
+    corner_d, corner_l = row_d[t - 1], row_l[t - 1]  # D[t-1, t-1], before the new row
+    _new_row(a, b, t, row_d, row_l, code)
+    _new_column(a, b, t, col_d, col_l, code)
+    # Corner (t, t): diagonal is the old corner, up is D[t-1, t], left is D[t, t-1].
+    best, move = _best(corner_d, col_d[t - 1], row_d[t - 1])
+    d = _point_dist(a, t, b, t, code)
+    if move == _DIAG:
+        length = corner_l + 1
+    elif move == _UP:
+        length = col_l[t - 1] + 1
+    else:
+        length = row_l[t - 1] + 1
+    row_d[t] = col_d[t] = d + best
+    row_l[t] = col_l[t] = length
+
+
+@njit(cache=True)
+def _new_row(
+    a: np.ndarray, b: np.ndarray, t: int, row_d: np.ndarray, row_l: np.ndarray, code: int
+) -> None:
+    """Row i = t, j = 0..t-1 of the cost matrix (and its path lengths) in place of row t - 1:
+    up is the old row, left is the new row."""
     inf = np.inf
-    corner_d, corner_l = row_d[t - 1], row_l[t - 1]  # D[t-1, t-1]
-    # New row i = t, j = 0..t-1: up is the old row, left is the new row.
     diag_d, diag_l = inf, 0
     for j in range(t):
         up_d, up_l = row_d[j], row_l[j]
@@ -269,7 +289,15 @@ def _extend(
         else:
             row_l[j] = row_l[j - 1] + 1
         diag_d, diag_l = up_d, up_l
-    # New column j = t, i = 0..t-1: left is the old column, up is the new column.
+
+
+@njit(cache=True)
+def _new_column(
+    a: np.ndarray, b: np.ndarray, t: int, col_d: np.ndarray, col_l: np.ndarray, code: int
+) -> None:
+    """Column j = t, i = 0..t-1 of the cost matrix (and its path lengths) in place of column
+    t - 1: left is the old column, up is the new column."""
+    inf = np.inf
     diag_d, diag_l = inf, 0
     for i in range(t):
         left_d, left_l = col_d[i], col_l[i]
@@ -284,17 +312,6 @@ def _extend(
         else:
             col_l[i] = left_l + 1
         diag_d, diag_l = left_d, left_l
-    # Corner (t, t): diagonal is the old corner, up is D[t-1, t], left is D[t, t-1].
-    best, move = _best(corner_d, col_d[t - 1], row_d[t - 1])
-    d = _point_dist(a, t, b, t, code)
-    if move == _DIAG:
-        length = corner_l + 1
-    elif move == _UP:
-        length = col_l[t - 1] + 1
-    else:
-        length = row_l[t - 1] + 1
-    row_d[t] = col_d[t] = d + best
-    row_l[t] = col_l[t] = length
 
 
 def dtw(a, b, metric: str = "euclidean") -> float:

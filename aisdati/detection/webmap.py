@@ -217,36 +217,73 @@ def map_data(
     medoid_lines = _labelled(medoids or [], "route")
     corners = [np.stack([lo, hi]) for lo, hi in regions]
     extent = _extent([tracks, [xy for _, xy in (*stretch_lines, *medoid_lines)], corners])
-    data: dict[str, Any] = {
+    optional = _optional_layers(
+        best_rollouts,
+        None if stretches is None else stretch_lines,
+        None if medoids is None else medoid_lines,
+    )
+    return {
         "title": title,
         "layers": _track_layers(tracks, rollouts, props, flagged),
+        "optional": optional,
+        "regions": [_latlon_box(lo, hi) for lo, hi in regions],
+        **_framing(extent),
+        "names": _layer_names(optional),  # only the layers the page has
+        "legend": legend(score_scale(_scores(props))),
+        "style": {"land": LAND_COLOR, "coast": COAST_COLOR, "water": WATER_COLOR},
+        "tile_url": TILE_URL,
+        "coast_attribution": COAST_ATTRIBUTION,
     }
-    data["optional"] = {
-        "best": None
-        if best_rollouts is None
-        else _collection(
+
+
+def _optional_layers(
+    best_rollouts: Sequence[np.ndarray | None] | None,
+    stretch_lines: list[tuple[str, np.ndarray]] | None,
+    medoid_lines: list[tuple[str, np.ndarray]] | None,
+) -> dict[str, dict[str, Any] | None]:
+    """The layers a map may have: the best rollouts, the stretches and the route medoids, each
+    a collection of its non-empty lines, or None where the caller gave none."""
+    best = None
+    if best_rollouts is not None:
+        best = _collection(
             [
                 _line(r, label=f"rollout {i}")
                 for i, r in enumerate(best_rollouts)
                 if r is not None and len(r)
             ]
-        ),
-        "stretches": None
-        if stretches is None
-        else _collection([_line(xy, label=label) for label, xy in stretch_lines if len(xy)]),
-        "medoids": None
-        if medoids is None
-        else _collection([_line(xy, label=name) for name, xy in medoid_lines if len(xy)]),
+        )
+    return {
+        "best": best,
+        "stretches": _labelled_lines(stretch_lines),
+        "medoids": _labelled_lines(medoid_lines),
     }
-    data["regions"] = [
-        [[float(lo[1]), float(lo[0])], [float(hi[1]), float(hi[0])]] for lo, hi in regions
-    ]
-    data["bounds"] = None
-    data["land"] = None
-    if extent is not None:
-        lo, hi = extent
-        data["bounds"] = [[float(lo[1]), float(lo[0])], [float(hi[1]), float(hi[0])]]
-        data["land"] = land_geojson(lo, hi)
+
+
+def _labelled_lines(lines: list[tuple[str, np.ndarray]] | None) -> dict[str, Any] | None:
+    """A collection of the non-empty (label, line) pairs, each line with its label; None for
+    None."""
+    if lines is None:
+        return None
+    return _collection([_line(xy, label=label) for label, xy in lines if len(xy)])
+
+
+def _latlon_box(lo: np.ndarray, hi: np.ndarray) -> list[list[float]]:
+    """A lon/lat box [lo, hi] as Leaflet's bounds: [[south, west], [north, east]]."""
+    return [[float(lo[1]), float(lo[0])], [float(hi[1]), float(hi[0])]]
+
+
+def _framing(extent: tuple[np.ndarray, np.ndarray] | None) -> dict[str, Any]:
+    """The page's `bounds` (what it shows first) and `land` (the coastline layer) for the box
+    of everything drawn; both None where nothing is."""
+    if extent is None:
+        return {"bounds": None, "land": None}
+    lo, hi = extent
+    return {"bounds": _latlon_box(lo, hi), "land": land_geojson(lo, hi)}
+
+
+def _layer_names(optional: dict[str, dict[str, Any] | None]) -> dict[str, str]:
+    """The layer control's names of the layers every page has and of the `optional` ones it
+    has (not None)."""
     names = {
         "coast": LAYER_COAST,
         "tracks": LAYER_TRACKS,
@@ -256,14 +293,9 @@ def map_data(
         "offline": BASE_OFFLINE,
         "tiles": BASE_TILES,
     }
-    optional = {"best": LAYER_BEST_ROLLOUTS, "stretches": LAYER_STRETCHES, "medoids": LAYER_MEDOIDS}
-    names.update({k: v for k, v in optional.items() if data["optional"][k] is not None})
-    data["names"] = names  # only the layers the page has
-    data["legend"] = legend(score_scale(_scores(props)))
-    data["style"] = {"land": LAND_COLOR, "coast": COAST_COLOR, "water": WATER_COLOR}
-    data["tile_url"] = TILE_URL
-    data["coast_attribution"] = COAST_ATTRIBUTION
-    return data
+    extra = {"best": LAYER_BEST_ROLLOUTS, "stretches": LAYER_STRETCHES, "medoids": LAYER_MEDOIDS}
+    names.update({k: v for k, v in extra.items() if optional[k] is not None})
+    return names
 
 
 PAGE = """<!DOCTYPE html>

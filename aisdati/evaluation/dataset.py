@@ -48,7 +48,11 @@ AT_SEA_DRAWS = 50
 
 
 def _anomaly(
-    kind: str, pos: np.ndarray, times_s: np.ndarray, rng: np.random.Generator, params: dict,
+    kind: str,
+    pos: np.ndarray,
+    times_s: np.ndarray,
+    rng: np.random.Generator,
+    params: dict,
     at_sea: bool,
 ) -> Injected | None:
     """One anomaly of `kind` written into a track; with `at_sea`, the first of `AT_SEA_DRAWS`
@@ -127,17 +131,58 @@ def build(
     (`_anomaly`)."""
     table = select_cluster(read_track_table(data_dir), cluster, data_dir)
     table = table[table["n_points"] >= MIN_POINTS]
+    train, held = _sides(table, train_fraction, seed, train_ids, before)
+    _check_sides(table, cluster, train, held, before)
+    assign = _kinds_of_altered(held, kinds, altered, seed)
+    points, tracks, next_id = _read_sides(data_dir, train + held)
+    changed = pa.array(list(assign))
+    keep_pts = [points.filter(pc.invert(pc.is_in(points["track_id"], changed)))]
+    keep_trk = [tracks.filter(pc.invert(pc.is_in(tracks["track_id"], changed)))]
+    rows = [(tid, 0, "", tid, -1, -1) for tid in held if tid not in assign]
+    alt_pts, alt_trk, alt_rows, not_at_sea = _with_anomalies(
+        points, tracks, assign, next_id, seed, params, at_sea
+    )
+    labels = pd.DataFrame(
+        rows + alt_rows, columns=["track_id", "label", "kind", "source_track_id", "start", "end"]
+    ).sort_values("track_id", kind="stable")
+    _write(out, pa.concat_tables(keep_pts + alt_pts), pa.concat_tables(keep_trk + alt_trk), labels)
+    heldout = sorted(int(i) for i in labels["track_id"])
+    return Split(train, heldout, labels.reset_index(drop=True), not_at_sea)
+
+
+def _sides(
+    table: pd.DataFrame,
+    train_fraction: float,
+    seed: int,
+    train_ids: list[int] | None,
+    before: pd.Timestamp | None,
+) -> tuple[list[int], list[int]]:
+    """The training and held-out track ids: by time with `before`, else by vessel. Given the
+    models' own training tracks (`train_ids`), those of the group train; split by time, the
+    later others are held out, whatever the dates of those that train; split by vessel, the
+    tracks of the vessels none of them belongs to."""
     if before is not None:
         train, held = split_by_time(table, before)
         if train_ids is not None:  # the models' own training tracks, whatever their dates
             train = sorted(set(train_ids) & set(table["track_id"]))
             held = sorted(set(held) - set(train))
-    elif train_ids is None:
-        train, held = split_by_vessel(table, train_fraction, seed)
-    else:
-        train = sorted(set(train_ids) & set(table["track_id"]))
-        vessels = set(table.loc[table["track_id"].isin(train), "mmsi"])
-        held = sorted(int(i) for i in table.loc[~table["mmsi"].isin(vessels), "track_id"])
+        return train, held
+    if train_ids is None:
+        return split_by_vessel(table, train_fraction, seed)
+    train = sorted(set(train_ids) & set(table["track_id"]))
+    vessels = set(table.loc[table["track_id"].isin(train), "mmsi"])
+    held = sorted(int(i) for i in table.loc[~table["mmsi"].isin(vessels), "track_id"])
+    return train, held
+
+
+def _check_sides(
+    table: pd.DataFrame,
+    cluster: str,
+    train: list[int],
+    held: list[int],
+    before: pd.Timestamp | None,
+) -> None:
+    """A `UserError` unless each side has enough tracks (`MIN_SPLIT`)."""
     if len(train) < MIN_SPLIT or len(held) < 2 * MIN_SPLIT:
         sides = "before and from the date" if before is not None else "from different vessels"
         raise UserError(
@@ -145,45 +190,84 @@ def build(
             f"({len(train)} for training, {len(held)} held out); evaluate needs at least "
             f"{MIN_SPLIT} for training and {2 * MIN_SPLIT} held out ({sides})"
         )
+
+
+def _kinds_of_altered(
+    held: list[int], kinds: tuple[str, ...], altered: float, seed: int
+) -> dict[int, str]:
+    """The held-out tracks that take an anomaly (a seeded share `altered` of them, at least
+    one), each with its kind: the kinds in turn, in the seeded order the tracks were drawn."""
     rng = np.random.default_rng([seed, 1])
     order = [held[i] for i in rng.permutation(len(held))]
-    altered = order[: max(1, round(len(held) * altered))]
-    assign = {tid: kinds[k % len(kinds)] for k, tid in enumerate(altered)}
-    points = pq.read_table(
-        data_dir / "points.parquet", filters=[("track_id", "in", train + held)]
-    ).sort_by([("track_id", "ascending"), ("time", "ascending")])
+    chosen = order[: max(1, round(len(held) * altered))]
+    return {tid: kinds[k % len(kinds)] for k, tid in enumerate(chosen)}
+
+
+def _read_sides(data_dir: Path, ids: list[int]) -> tuple[pa.Table, pa.Table, int]:
+    """The reports (by track and time) and the tracks.parquet rows of the tracks `ids`, and
+    the first track id that no track of the ingest output has (the altered tracks' ids)."""
+    points = pq.read_table(data_dir / "points.parquet", filters=[("track_id", "in", ids)]).sort_by(
+        [("track_id", "ascending"), ("time", "ascending")]
+    )
     tracks = pq.read_table(data_dir / "tracks.parquet")
     next_id = int(pc.max(tracks["track_id"]).as_py()) + 1
-    tracks = tracks.filter(pc.is_in(tracks["track_id"], pa.array(train + held, pa.int64())))
-    keep_pts = [points.filter(pc.invert(pc.is_in(points["track_id"], pa.array(altered))))]
-    keep_trk = [tracks.filter(pc.invert(pc.is_in(tracks["track_id"], pa.array(altered))))]
-    rows = [(tid, 0, "", tid, -1, -1) for tid in held if tid not in assign]
-    not_at_sea = []
+    tracks = tracks.filter(pc.is_in(tracks["track_id"], pa.array(ids, pa.int64())))
+    return points, tracks, next_id
+
+
+def _with_anomalies(
+    points: pa.Table,
+    tracks: pa.Table,
+    assign: dict[int, str],
+    next_id: int,
+    seed: int,
+    params: dict,
+    at_sea: bool,
+) -> tuple[list[pa.Table], list[pa.Table], list[tuple], list[int]]:
+    """The tracks of `assign` (id -> kind) in the order of their ids, the k-th with an anomaly
+    written in (`_altered`, its generator seeded with `seed` and k) as track `next_id + k`, or
+    left as it is where no draw kept it at sea: their reports, rows of tracks.parquet and rows
+    of labels.csv, and the ids of those left."""
+    new_pts, new_trk, rows, not_at_sea = [], [], [], []
     for k, src in enumerate(sorted(assign)):
         kind = assign[src]
         pts = points.filter(pc.equal(points["track_id"], src))
-        pos = np.column_stack([pts["lon"].to_numpy(), pts["lat"].to_numpy()])
-        t_us = pts["time"].cast(pa.int64()).to_numpy()
-        t0 = int(t_us[0])
-        rng_k = np.random.default_rng([seed, 2, k])
-        got = _anomaly(kind, pos, (t_us - t0) / 1e6, rng_k, params, at_sea)
         source_row = tracks.filter(pc.equal(tracks["track_id"], src))
-        if got is None:  # counted, and judged as the normal track it is
+        rng_k = np.random.default_rng([seed, 2, k])
+        written = _altered(pts, source_row, kind, next_id + k, rng_k, params, at_sea)
+        if written is None:  # counted, and judged as the normal track it is
             not_at_sea.append(src)
-            keep_pts.append(pts)
-            keep_trk.append(source_row)
+            new_pts.append(pts)
+            new_trk.append(source_row)
             rows.append((src, 0, "", src, -1, -1))
             continue
-        new_id = next_id + k
-        keep_pts.append(_points(new_id, pts["mmsi"][0].as_py(), t0, got))
-        keep_trk.append(_track_row(source_row, new_id, t0, got))
-        rows.append((new_id, 1, kind, src, *got.stretch))
-    labels = pd.DataFrame(
-        rows, columns=["track_id", "label", "kind", "source_track_id", "start", "end"]
-    ).sort_values("track_id", kind="stable")
-    _write(out, pa.concat_tables(keep_pts), pa.concat_tables(keep_trk), labels)
-    heldout = sorted(int(i) for i in labels["track_id"])
-    return Split(train, heldout, labels.reset_index(drop=True), not_at_sea)
+        altered_pts, altered_row, got = written
+        new_pts.append(altered_pts)
+        new_trk.append(altered_row)
+        rows.append((next_id + k, 1, kind, src, *got.stretch))
+    return new_pts, new_trk, rows, not_at_sea
+
+
+def _altered(
+    pts: pa.Table,
+    source_row: pa.Table,
+    kind: str,
+    new_id: int,
+    rng: np.random.Generator,
+    params: dict,
+    at_sea: bool,
+) -> tuple[pa.Table, pa.Table, Injected] | None:
+    """A track (its reports `pts`, its row `source_row`) with an anomaly of `kind` written in,
+    as track `new_id`: its reports, its row of tracks.parquet and the anomaly; None where no
+    draw kept it at sea (`_anomaly`)."""
+    pos = np.column_stack([pts["lon"].to_numpy(), pts["lat"].to_numpy()])
+    t_us = pts["time"].cast(pa.int64()).to_numpy()
+    t0 = int(t_us[0])
+    got = _anomaly(kind, pos, (t_us - t0) / 1e6, rng, params, at_sea)
+    if got is None:
+        return None
+    new_pts = _points(new_id, pts["mmsi"][0].as_py(), t0, got)
+    return new_pts, _track_row(source_row, new_id, t0, got), got
 
 
 def _points(track_id: int, mmsi: int, t0_us: int, got: Injected) -> pa.Table:

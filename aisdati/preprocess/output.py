@@ -7,7 +7,11 @@ half-written `points.parquet`, nor a new `points.parquet` beside an earlier run'
 `points.parquet` and `rejects.parquet` are Parquet datasets: folders of part files
 (`part-00000.parquet`, ...), one per task that wrote rows, so that tasks on several workers
 write them side by side (`StagedDataset`, `PartWriter`). Each part is renamed into its folder
-once whole, and the folder, under a temporary name until the run succeeded, lands whole."""
+once whole, and the folder, under a temporary name until the run succeeded, lands whole.
+
+The route clusters reach the disk here as well (`write_routes`, `route_summary`):
+`aisdati.preprocess.routes` finds them and knows nothing of how ingest stages its files, so the
+dependency runs one way, from here to there."""
 
 from __future__ import annotations
 
@@ -28,8 +32,15 @@ from aisdati.geo import haversine_m
 from aisdati.interrupts import raise_if_interrupted
 from aisdati.outdir import DATASET_PART, temporary_path
 from aisdati.preprocess.cluster import cluster_tracks
-from aisdati.preprocess.routes import ROUTE_FILES
-from aisdati.tracks.schema import GEO_METADATA, POINTS_SCHEMA, TRACKS_SCHEMA, UTC_US
+from aisdati.preprocess.routes import Routes, TrackShapes
+from aisdati.tracks.schema import (
+    GEO_METADATA,
+    POINTS_SCHEMA,
+    ROUTE_COLUMNS,
+    ROUTES_SCHEMA,
+    TRACKS_SCHEMA,
+    UTC_US,
+)
 
 
 def build_tracks(
@@ -88,6 +99,8 @@ def _cog32(cog: np.ndarray) -> np.ndarray:
     return out
 
 
+ROUTE_FILES = ("routes.parquet", "routes.geojson", "routes.png")
+"""The route clusters' files (`write_routes`), with `--clusters routes`."""
 OUTPUT_NAMES = (
     "points.parquet",
     "tracks.parquet",
@@ -212,3 +225,69 @@ def write_json(final: Path, doc: dict[str, Any]) -> StagedFile:
     staged = StagedFile(final)
     staged.tmp.write_text(json.dumps(doc, indent=2, default=str) + "\n", encoding="utf-8")
     return staged
+
+
+# -------------------------------------------------------------------------- route outputs
+def with_routes(tracks: pa.Table, labels: np.ndarray) -> pa.Table:
+    """tracks.parquet's rows with their `route` column filled in (None: no route)."""
+    col = tracks.schema.get_field_index("route")
+    return tracks.set_column(col, "route", pa.array(list(labels), pa.string()))
+
+
+def routes_arrow(routes: Routes) -> pa.Table:
+    """routes.parquet: one row per route, the medoid track as a WKB LineString."""
+    table = routes.table
+    columns = [pa.array(table[c].tolist(), ROUTES_SCHEMA.field(c).type) for c in ROUTE_COLUMNS]
+    wkb = [shapely.to_wkb(shapely.linestrings(xy)) for xy in routes.medoids]
+    columns.append(pa.array(wkb, pa.binary()))
+    return pa.Table.from_arrays(columns, schema=ROUTES_SCHEMA)
+
+
+def routes_geojson(routes: Routes) -> dict[str, Any]:
+    """routes.geojson: a FeatureCollection of the medoid LineStrings with the route's facts."""
+    features = []
+    for row, xy in zip(routes.table.to_dict("records"), routes.medoids, strict=True):
+        props = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()}
+        props = {k: (int(v) if isinstance(v, np.integer) else v) for k, v in props.items()}
+        coords = np.round(xy, 6).tolist()
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "LineString", "coordinates": coords},
+                "properties": props,
+            }
+        )
+    return {"type": "FeatureCollection", "features": features}
+
+
+def write_routes(
+    out_dir: Path, routes: Routes, shapes: TrackShapes, title: str
+) -> list[StagedFile]:
+    """routes.parquet, routes.geojson and routes.png (each track drawn as its resampled
+    shape), staged (renamed when the run commits)."""
+    from aisdati.preprocess.figures import plot_routes
+
+    parquet = StagedFile(out_dir / "routes.parquet")
+    table = routes_arrow(routes).replace_schema_metadata({"geo": json.dumps(GEO_METADATA)})
+    pq.write_table(table, parquet.tmp, compression="zstd")
+    geojson = StagedFile(out_dir / "routes.geojson")
+    geojson.tmp.write_text(json.dumps(routes_geojson(routes)) + "\n", encoding="utf-8")
+    png = StagedFile(out_dir / "routes.png")
+    png.tmp = png.tmp.with_name(png.tmp.name + ".png")  # matplotlib picks the format by suffix
+    lines = list(shapes.resampled)
+    plot_routes(lines, routes.labels, routes.table, routes.medoids, png.tmp, title)
+    return [parquet, geojson, png]
+
+
+def route_summary(routes: Routes) -> dict[str, Any]:
+    """For ingest_report.json and `--json`: the routes table and how many tracks have none."""
+    rows = [
+        {k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()}
+        for r in routes.table.to_dict("records")
+    ]
+    rows = [{k: (int(v) if isinstance(v, np.integer) else v) for k, v in r.items()} for r in rows]
+    return {
+        "routes": rows,
+        "routed_tracks": int(sum(r["n_tracks"] for r in rows)),
+        "unrouted_tracks": int(sum(label is None for label in routes.labels)),
+    }

@@ -24,12 +24,13 @@ of tracks.parquet without the geometry, and its shape), never every track's repo
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypeVar
@@ -50,19 +51,15 @@ from aisdati.preprocess.output import (
     StagedDataset,
     StagedFile,
     commit_all,
+    route_summary,
+    with_routes,
     write_json,
+    write_routes,
     write_tracks,
 )
 from aisdati.preprocess.read import open_reader
 from aisdati.preprocess.report import IngestCounts, no_tracks_message
-from aisdati.preprocess.routes import (
-    TrackShapes,
-    cluster_shapes,
-    lines_from_wkb,
-    route_summary,
-    with_routes,
-    write_routes,
-)
+from aisdati.preprocess.routes import TrackShapes, cluster_shapes, lines_from_wkb
 from aisdati.preprocess.routes import settings_of as route_settings
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.preprocess.tasks import (
@@ -160,41 +157,17 @@ def _run(
     run's time. The runner is closed (a local cluster's workers stopped) before the spill
     folder is deleted, so that no task still writes there."""
     stage = outputs.folder
-    with (
-        tempfile.TemporaryDirectory(
-            dir=outputs.out, prefix=f".ingest-{os.getpid()}-", ignore_cleanup_errors=True
-        ) as tmp,
-        hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
-        open_runner(execution) as runner,
-    ):
+    with _spill_folder(outputs.out) as spill, open_runner(execution) as runner:
         started = time.perf_counter()  # the workers' start (the run's seconds hold it) aside
-        spill = Path(tmp).absolute()
-        rejects = None  # the folder the tasks write rejects.parquet's parts into
-        if settings.keep_rejects:
-            kept = StagedDataset(stage / "rejects.parquet", REJECTS_SCHEMA)
-            staged.append(kept)
-            rejects = kept.tmp.absolute()
+        rejects = _staged_rejects(stage, staged, settings)
         reads = _read_stage(runner, sources, spill, settings, area[0], rejects, progress)
-        counts = IngestCounts()
-        for read in reads:
-            counts.merge(read.counts)
+        counts = _read_counts(reads, sources)
         stage_seconds = {"read_clean_filter": time.perf_counter() - started}
-        if counts.rows_read == 0:
-            raise UserError(
-                "no data rows in the input (only headers?): " + ", ".join(s.label for s in sources)
-            )
         points = StagedDataset(stage / "points.parquet", POINTS_SCHEMA)
         staged.append(points)
         labels = tuple(s.label for s in sources)
         tasks = _vessel_tasks(reads, spill, settings, labels, rejects)
-        on = _vessel_runner(runner)
-        vessels = _map(on, vessel_stages, tasks, progress, "clean, segment, cluster")
-        for read in reads:  # every vessel task's result is here: its inputs are not needed again
-            shutil.rmtree(read.folder)
-        for vessel in vessels:
-            counts.merge(vessel.counts)
-        parts, shapes = _write_points(on, tasks, vessels, points.tmp.absolute(), settings, progress)
-        del vessels  # their shapes are joined: one copy, not two, through route clustering
+        parts, shapes = _vessel_stage(runner, tasks, reads, counts, points.tmp, settings, progress)
         # the reading and per-vessel stages' freed memory (`aisdati.memory`): route clustering's
         # peak comes next, so hand it back first
         hand_back()
@@ -204,9 +177,8 @@ def _run(
             time.perf_counter() - started - stage_seconds["read_clean_filter"]
         )
         routed_at = time.perf_counter()
-        what = labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
         labels_of, route_files, routes = _route_stage(
-            parts, shapes, stage, settings, what, progress
+            parts, shapes, stage, settings, _inputs_named(labels), progress
         )
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)
@@ -214,12 +186,84 @@ def _run(
         staged.append(write_tracks(stage / "tracks.parquet", rows))
     if not counts.balanced():
         raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
-    result = IngestResult(counts, settings, area[1])
-    result.stage_seconds = {k: round(v, 3) for k, v in stage_seconds.items()}
-    result.routes = routes
-    result.outputs = {_output_key(f.final): str(outputs.final(f.final)) for f in staged}
-    result.outputs["ingest_report"] = str(outputs.out / REPORT_NAME)
-    return result
+    return IngestResult(
+        counts,
+        settings,
+        area[1],
+        outputs=_output_paths(outputs, staged),
+        stage_seconds={k: round(v, 3) for k, v in stage_seconds.items()},
+        routes=routes,
+    )
+
+
+@contextlib.contextmanager
+def _spill_folder(out: Path) -> Iterator[Path]:
+    """A temporary folder in --out for the tasks' spill files, as an absolute path (workers may
+    run elsewhere), deleted after the block."""
+    with (
+        tempfile.TemporaryDirectory(
+            dir=out, prefix=f".ingest-{os.getpid()}-", ignore_cleanup_errors=True
+        ) as tmp,
+        hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
+    ):
+        yield Path(tmp).absolute()
+
+
+def _staged_rejects(stage: Path, staged: list[StagedFile], settings: IngestSettings) -> Path | None:
+    """With `--keep-rejects`, rejects.parquet staged (and added to `staged`): the folder the
+    tasks write its parts into; else None."""
+    if not settings.keep_rejects:
+        return None
+    kept = StagedDataset(stage / "rejects.parquet", REJECTS_SCHEMA)
+    staged.append(kept)
+    return kept.tmp.absolute()
+
+
+def _read_counts(reads: list[ReadResult], sources: list[Source]) -> IngestCounts:
+    """The read stage's counts of every source together; a `UserError` where no source had a
+    data row."""
+    counts = IngestCounts()
+    for read in reads:
+        counts.merge(read.counts)
+    if counts.rows_read == 0:
+        raise UserError(
+            "no data rows in the input (only headers?): " + ", ".join(s.label for s in sources)
+        )
+    return counts
+
+
+def _vessel_stage(
+    runner: Runner,
+    tasks: list[VesselTask],
+    reads: list[ReadResult],
+    counts: IngestCounts,
+    points: Path,
+    settings: IngestSettings,
+    progress: Progress | None,
+) -> tuple[list[PartTracks], TrackShapes | None]:
+    """The vessel partitions' tasks run (their counts added to `counts`), the read stage's
+    spill files deleted, and their points written into the dataset folder `points`: what
+    `_write_points` returns. The tasks' results are dropped on return: their shapes are joined,
+    one copy, not two, through route clustering."""
+    on = _vessel_runner(runner)
+    vessels = _map(on, vessel_stages, tasks, progress, "clean, segment, cluster")
+    for read in reads:  # every vessel task's result is here: its inputs are not needed again
+        shutil.rmtree(read.folder)
+    for vessel in vessels:
+        counts.merge(vessel.counts)
+    return _write_points(on, tasks, vessels, points.absolute(), settings, progress)
+
+
+def _inputs_named(labels: tuple[str, ...]) -> str:
+    """What the tracks are, for routes.png's title: the first input, and how many more."""
+    return labels[0] + (f" and {len(labels) - 1} more" if len(labels) > 1 else "")
+
+
+def _output_paths(outputs: OutputSet, staged: list[StagedFile]) -> dict[str, str]:
+    """The report's `outputs`: where each staged file lands in --out, and the report itself."""
+    paths = {_output_key(f.final): str(outputs.final(f.final)) for f in staged}
+    paths["ingest_report"] = str(outputs.out / REPORT_NAME)
+    return paths
 
 
 def _read_stage(

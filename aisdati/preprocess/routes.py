@@ -53,24 +53,20 @@ matter), samples are drawn with `seed`, and ties go to the lower index.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
 import shapely
 from numba import njit
 
 from aisdati.dtw import pairs_mean_dtw_m, prepare_lonlat
 from aisdati.geo import EARTH_RADIUS_M, arc_m, haversine_m, haversine_one_m, unit_vectors
 from aisdati.memory import hand_back
-from aisdati.tracks.schema import GEO_METADATA, ROUTE_COLUMNS, ROUTE_PREFIX, ROUTES_SCHEMA
+from aisdati.tracks.schema import ROUTE_COLUMNS, ROUTE_PREFIX
 
 
 @dataclass(frozen=True)
@@ -494,27 +490,63 @@ def cluster_shapes(
     order = np.argsort(track_ids, kind="stable")
     if (order != np.arange(len(order))).any():
         return _in_id_order(order, tracks, track_ids, length_km, lines_of, settings)
-    n = len(tracks)
+    if len(tracks) == 0:
+        return Routes(np.full(0, None, dtype=object), _empty_table(), [])
     length_km = np.asarray(length_km, dtype=np.float64)
-    labels = np.full(n, None, dtype=object)
-    if n == 0:
-        return Routes(labels, _empty_table(), [])
-    clock = time.perf_counter()
-    seconds: dict[str, float] = {}
+    return _routes_in_id_order(tracks, track_ids, length_km, lines_of, settings)
 
-    def lap(step: str) -> None:
-        nonlocal clock
+
+class _Laps:
+    """The wall time of each step of a run, from the end of the step before (`Routes.seconds`)."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._clock = time.perf_counter()
+
+    def lap(self, step: str) -> None:
         now = time.perf_counter()
-        seconds[step] = round(now - clock, 3)
-        clock = now
+        self.seconds[step] = round(now - self._clock, 3)
+        self._clock = now
 
+
+def _routes_in_id_order(
+    tracks: TrackShapes,
+    track_ids: np.ndarray,
+    length_km: np.ndarray,
+    lines_of: LinesOf,
+    settings: RouteSettings,
+) -> Routes:
+    """`cluster_shapes` of at least one track, given in the order of their ids: the steps of
+    the module docstring, each timed. One generator draws every sample, step after step."""
+    laps = _Laps()
     first, last = tracks.first, tracks.last
     groups = endpoint_groups(first, last, settings)
     hand_back()  # what the density clustering freed, before the shapes' unit vectors are made
-    lap("endpoints")
+    laps.lap("endpoints")
     shapes = ShapeDistance(tracks.resampled)  # after: the density clustering's peak without it
     rng = np.random.default_rng(settings.seed)
+    paths = _shape_paths(groups, shapes, length_km, settings, rng)
+    laps.lap("split")
+    routes = _merged_routes(paths, shapes, first, last, settings, rng)
+    routes.sort(key=lambda r: (-len(r[0]), int(track_ids[r[0]].min())))
+    laps.lap("merge")
+    labels, table = _described(routes, tracks, track_ids, length_km, shapes, settings, rng)
+    medoids = [medoid for _, medoid in routes]
+    medoid_lines = lines_of(np.array(medoids, dtype=np.int64)) if medoids else []
+    laps.lap("describe")
+    return Routes(labels, table, medoid_lines, laps.seconds)
 
+
+def _shape_paths(
+    groups: np.ndarray,
+    shapes: ShapeDistance,
+    length_km: np.ndarray,
+    settings: RouteSettings,
+    rng: np.random.Generator,
+) -> list[tuple[np.ndarray, int, float]]:
+    """Step 2: every candidate group split by shape into paths (member track indices, medoid
+    track index, the group's shape tolerance), from seeded samples of the groups compared all
+    at once."""
     paths: list[tuple[np.ndarray, int, float]] = []
     members_of = _members(groups)
     size = _sample_size([len(idx) for idx in members_of], settings.max_sample)
@@ -523,17 +555,26 @@ def cluster_shapes(
         tau = _tolerance(length_km[idx], settings)
         for members, medoid in split_by_shape(idx, sample, dist, shapes, tau):
             paths.append((members, medoid, tau))
-    lap("split")
+    return paths
 
-    routes = _merged_routes(paths, shapes, first, last, settings, rng)
-    routes.sort(key=lambda r: (-len(r[0]), int(track_ids[r[0]].min())))
-    lap("merge")
 
-    rows = []
-    medoids = []
+def _described(
+    routes: list[tuple[np.ndarray, int]],
+    tracks: TrackShapes,
+    track_ids: np.ndarray,
+    length_km: np.ndarray,
+    shapes: ShapeDistance,
+    settings: RouteSettings,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, pd.DataFrame]:
+    """Each track's route name (None: no route) and the routes table (`ROUTE_COLUMNS`), the
+    routes (member track indices, medoid track index) numbered in the order given; a route's
+    spread from a seeded sample of its tracks."""
+    labels = np.full(len(tracks), None, dtype=object)
     some = [_sample(members, settings.max_sample, rng) for members, _ in routes]
     to_medoid = [np.full(len(s), medoid) for s, (_, medoid) in zip(some, routes, strict=True)]
     spreads = shapes.grouped(some, to_medoid)
+    rows = []
     for number, ((members, medoid), spread) in enumerate(
         zip(routes, spreads, strict=True), start=1
     ):
@@ -543,20 +584,17 @@ def cluster_shapes(
             {
                 "route": name,
                 "n_tracks": len(members),
-                "entry_lon": float(np.median(first[members, 0])),
-                "entry_lat": float(np.median(first[members, 1])),
-                "exit_lon": float(np.median(last[members, 0])),
-                "exit_lat": float(np.median(last[members, 1])),
+                "entry_lon": float(np.median(tracks.first[members, 0])),
+                "entry_lat": float(np.median(tracks.first[members, 1])),
+                "exit_lon": float(np.median(tracks.last[members, 0])),
+                "exit_lat": float(np.median(tracks.last[members, 1])),
                 "median_length_km": float(np.median(length_km[members])),
                 "medoid_track_id": int(track_ids[medoid]),
                 "spread_km": float(np.median(spread)),
             }
         )
-        medoids.append(medoid)
     table = pd.DataFrame(rows, columns=ROUTE_COLUMNS) if rows else _empty_table()
-    medoids = lines_of(np.array(medoids, dtype=np.int64)) if medoids else []
-    lap("describe")
-    return Routes(labels, table, medoids, seconds)
+    return labels, table
 
 
 def _in_id_order(
@@ -621,10 +659,7 @@ def lines_from_wkb(wkb: list[bytes]) -> list[np.ndarray]:
     return np.split(coords, cuts) if len(coords) else []
 
 
-# ------------------------------------------------------------------------- ingest outputs
-ROUTE_FILES = ("routes.parquet", "routes.geojson", "routes.png")
-
-
+# ------------------------------------------------------------------------ ingest settings
 def settings_of(ingest_settings: Any) -> RouteSettings:
     """The route settings of an `IngestSettings`."""
     return RouteSettings(
@@ -632,67 +667,3 @@ def settings_of(ingest_settings: Any) -> RouteSettings:
         eps_km=ingest_settings.route_eps_km,
         seed=ingest_settings.route_seed,
     )
-
-
-def with_routes(tracks: pa.Table, labels: np.ndarray) -> pa.Table:
-    """tracks.parquet's rows with their `route` column filled in (None: no route)."""
-    col = tracks.schema.get_field_index("route")
-    return tracks.set_column(col, "route", pa.array(list(labels), pa.string()))
-
-
-def routes_arrow(routes: Routes) -> pa.Table:
-    """routes.parquet: one row per route, the medoid track as a WKB LineString."""
-    table = routes.table
-    columns = [pa.array(table[c].tolist(), ROUTES_SCHEMA.field(c).type) for c in ROUTE_COLUMNS]
-    wkb = [shapely.to_wkb(shapely.linestrings(xy)) for xy in routes.medoids]
-    columns.append(pa.array(wkb, pa.binary()))
-    return pa.Table.from_arrays(columns, schema=ROUTES_SCHEMA)
-
-
-def routes_geojson(routes: Routes) -> dict[str, Any]:
-    """routes.geojson: a FeatureCollection of the medoid LineStrings with the route's facts."""
-    features = []
-    for row, xy in zip(routes.table.to_dict("records"), routes.medoids, strict=True):
-        props = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()}
-        props = {k: (int(v) if isinstance(v, np.integer) else v) for k, v in props.items()}
-        coords = np.round(xy, 6).tolist()
-        features.append(
-            {
-                "type": "Feature",
-                "geometry": {"type": "LineString", "coordinates": coords},
-                "properties": props,
-            }
-        )
-    return {"type": "FeatureCollection", "features": features}
-
-
-def write_routes(out_dir: Path, routes: Routes, shapes: TrackShapes, title: str) -> list:
-    """routes.parquet, routes.geojson and routes.png (each track drawn as its resampled
-    shape), staged (renamed when the run commits)."""
-    from aisdati.preprocess.figures import plot_routes
-    from aisdati.preprocess.output import StagedFile
-
-    parquet = StagedFile(out_dir / "routes.parquet")
-    table = routes_arrow(routes).replace_schema_metadata({"geo": json.dumps(GEO_METADATA)})
-    pq.write_table(table, parquet.tmp, compression="zstd")
-    geojson = StagedFile(out_dir / "routes.geojson")
-    geojson.tmp.write_text(json.dumps(routes_geojson(routes)) + "\n", encoding="utf-8")
-    png = StagedFile(out_dir / "routes.png")
-    png.tmp = png.tmp.with_name(png.tmp.name + ".png")  # matplotlib picks the format by suffix
-    lines = list(shapes.resampled)
-    plot_routes(lines, routes.labels, routes.table, routes.medoids, png.tmp, title)
-    return [parquet, geojson, png]
-
-
-def route_summary(routes: Routes) -> dict[str, Any]:
-    """For ingest_report.json and `--json`: the routes table and how many tracks have none."""
-    rows = [
-        {k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()}
-        for r in routes.table.to_dict("records")
-    ]
-    rows = [{k: (int(v) if isinstance(v, np.integer) else v) for k, v in r.items()} for r in rows]
-    return {
-        "routes": rows,
-        "routed_tracks": int(sum(r["n_tracks"] for r in rows)),
-        "unrouted_tracks": int(sum(label is None for label in routes.labels)),
-    }
