@@ -16,7 +16,11 @@ stages see a vessel's reports on both sides of a gap longer than `gap_s` indepen
 track ends there, the outlier test and the derived speeds start anew, a stop cannot span it), so
 where such gaps allow, the pieces give exactly the results of the whole partition. A vessel
 reporting without such a gap for more than a piece's rows is cut anyway, at a time: its track
-is split there. Reports at one and the same time are never split up.
+is split there. Reports at one and the same time are never split up; but a vessel cannot be at
+two places at one time, and the cleaner keeps only the first of its reports at one time, so of a
+flood at one time (a bin of more rows than a piece holds) only the first piece's worth is kept:
+the rest are handed to the caller's `dropped` (counted as `same_time_flood`), and memory stays
+bounded whatever the input.
 
 Several writers may spill one partition (each input source its own `VesselPartitions`, in its
 own task): `partition_tables` reads partition i from all their files, in the writers' order, as
@@ -26,8 +30,9 @@ if one writer had written them all.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections import Counter
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +45,8 @@ MAX_BINS = 1 << 18
 months of reports, bins of 20 seconds)."""
 HISTOGRAMS_PER_PASS = 16
 """Large vessels whose histograms one pass over a partition file builds (32 MiB at most)."""
+Dropped = Callable[[pa.Table], None]
+"""Where a large partition's reports beyond a piece's worth at one (MMSI, time) go."""
 
 
 def partition_of(mmsi: np.ndarray, n: int) -> np.ndarray:
@@ -68,6 +75,8 @@ class VesselPartitions:
         self.gap_s = gap_s
         self._writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
         self._rows = np.zeros(n, dtype=np.int64)
+        self.flooded = 0
+        """Reports dropped by iterating: beyond a piece's worth of one vessel at one time."""
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -100,9 +109,12 @@ class VesselPartitions:
         for i, path in enumerate(self.paths):
             paths = [path] if i in self._writers else []
             yield from partition_tables(
-                paths, self.schema, int(self._rows[i]), self.max_rows, self.gap_s
+                paths, self.schema, int(self._rows[i]), self.max_rows, self.gap_s, self._flood
             )
             path.unlink(missing_ok=True)
+
+    def _flood(self, rows: pa.Table) -> None:
+        self.flooded += rows.num_rows
 
 
 def partition_tables(
@@ -111,15 +123,18 @@ def partition_tables(
     rows: int,
     max_rows: int | None = None,
     gap_s: float = math.inf,
+    dropped: Dropped | None = None,
 ) -> Iterator[pa.Table]:
     """One partition, spilled to `paths` (in writing order; `rows` in all): as one table, or,
-    holding more than `max_rows`, as pieces in (MMSI, time) order (see the module docstring).
+    holding more than `max_rows`, as pieces in (MMSI, time) order (see the module docstring),
+    the reports of a flood at one time beyond a piece's worth handed to `dropped`.
     The files are left in place, so that a task run again can read them again."""
     if not paths:
         yield schema.empty_table()
     elif max_rows is not None and rows > max_rows:
         gap_us = math.ceil(gap_s * 1e6) if math.isfinite(gap_s) else None
-        yield from _pieces(paths, schema, max(max_rows // PIECES_PER_BOUND, 1), gap_us)
+        piece_rows = max(max_rows // PIECES_PER_BOUND, 1)
+        yield from _pieces(paths, schema, piece_rows, gap_us, dropped or (lambda _: None))
     else:
         tables = []
         for path in paths:
@@ -129,17 +144,26 @@ def partition_tables(
 
 
 def _pieces(
-    paths: Sequence[Path], schema: pa.Schema, piece_rows: int, gap_us: int | None
+    paths: Sequence[Path],
+    schema: pa.Schema,
+    piece_rows: int,
+    gap_us: int | None,
+    dropped: Dropped,
 ) -> Iterator[pa.Table]:
     """A large partition's pieces, spilled beside its first file, each read whole (and
-    deleted) in turn."""
+    deleted) in turn; the reports of a flood at one time beyond a piece's worth to `dropped`."""
     plan = plan_pieces(paths, piece_rows, gap_us)
     first = paths[0]
     pieces = [first.with_name(f"{first.stem}-piece-{k:05d}.arrow") for k in range(plan.count)]
     writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+    cap = FloodCap(plan, piece_rows)
     for batch in _batches(paths):
         table = pa.Table.from_batches([batch])
-        for k, chunk in split_rows(table, plan.piece_of(batch), plan.count):
+        over = cap.over(table)
+        if over.any():
+            dropped(table.filter(pa.array(over)))
+            table = table.filter(pa.array(~over))
+        for k, chunk in split_rows(table, plan.piece_of(table), plan.count):
             if k not in writers:
                 writers[k] = pa.ipc.new_stream(str(pieces[k]), schema)
             writers[k].write_table(chunk)
@@ -168,7 +192,7 @@ def _batches(paths: Sequence[Path]) -> Iterator[pa.RecordBatch]:
             yield from pa.ipc.open_stream(f)
 
 
-def _keys(batch: pa.RecordBatch) -> tuple[np.ndarray, np.ndarray]:
+def _keys(batch: pa.RecordBatch | pa.Table) -> tuple[np.ndarray, np.ndarray]:
     """The MMSIs and times (microseconds) of a batch's rows."""
     mmsi = batch.column("mmsi").to_numpy()
     return mmsi, batch.column("time").to_numpy().view(np.int64)
@@ -177,14 +201,16 @@ def _keys(batch: pa.RecordBatch) -> tuple[np.ndarray, np.ndarray]:
 @dataclass(frozen=True)
 class PiecePlan:
     """Where a partition's rows go: `first_piece[v]` is the piece of the v-th of the sorted
-    `mmsi`, and of a vessel with time cuts (`cuts[v]`, sorted) its first piece."""
+    `mmsi`, and of a vessel with time cuts (`cuts[v]`, sorted) its first piece. `crowded[v]`:
+    the vessel's time bins of more rows than a piece holds, where a flood at one time may be."""
 
     mmsi: np.ndarray
     first_piece: np.ndarray
     cuts: dict[int, np.ndarray]
     count: int
+    crowded: dict[int, Crowded] = field(default_factory=dict)
 
-    def piece_of(self, batch: pa.RecordBatch) -> np.ndarray:
+    def piece_of(self, batch: pa.RecordBatch | pa.Table) -> np.ndarray:
         mmsi, time_us = _keys(batch)
         vessel = np.searchsorted(self.mmsi, mmsi)
         piece = self.first_piece[vessel]
@@ -198,7 +224,8 @@ def plan_pieces(paths: Sequence[Path], max_rows: int, gap_us: int | None) -> Pie
     """Pieces of at most about `max_rows` rows: vessels packed whole in MMSI order, and a vessel
     of more rows cut at times (`vessel_cuts`)."""
     mmsi, counts, first, last = _vessel_spans(paths)
-    cuts = time_cuts(paths, mmsi, first, last, np.flatnonzero(counts > max_rows), max_rows, gap_us)
+    large = np.flatnonzero(counts > max_rows)
+    cuts, crowded = time_cuts(paths, mmsi, first, last, large, max_rows, gap_us)
     first_piece = np.zeros(len(mmsi), dtype=np.int64)
     piece, rows = 0, 0
     for v in range(len(mmsi)):
@@ -209,7 +236,7 @@ def plan_pieces(paths: Sequence[Path], max_rows: int, gap_us: int | None) -> Pie
             piece += len(cuts[v]) + 1
         else:
             rows += int(counts[v])
-    return PiecePlan(mmsi, first_piece, cuts, piece + 1 if rows else piece)
+    return PiecePlan(mmsi, first_piece, cuts, piece + 1 if rows else piece, crowded)
 
 
 def time_cuts(
@@ -220,10 +247,12 @@ def time_cuts(
     large: np.ndarray,
     max_rows: int,
     gap_us: int | None,
-) -> dict[int, np.ndarray]:
+) -> tuple[dict[int, np.ndarray], dict[int, Crowded]]:
     """The cut times (`vessel_cuts`) of each of the `large` vessels (indices into the sorted
-    `mmsi`), from histograms of their times built `HISTOGRAMS_PER_PASS` at a time."""
+    `mmsi`), from histograms of their times built `HISTOGRAMS_PER_PASS` at a time; and of those
+    with bins of more than `max_rows` rows, the bins (`Crowded`)."""
     cuts: dict[int, np.ndarray] = {}
+    crowded: dict[int, Crowded] = {}
     for start in range(0, len(large), HISTOGRAMS_PER_PASS):
         bins = {
             int(v): _Bins(int(first[v]), int(last[v]))
@@ -235,7 +264,8 @@ def time_cuts(
             for v, hist in bins.items():
                 hist.add(time_us[vessel == v])
         cuts |= {v: vessel_cuts(hist, max_rows, gap_us) for v, hist in bins.items()}
-    return cuts
+        crowded |= {v: Crowded.of(hist, max_rows) for v, hist in bins.items()}
+    return cuts, {v: c for v, c in crowded.items() if len(c.bins)}
 
 
 def _vessel_spans(paths: Sequence[Path]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -273,6 +303,60 @@ class _Bins:
 
     def add(self, time_us: np.ndarray) -> None:
         self.counts += np.bincount((time_us - self.start) // self.width, minlength=len(self.counts))
+
+
+@dataclass(frozen=True)
+class Crowded:
+    """A large vessel's time bins (`_Bins`) of more rows than a piece holds: only there can more
+    than a piece's worth of its reports share one time."""
+
+    start: int
+    width: int
+    bins: np.ndarray
+
+    @classmethod
+    def of(cls, hist: _Bins, max_rows: int) -> Crowded:
+        return cls(hist.start, hist.width, np.flatnonzero(hist.counts > max_rows))
+
+    def holds(self, time_us: np.ndarray) -> np.ndarray:
+        return np.isin((time_us - self.start) // self.width, self.bins)
+
+
+class FloodCap:
+    """Which reports of a large partition, read in order, follow `cap` earlier ones of their
+    vessel at their time: the cleaner would keep only the first, and a flood of them would make
+    one unbounded piece. Counts are kept for the times in crowded bins only."""
+
+    def __init__(self, plan: PiecePlan, cap: int) -> None:
+        self.plan = plan
+        self.cap = cap
+        self.seen: Counter[tuple[int, int]] = Counter()
+
+    def over(self, table: pa.Table) -> np.ndarray:
+        """One flag per row of `table`: beyond the cap."""
+        over = np.zeros(table.num_rows, dtype=bool)
+        if not self.plan.crowded:
+            return over
+        mmsi, time_us = _keys(table)
+        vessel = np.searchsorted(self.plan.mmsi, mmsi)
+        for v, crowd in self.plan.crowded.items():
+            rows = np.flatnonzero(vessel == v)
+            rows = rows[crowd.holds(time_us[rows])]
+            over[rows] = self._beyond(v, time_us[rows])
+        return over
+
+    def _beyond(self, v: int, time_us: np.ndarray) -> np.ndarray:
+        """Of one vessel's reports (in order), those after `cap` others at their time, counting
+        those of earlier batches."""
+        times, inverse, counts = np.unique(time_us, return_inverse=True, return_counts=True)
+        order = np.argsort(inverse, kind="stable")
+        starts = np.r_[0, np.cumsum(counts)[:-1]]
+        rank = np.empty(len(time_us), dtype=np.int64)
+        rank[order] = np.arange(len(time_us)) - starts[inverse[order]]
+        before = np.array([self.seen[(v, int(t))] for t in times], dtype=np.int64)
+        for t, n in zip(times, counts, strict=True):
+            self.seen[(v, int(t))] += int(n)
+        return rank + before[inverse] >= self.cap
 
 
 def vessel_cuts(bins: _Bins, max_rows: int, gap_us: int | None) -> np.ndarray:

@@ -14,7 +14,8 @@ import numpy as np
 
 KEPT = 0
 
-# code -> (stage, reason, description); the order is the order in which checks are applied.
+# code -> (stage, reason, description); the order is the order in which checks are applied (but
+# for codes added later, listed last: a code's place is its index in `rejects._REASON_NAMES`).
 REASONS: dict[int, tuple[str, str, str]] = {
     1: ("read", "malformed_row", "too many or too few fields"),
     2: ("read", "header_line", "header repeated mid-file (joined files); later rows read under it"),
@@ -40,6 +41,7 @@ REASONS: dict[int, tuple[str, str, str]] = {
     22: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
     23: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
     24: ("segment", "dwell", "inside a stop: within --dwell-radius for at least --dwell-time"),
+    25: ("vessel", "same_time_flood", "report of a vessel at one time beyond a piece's worth"),
 }
 CODE = {reason: code for code, (_, reason, _) in REASONS.items()}
 N_CODES = max(REASONS) + 1

@@ -46,3 +46,26 @@ def segment(
     codes = np.where(track < 0, CODE["short_segment"], 0).astype(np.uint8)
     codes[splits.drop] = CODE["dwell"]
     return track, codes, int((~long_enough).sum())
+
+
+def antimeridian_crossing(mmsi: np.ndarray, lon: np.ndarray, track: np.ndarray) -> int | None:
+    """The MMSI of the first kept track (`track` >= 0, rows sorted by (MMSI, time)) whose
+    consecutive reports are more than 180 degrees of longitude apart, i.e. that crosses the
+    antimeridian; None when none does. Region boxes, corridors and route clusters are not
+    circular in longitude, so such a track would span every longitude."""
+    kept = np.flatnonzero(track >= 0)
+    if len(kept) < 2:
+        return None
+    same = track[kept[1:]] == track[kept[:-1]]
+    jumps = same & (np.abs(np.diff(lon[kept])) > 180.0)
+    return int(mmsi[kept[1:][jumps][0]]) if jumps.any() else None
+
+
+def antimeridian_message(mmsi: int) -> str:
+    """The one-line refusal of a track across 180 degrees, and what to do instead."""
+    return (
+        f"vessel {mmsi} has a track that crosses the antimeridian (longitude +-180): aisdati "
+        "does not yet handle tracks across 180 degrees (its region boxes, corridors and route "
+        "clusters are not circular in longitude); shift the longitudes (e.g. into 0..360) or "
+        "split the data at 180; nothing written"
+    )

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +31,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 from rich.progress import Progress
 
+from aisdati.errors import UserError
 from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.inputs import Source, describe_read_error
@@ -38,10 +39,10 @@ from aisdati.preprocess.output import PartWriter, build_tracks
 from aisdati.preprocess.partition import VesselPartitions, partition_tables
 from aisdati.preprocess.read import open_reader
 from aisdati.preprocess.rejects import malformed_rows, reject_rows
-from aisdati.preprocess.report import IngestCounts
+from aisdati.preprocess.report import CODE, IngestCounts
 from aisdati.preprocess.routes import TrackShapes
 from aisdati.preprocess.routes import settings_of as route_settings
-from aisdati.preprocess.segment import segment
+from aisdati.preprocess.segment import antimeridian_crossing, antimeridian_message, segment
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.preprocess.stops import Splitter, dwell_rules
 from aisdati.preprocess.streams import READ_ERRORS
@@ -168,15 +169,16 @@ def vessel_stages(task: VesselTask) -> VesselResult:
     stops = dwell_rules(settings.dwell_radius_m, settings.dwell_time_s, settings.min_sog_kn)
     # reports further apart than both the stop gap and the dwell time are independent
     independent_s = max(settings.stop_gap_s, settings.dwell_time_s)
-    pieces = partition_tables(
-        task.spills, PARTITION_SCHEMA, task.rows, settings.rows_per_bucket, independent_s
-    )
     with (
         contextlib.ExitStack() as stack,
         pa.ipc.new_stream(str(task.points), POINTS_SCHEMA) as points,
         pa.ipc.new_stream(str(task.tracks), TRACKS_SCHEMA) as spilled,
     ):
         rejects = _rejects_part(stack, task.rejects, task.reject_part)
+        pieces = partition_tables(
+            task.spills, PARTITION_SCHEMA, task.rows, settings.rows_per_bucket, independent_s,
+            _flooded(counts, rejects, task.labels),
+        )  # fmt: skip
         for table in pieces:
             table, codes = clean_vessels(table, settings)
             track = _segment(table, codes, settings, stops, counts)
@@ -199,6 +201,21 @@ def vessel_stages(task: VesselTask) -> VesselResult:
     table = pa.concat_tables(tracks) if tracks else empty
     joined = TrackShapes.joined(shapes, samples) if settings.clusters == "routes" else None
     return VesselResult(counts, table, joined)
+
+
+def _flooded(
+    counts: IngestCounts, rejects: PartWriter | None, labels: tuple[str, ...]
+) -> Callable[[pa.Table], None]:
+    """Where the reports of a flood at one time that `partition_tables` drops go: counted, and
+    with --keep-rejects written, as `same_time_flood`."""
+
+    def dropped(rows: pa.Table) -> None:
+        counts.add("same_time_flood", rows.num_rows)
+        if rejects:
+            codes = np.full(rows.num_rows, CODE["same_time_flood"], dtype=np.uint8)
+            rejects.write(reject_rows(rows, codes, list(labels)))
+
+    return dropped
 
 
 def _lines(points: pa.Table) -> list[np.ndarray]:
@@ -229,6 +246,9 @@ def _segment(
     counts.short_segments += n_short
     out = np.full(len(codes), -1, dtype=np.int64)
     out[kept] = track
+    crossing = antimeridian_crossing(mmsi[kept], lon, track)
+    if crossing is not None:
+        raise UserError(antimeridian_message(crossing))
     return out
 
 
