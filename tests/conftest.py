@@ -64,3 +64,23 @@ def kitimat(tmp_path_factory) -> Path:
     result = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 0, result.output
     return out
+
+
+@pytest.fixture(scope="session")
+def ny_dati(tmp_path_factory) -> dict:
+    """The NY hour ingested (tracks of >= 30 reports) and a 2-episode dati model of its `down`
+    cluster ({"base", "proc", "models"}), built once per worker: tests copy it before they damage
+    it."""
+    from tests.helpers.models import train_ny_dati
+
+    return train_ny_dati(tmp_path_factory.mktemp("detect"))
+
+
+@pytest.fixture(scope="session")
+def ny_models(tmp_path_factory) -> dict:
+    """The NY hour ingested (tracks of >= 30 reports) and 2-episode dati, bc and nearest models
+    of its `down` cluster ({"proc", "models"}; the lanes preset without pretraining), built once
+    per worker: tests copy them before they damage them."""
+    from tests.helpers.models import train_ny_models
+
+    return train_ny_models(tmp_path_factory.mktemp("models"))

@@ -1,5 +1,7 @@
 """Exact DTW: whole-pair forms against a naive reference, the incremental form against the
-whole-pair form, and the haversine metric against the `haversine` package."""
+whole-pair form, and the haversine metric against the `haversine` package; the batched mean
+DTW, a planted detour on a real New York Harbor track, and the pruned nearest-track search
+against every pair, on real Kitimat tracks and random ones."""
 
 from __future__ import annotations
 
@@ -7,6 +9,7 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +30,7 @@ from aisdati.dtw import (
     prepare_lonlat,
 )
 from aisdati.geo import arc_m, haversine_m
+from aisdati.tracks.store import load_tracks, read_track_table
 
 COORD = st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
 # Few distinct values make exact ties between warping paths common.
@@ -283,3 +287,126 @@ def test_a_damaged_incremental_state_is_refused():
     restored = IncrementalDTW("haversine")
     restored.load_state_dict(good)
     assert restored.distance == dtw_state.distance
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory):
+    from typer.testing import CliRunner
+
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("processed")
+    src = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+    args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def mean_dtw_m(a: np.ndarray, b: np.ndarray) -> float:
+    cost, length = dtw_path_length(a, b, "haversine")
+    return cost / length
+
+
+def _detour(track: np.ndarray, km: float) -> np.ndarray:
+    """The track with a smooth bump of `km` peak in its middle third, perpendicular to the line
+    from its first to its last point."""
+    n = len(track)
+    coslat = np.cos(np.radians(track[0, 1]))
+    d = (track[-1] - track[0]) * [coslat, 1.0]
+    normal = np.array([-d[1], d[0]]) / np.hypot(*d)
+    i = np.arange(n)
+    bump = np.clip(1 - np.abs(i - n / 2) / (n / 6), 0, 1)
+    offset_deg = bump[:, None] * km / 111.2 * normal / [coslat, 1.0]
+    return track + offset_deg
+
+
+def test_planted_detour_scores_above_its_untouched_twin(processed):
+    (track,) = load_tracks(processed, [3])
+    rng = np.random.default_rng(0)
+    # a model that has learnt the route well: rollouts within ~50 m of the track
+    rollouts = [track.positions + rng.normal(0, 0.0005, track.positions.shape) for _ in range(3)]
+    twin = track.positions.copy()
+    detoured = _detour(track.positions, 5.0)
+    score_twin = min(mean_dtw_m(r, twin) for r in rollouts)
+    score_detour = min(mean_dtw_m(r, detoured) for r in rollouts)
+    assert score_detour > 5 * score_twin
+    assert score_twin < 0.75 * score_detour  # the paper's rule flags the detour alone
+    profile = matched_distances(detoured, rollouts[0])
+    dev, idx = profile.max(), int(profile.argmax())
+    assert dev > 4000
+    assert abs(idx - len(detoured) / 2) <= len(detoured) / 10
+
+
+def test_batched_parallel_dtw_equals_reference_dtw():
+    rng = np.random.default_rng(0)
+    origin = np.array([-80.0, 25.0])
+    tracks = [np.cumsum(rng.normal(0, 0.001, (n, 2)), 0) + origin for n in (50, 80, 33)]
+    rolls = np.cumsum(rng.normal(0, 0.001, (6, 90, 2)), 1) + origin
+    lengths = np.array([90, 60, 81, 40, 33, 70])
+    owner = np.array([0, 0, 1, 1, 2, 2])
+    got = batch_mean_dtw_m(rolls, lengths, tracks, owner)
+    want = [mean_dtw_m(rolls[i, : lengths[i]], tracks[owner[i]]) for i in range(6)]
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def real(kitimat) -> list[np.ndarray]:
+    ids = read_track_table(kitimat)["track_id"].tolist()[:40]
+    return [t.positions for t in load_tracks(kitimat, ids)]
+
+
+def random_tracks(seed: int, count: int) -> list[np.ndarray]:
+    """Random walks near Kitimat, some standing still for a while (points with no course)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        steps = rng.normal(0, 0.01, (int(rng.integers(5, 120)), 2))
+        steps[rng.random(len(steps)) < 0.1] = 0.0
+        out.append(np.array([-129.0, 53.9]) + rng.normal(0, 0.05, 2) + np.cumsum(steps, 0))
+    return out
+
+
+def plain_nearest(query: np.ndarray, refs: list[np.ndarray]) -> tuple[float, int]:
+    """Every reference's full DTW (no bounds, no abandoning), the first of equal minima."""
+    means = batch_mean_dtw_m(
+        np.repeat(query[None], len(refs), 0), np.full(len(refs), len(query)), refs,
+        np.arange(len(refs)),
+    )  # fmt: skip
+    return float(means.min()), int(means.argmin())
+
+
+def test_the_pruned_nearest_search_equals_every_pair_on_real_and_random_tracks(real):
+    for queries, refs in ((real[:8], real[8:]), (random_tracks(2, 6), random_tracks(3, 40))):
+        refs = [*refs, refs[3]]  # a duplicate: equal means go to the smaller index
+        dist, arg = nearest_mean_dtw_m(queries, refs, [np.arange(len(refs))] * len(queries))
+        for q, d, a in zip(queries, dist, arg, strict=True):
+            assert (d, a) == plain_nearest(q, refs)
+
+
+def test_the_search_keeps_to_each_querys_candidates(real):
+    queries, refs = real[:5], real[5:]
+    cands = [np.arange(k, len(refs), 3) for k in range(5)]
+    dist, arg = nearest_mean_dtw_m(queries, refs, cands)
+    for q, c, d, a in zip(queries, cands, dist, arg, strict=True):
+        best, at = plain_nearest(q, [refs[j] for j in c])
+        assert d == best and a == c[at]
+    dist, arg = nearest_mean_dtw_m(queries[:1], refs, [np.array([], np.int64)])
+    assert dist[0] == np.inf and arg[0] == -1
+
+
+@pytest.fixture(scope="module")
+def tracks(kitimat):
+    ids = read_track_table(kitimat)["track_id"].tolist()[:30]
+    return load_tracks(kitimat, ids)
+
+
+def test_nearest_search_is_exact_despite_pruning(tracks):
+    queries = [t.positions for t in tracks[:6]]
+    refs = [t.positions for t in tracks[6:]]
+    cands = [np.arange(len(refs))] * len(queries)
+    dist, arg = nearest_mean_dtw_m(queries, refs, cands)
+    for q, d, a in zip(queries, dist, arg, strict=True):
+        brute = [c / n for c, n in (dtw_path_length(q, r, "haversine") for r in refs)]
+        assert d == pytest.approx(min(brute), rel=1e-9)
+        assert brute[a] == pytest.approx(d, rel=1e-9)

@@ -1,15 +1,42 @@
-"""The indexed scoring kernels against their brute-force definitions, on real Kitimat tracks and
-random ones: `lane_distances` (a k-d tree, kept between calls) and `nearest_mean_dtw_m` (lower
-bounds and abandoning) must give what comparing every point, or every pair, gives."""
+"""Geodesy (`aisdati.geo`): the spherical step against the haversine distance, and the
+indexed lane distance (a k-d tree, kept between calls) against comparing every point, on real
+Kitimat tracks and random ones."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from aisdati.dtw import batch_mean_dtw_m, nearest_mean_dtw_m
-from aisdati.geo import courses_deg, haversine_m, lane_distances
+from aisdati.geo import courses_deg, haversine_m, lane_distances, spherical_step
 from aisdati.tracks.store import load_tracks, read_track_table
+
+
+@pytest.mark.parametrize("lat", [0.0, 25.0, 40.7, 60.0])
+def test_spherical_rule_one_step_error_below_0_1_percent(lat):
+    rng = np.random.default_rng(1)
+    sog = rng.uniform(0.5, 30.0, 200)
+    cog = rng.uniform(0.0, 360.0, 200)
+    dist_m = rng.uniform(10.0, 5000.0, 200)
+    dt = dist_m / 1852.0 / sog
+    lon, lat2 = spherical_step(-74.0, lat, sog, cog, dt)
+    true = haversine_m(-74.0, lat, lon, lat2)
+    assert np.max(np.abs(true - dist_m) / dist_m) < 1e-3
+
+
+NM_M = 1852.0
+
+
+@pytest.mark.parametrize("lat", [-60.0, -20.0, 0.0, 25.3, 45.0, 60.0])
+def test_spherical_step_distance_matches_haversine(lat):
+    """One step of SOG x dt nautical miles travels that far on the sphere, within 0.1 %."""
+    dists_m = np.array([50.0, 500.0, 2000.0, 4999.0])
+    dt_h = 0.1
+    for cog in np.arange(0.0, 360.0, 22.5):
+        sog = dists_m / NM_M / dt_h
+        lon2, lat2 = spherical_step(np.full(4, -80.0), np.full(4, lat), sog, cog, dt_h)
+        travelled = haversine_m(-80.0, lat, lon2, lat2)
+        rel = np.abs(travelled - dists_m) / dists_m
+        assert rel.max() < 1e-3, (lat, cog, rel)
 
 
 @pytest.fixture(scope="module")
@@ -72,29 +99,40 @@ def test_the_kept_index_serves_subsets_and_notices_changed_tracks(real):
     )
 
 
-def plain_nearest(query: np.ndarray, refs: list[np.ndarray]) -> tuple[float, int]:
-    """Every reference's full DTW (no bounds, no abandoning), the first of equal minima."""
-    means = batch_mean_dtw_m(
-        np.repeat(query[None], len(refs), 0), np.full(len(refs), len(query)), refs,
-        np.arange(len(refs)),
-    )  # fmt: skip
-    return float(means.min()), int(means.argmin())
+@pytest.fixture(scope="module")
+def tracks(kitimat):
+    ids = read_track_table(kitimat)["track_id"].tolist()[:30]
+    return load_tracks(kitimat, ids)
 
 
-def test_the_pruned_nearest_search_equals_every_pair_on_real_and_random_tracks(real):
-    for queries, refs in ((real[:8], real[8:]), (random_tracks(2, 6), random_tracks(3, 40))):
-        refs = [*refs, refs[3]]  # a duplicate: equal means go to the smaller index
-        dist, arg = nearest_mean_dtw_m(queries, refs, [np.arange(len(refs))] * len(queries))
-        for q, d, a in zip(queries, dist, arg, strict=True):
-            assert (d, a) == plain_nearest(q, refs)
+def test_lane_distances_equal_the_brute_force_nearest_great_circle_distance(tracks):
+    from aisdati.geo import haversine_m, lane_distances
+
+    track, lane = tracks[0].positions, np.concatenate([t.positions for t in tracks[1:4]])
+    brute = haversine_m(
+        track[:, None, 0], track[:, None, 1], lane[None, :, 0], lane[None, :, 1]
+    ).min(axis=1)
+    np.testing.assert_allclose(lane_distances(track, [lane]), brute, rtol=1e-6, atol=1e-3)
 
 
-def test_the_search_keeps_to_each_querys_candidates(real):
-    queries, refs = real[:5], real[5:]
-    cands = [np.arange(k, len(refs), 3) for k in range(5)]
-    dist, arg = nearest_mean_dtw_m(queries, refs, cands)
-    for q, c, d, a in zip(queries, cands, dist, arg, strict=True):
-        best, at = plain_nearest(q, [refs[j] for j in c])
-        assert d == best and a == c[at]
-    dist, arg = nearest_mean_dtw_m(queries[:1], refs, [np.array([], np.int64)])
-    assert dist[0] == np.inf and arg[0] == -1
+def test_the_course_weighted_lane_distance_is_the_brute_force_minimum(tracks):
+    from aisdati.geo import courses_deg, haversine_m, lane_distances
+
+    track, lane = tracks[0].positions, [t.positions for t in tracks[1:4]]
+    cloud = np.concatenate(lane)
+    courses = np.concatenate([courses_deg(p) for p in lane])
+    dtheta = np.radians(courses_deg(track)[:, None] - courses[None, :])
+    gc = haversine_m(track[:, None, 0], track[:, None, 1], cloud[None, :, 0], cloud[None, :, 1])
+    brute = np.hypot(gc, 3000.0 * np.sin(dtheta / 2)).min(axis=1)
+    np.testing.assert_allclose(lane_distances(track, lane, 3000.0), brute, rtol=1e-6, atol=1e-3)
+
+
+def test_sailing_a_lane_backwards_costs_the_course_weight(tracks):
+    from aisdati.geo import lane_distances
+
+    track = tracks[0].positions
+    np.testing.assert_allclose(lane_distances(track, [track], 3000.0), 0.0, atol=1e-6)
+    backwards = lane_distances(track[::-1], [track], 3000.0)
+    assert np.all(backwards <= 3000.0 + 1e-6)
+    assert np.median(backwards) > 2500.0  # the same places, the opposite way
+    np.testing.assert_allclose(lane_distances(track[::-1], [track]), 0.0, atol=1e-6)

@@ -16,11 +16,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import torch
-from hardening import one_line_error, run
 
 from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings
 from aisdati.storage import RemoteFolder
+from tests.helpers.cli import one_line_error, run
 
 pytest.importorskip("pyftpdlib")
 distributed = pytest.importorskip("distributed")

@@ -2,7 +2,8 @@
 item 1): every random draw is keyed by the run's seed and the track's own reports
 (`aisdati.ais.policy.Draws`), and the default rule is each model's calibrated threshold.
 On real Kitimat tracks, the area's default detector (cross-fitted BC, judged by stepspread)
-and DATI's lane score."""
+and DATI's lane score; and the one-step errors of a policy (`aisdati.ais.policy`): zero for one
+that reproduces the tracks, largest at a position jump."""
 
 from __future__ import annotations
 
@@ -13,12 +14,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aisdati.ais.policy import draw_rows
-from aisdati.ais.space import PRESETS
+from aisdati.ais.policy import AISPolicy, draw_rows
+from aisdati.ais.source import build_source
+from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.dati import DATIDetector
+from aisdati.evaluation.inject import inject
 from aisdati.model.noise import keyed_normal
 from aisdati.tracks.store import load_tracks, read_track_table
 
@@ -115,3 +118,63 @@ def test_detect_flags_a_track_alone_as_in_its_batch(cli, kitimat, area_bc, split
                    "--threshold", "0.75", "--out", paper)  # fmt: skip
     assert relative.exit_code == 0 and "too few to say what is normal" in relative.output
     assert any("too few" in w for w in json.loads((paper / "report.json").read_text())["warnings"])
+
+
+@pytest.fixture(scope="module")
+def tracks(kitimat):
+    ids = read_track_table(kitimat)["track_id"].tolist()[:30]
+    return load_tracks(kitimat, ids)
+
+
+def _perfect_policy(space, tracks, draws):
+    """A policy that takes every track's own perfect decisions: it reproduces them exactly."""
+    scaled = np.concatenate(
+        [space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
+         for t in tracks]
+    ).repeat(draws, axis=0)
+
+    def make(rows, temporal):
+        return lambda obs: scaled[: len(obs)]
+
+    return AISPolicy(space, make)
+
+
+def test_step_errors_of_a_model_that_reproduces_the_tracks_are_zero(tracks):
+    space = build_source(tracks, LaneConfig()).space
+    policy = _perfect_policy(space, tracks[:5], draws=3)
+    errors, predicted = policy.step_errors(
+        [t.positions for t in tracks[:5]], [t.dts for t in tracks[:5]], 3
+    )
+    for e, p, t in zip(errors, predicted, tracks[:5], strict=True):
+        assert len(e) == len(t.positions) - 1
+        assert e.max() < 1e-3  # metres
+        np.testing.assert_allclose(p, t.positions[1:], atol=1e-9)
+
+
+def _dead_reckoning(space):
+    """Continue at the current course and speed (read from the motion state)."""
+
+    def make(rows, temporal):
+        def act(obs):
+            sog = obs[:, 4] * space.rule.max_sog
+            cog = np.degrees(np.arctan2(obs[:, 2], obs[:, 3]))
+            decision = np.stack([sog, cog, np.full(len(obs), 0.05)], axis=1)
+            return space.rule.decision_scaler.scale(decision)
+
+        return act
+
+    return make
+
+
+def test_a_position_jump_gives_the_largest_step_error(tracks):
+    t = tracks[3]
+    times = np.r_[0.0, np.cumsum(t.dts)] * 3600.0
+    got = inject("jump", t.positions, times, np.random.default_rng(0))
+    i, j = got.stretch
+    space = build_source(tracks, LaneConfig(state="motion")).space
+    policy = AISPolicy(space, _dead_reckoning(space))
+    (errors,), _ = policy.step_errors([got.positions], [np.diff(got.times_s) / 3600.0], 1)
+    peak = int(np.argmax(errors)) + 1  # error k is at report k + 1
+    # at the jump itself, or the report after it (dead reckoning carries the jump one step on)
+    assert min(abs(peak - i), abs(peak - j)) <= 1, (peak, i, j)
+    assert errors.max() > 2500

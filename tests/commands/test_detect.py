@@ -23,7 +23,7 @@ def run(tmp_path_factory):
     from aisdati.cli import app
 
     base = tmp_path_factory.mktemp("ais")
-    data = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+    data = Path(__file__).parents[1] / "data" / "NYHarbor_2020_06_30_first_hour.csv"
     proc, models, report = base / "processed", base / "models", base / "report"
 
     def cli(*args):

@@ -1,12 +1,17 @@
-"""`aisdati selftest` end to end on tiny runs, and its one-line errors on bad input."""
+"""`aisdati selftest` end to end on tiny runs (Table 1's methods and the Table 2 ablation
+among them), and its one-line errors on bad input."""
 
 from __future__ import annotations
 
 import json
 import math
 
+import numpy as np
 import pandas as pd
 import pytest
+
+from aisdati.selftest.paper import PAPER_TABLE1
+from aisdati.selftest.settings import ABLATION
 
 TINY = ("--seeds", "2", "--episodes", "2", "--steps", "20", "--references", "2")
 FILES = ("results.csv", "results.json", "scores.csv", "families.png", "rollouts.png")
@@ -137,3 +142,54 @@ def test_two_workers_end_without_a_traceback(tmp_path):
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in run.stderr + run.stdout
     assert (tmp_path / "run" / "results.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("--methods", "bogus"),
+        ("--methods", ","),
+        ("--methods", "table2,bc"),
+    ],
+)
+def test_bad_methods_are_one_line_errors(cli, tmp_path, args):
+    result = cli("selftest", "--out", tmp_path / "o", *args)
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:")
+
+
+TINY_BASELINES = ("--seeds", "1", "--references", "2", "--workers", "1")
+
+
+def test_table1_methods_end_to_end(cli, tmp_path):
+    out = tmp_path / "t1"
+    result = cli(
+        "selftest", "--methods", "dati,bc,ddpg-ti", "--family", "circles",
+        "--episodes", "2", "--steps", "20", "--out", out, *TINY_BASELINES,
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "Table 1" in result.output and "DDPG-TI" in result.output
+    rows = pd.read_csv(out / "results.csv")
+    assert list(rows["method"]) == ["dati", "bc", "ddpg-ti"]
+    assert list(rows["paper_best"]) == [PAPER_TABLE1[m]["circles"] for m in rows["method"]]
+    assert (rows["best"] <= rows["second_best"]).all() and (rows["mean_episodes"] == 2).all()
+    scores = pd.read_csv(out / "scores.csv")
+    assert sorted(scores["method"].unique()) == ["bc", "dati", "ddpg-ti"]
+    assert len(scores) == 3 * 2 and np.isfinite(scores["score"]).all()
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["settings"]["methods"] == ["dati", "bc", "ddpg-ti"]
+    assert doc["settings"]["bc"]["episodes"] == doc["settings"]["ddpg"]["episodes"] == 2
+    assert (out / "rollouts.png").stat().st_size > 0
+
+
+def test_ablation_end_to_end(cli, tmp_path):
+    out = tmp_path / "t2"
+    result = cli("selftest", "--methods", "table2", "--episodes", "1", "--steps", "10",
+                 "--out", out, *TINY_BASELINES)
+    assert result.exit_code == 0, result.output
+    assert "ablation" in result.output and "top-2" in result.output
+    rows = pd.read_csv(out / "results.csv")
+    assert tuple(rows["method"]) == ABLATION and set(rows["family"]) == {"circles"}
+    assert list(rows["paper_best"]) == [0.058, 1.829, 0.305]
+    assert list(rows["paper_second_best"]) == [0.074, 1.976, 0.451]

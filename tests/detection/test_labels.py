@@ -1,6 +1,7 @@
 """Labels for `aisdati detect --labels` on the real Kitimat tracks: incident lists (vessel, time
 window, kind) as labels with per-kind metrics (issue 28, item 4), and rows that disagree about
-one track refused instead of decided by their order (issue 27, item 4)."""
+one track refused instead of decided by their order (issue 27, item 4); the metrics of flags
+and scores against labels, and bad label files refused before any work (issue 13, item 12)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ from aisdati.detection.labels import evaluate_labels, match_labels, read_labels
 from aisdati.detection.routing import NOT_JUDGED_FAR
 from aisdati.errors import UserError
 from aisdati.tracks.store import load_tracks, read_track_table
+from tests.helpers.cli import one_line_error
+from tests.helpers.models import detect_dati
 
 
 @pytest.fixture(scope="module")
@@ -194,3 +197,38 @@ def test_report_counts_the_tracks_no_model_judged(kitimat, cli, tmp_path):
         set(read_track_table(kitimat)["track_id"]) - set(pd.read_parquet(out / "scores.parquet")
         ["track_id"]) - set(cov["training_track_ids"])
     )  # fmt: skip
+
+
+def test_label_metrics_weighted_f1_and_auc():
+    from aisdati.detection.labels import label_metrics
+
+    y = np.array([1, 1, 0, 0, 0, 0])
+    flagged = np.array([1, 0, 1, 0, 0, 0])
+    score = np.array([0.9, 0.6, 0.8, 0.1, 0.2, 0.3])
+    m = label_metrics(y, flagged, score)
+    assert m["precision"] == pytest.approx(0.5) and m["recall"] == pytest.approx(0.5)
+    # class 1: F1 0.5 (support 2); class 0: precision 3/4, recall 3/4, F1 0.75 (support 4)
+    assert m["f1_weighted"] == pytest.approx((2 * 0.5 + 4 * 0.75) / 6)
+    assert m["roc_auc"] == pytest.approx(7 / 8)
+
+
+# --------------------------------------------------------------------------------- item 12
+LABELS = [
+    ("track_id,label\nabc,1\n", "row 1: track_id must be an integer in \\[0, .*got 'abc'"),
+    ("track_id,label\n3,1\n,0\n", "row 2: track_id must be an integer .*got ''"),
+    ("track_id,label\n99999999999999999999,1\n", "row 1: track_id must be an integer in"),
+    ("track_id,label\n3,yes\n", "row 1: label must be 0 or 1, got 'yes'"),
+    ("track_id,label\n3,1\n3,0\n", "track_id 3 has both labels 0 and 1"),
+    ("mmsi,start,label\n367000140,soon,1\n", "row 1: start must be a time"),
+    ("mmsi,start,label\n-5,2020-06-30T00:00:00,1\n", "row 1: mmsi must be an integer in \\[1,"),
+    ("track_id,label\n", "the file holds no labels"),
+]
+
+
+@pytest.mark.parametrize("text, needle", LABELS)
+def test_bad_label_files_are_refused_before_any_work(ny_dati, tmp_path, text, needle):
+    labels = tmp_path / "labels.csv"
+    labels.write_text(text)
+    result = detect_dati(ny_dati, ny_dati["models"], tmp_path / "r", "--labels", labels)
+    one_line_error(result, re.escape(str(labels)) + ": " + needle)
+    assert not (tmp_path / "r" / "scores.parquet").exists()  # no rollout ran

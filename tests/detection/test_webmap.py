@@ -25,7 +25,7 @@ from aisdati.detection.webmap import (
     html_detection_map,
 )
 
-DATA = Path(__file__).parent / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
+DATA = Path(__file__).parents[1] / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
 FLAG_RED = "#d62728"
 BROWSER_SERVICES = ("google.com", "googleapis.com", "gvt1.com")
 """Chromium's own update, time and account services, which it calls whatever the page is (the

@@ -3,7 +3,8 @@ scikit-learn's estimator checks: the PyOD-shaped interface (fit returns the dete
 finite and one per track, the threshold falls as the contamination rises, predict is the score
 above it, save and load give back the same scores, an unfitted detector refuses in one line), a
 track's score independent of the tracks scored with it, and every score declared once with its
-unit, evidence, profile, definition and calibration. On real Kitimat tracks, small models."""
+unit, evidence, profile, definition and calibration. On real Kitimat tracks, small models; and
+non-finite numbers reaching a kernel one line naming the model (issue 27, item 8)."""
 
 from __future__ import annotations
 
@@ -96,3 +97,17 @@ def test_every_score_is_declared_computed_and_calibrated(fitted, route):
         got = fitted.score(route[1], replace(HOW, score=name))
         assert np.isfinite(got.score).all() and len(got.profiles) == len(route[1])
         assert fitted.threshold(replace(HOW, score=name)) > 0
+
+
+def test_non_finite_numbers_reaching_a_kernel_are_one_line_naming_the_model(ny_models, tmp_path):
+    """The kernels refuse NaN themselves; the detector says which model was scoring."""
+    from aisdati.detectors import load_detector
+    from aisdati.errors import UserError
+    from aisdati.tracks.store import load_tracks
+
+    det = load_detector(ny_models["models"] / "down-nearest")
+    (track,) = load_tracks(ny_models["proc"], det.card.data.track_ids[:1])
+    positions = track.positions.copy()
+    positions[3] = np.nan
+    with pytest.raises(UserError, match=r"cannot score with .*down-nearest\.json: .*non-finite"):
+        det.score([replace(track, positions=positions)])

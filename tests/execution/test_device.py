@@ -1,7 +1,7 @@
 """`--device`: where DATI's networks run. On this machine (no GPU) `auto` is the CPU and a GPU
 asked for is one line and exit 2 before anything is written; where torch sees CUDA, the tests
 at the end train and score on it and compare with the CPU (run them on a GPU machine:
-`pytest tests/test_device.py`)."""
+`pytest tests/execution/test_device.py`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-from hardening import one_line_error, run
 
 from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings
@@ -19,6 +18,7 @@ from aisdati.execution import resolve_device
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.selftest.families import get_family
 from aisdati.selftest.sources import make_family_env
+from tests.helpers.cli import one_line_error, run
 
 GPU = torch.cuda.is_available()
 needs_gpu = pytest.mark.skipif(not GPU, reason="torch sees no CUDA device")

@@ -16,13 +16,13 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-from hardening import one_line_error, run
 
 from aisdati.ais.space import lane_config
 from aisdati.ais.training import TrainSettings
 from aisdati.errors import UserError
 from aisdati.execution import Execution, InProcess, InThreads, open_runner
 from aisdati.execution.runner import DaskRunner
+from tests.helpers.cli import one_line_error, run
 
 distributed = pytest.importorskip("distributed")
 

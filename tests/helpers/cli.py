@@ -1,6 +1,6 @@
-"""What the hardening tests share: `run` invokes the real command line in process;
+"""The command line as a user meets it: `run` invokes the real `aisdati` in process;
 `one_line_error` asserts a user mistake's contract (exit 2, one red line naming the problem, no
-traceback); `card_edit` damages one field of a model card."""
+traceback)."""
 
 from __future__ import annotations
 
@@ -21,16 +21,3 @@ def one_line_error(result, needle: str, code: int = 2) -> None:
     assert result.stderr.startswith("error:"), result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert re.search(needle, " ".join(result.stderr.split())), result.stderr
-
-
-def card_edit(path: str, value):
-    """An edit of a card (a JSON dict) that sets the dotted `path` to `value`."""
-
-    def edit(card):
-        node = card
-        *parents, last = path.split(".")
-        for p in parents:
-            node = node[p]
-        node[last] = value
-
-    return edit

@@ -2,7 +2,7 @@
 reports, 32 tracks with `--roi none --min-points 20`), and the same rows in the Danish Maritime
 Authority's CSV layout.
 
-`python tests/kitimat_sample.py` writes the DMA fixture,
+`python tests/helpers/kitimat_sample.py` writes the DMA fixture,
 tests/data/DMA_2018_07_Kitimat_sample.csv.gz; the tests import `kitimat_rows` to rebuild the
 MarineCadastre rows it was made from (and check that the fixture is what this script writes).
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 KITIMAT = DATA / "AIS_2018_07-08_Kitimat.csv.gz"
 DMA_SAMPLE = DATA / "DMA_2018_07_Kitimat_sample.csv.gz"
 VESSELS = ("100000634", "100001938", "100001691", "100000507", "100000809", "100000796")

@@ -1,5 +1,5 @@
-"""The DATI trainer (ensemble = independent runs, early stopping, warm-up), checkpoints and the
-evaluation statistics."""
+"""The DATI trainer (ensemble = independent runs, early stopping, warm-up, the actor chosen by
+validation), checkpoints and the evaluation statistics."""
 
 from __future__ import annotations
 
@@ -358,3 +358,25 @@ def test_summarize_interval_on_a_larger_sample():
     assert s.median == pytest.approx(np.median(x))
     assert s.iqm_low < s.iqm < s.iqm_high
     assert s.iqm_high - s.iqm_low < 0.5 * s.iqm
+
+
+def test_validation_selects_the_actor_with_the_best_validation_score():
+    from aisdati.model.dati import DATIConfig, DATITrainer
+    from aisdati.selftest.families import get_family
+    from aisdati.selftest.sources import make_family_env
+
+    scores = iter([5.0, 3.0, 4.0, 6.0, 7.0])
+    snapshots = []
+
+    def validate(trainer, k):
+        snapshots.append(trainer.nets.forward_actor.out.weight.detach().clone())
+        return next(scores)
+
+    env = make_family_env(replace(get_family("circles"), steps=12))
+    cfg = DATIConfig(episodes=5, batch_size=16, patience=0)
+    trainer = DATITrainer([env], [0], cfg, validate)
+    trainer.train()
+    assert trainer.best_episode[0] == 2
+    kept = trainer.final.forward_actor.out.weight
+    assert torch.equal(kept, snapshots[1])
+    assert [h.validation for h in trainer.history] == [5.0, 3.0, 4.0, 6.0, 7.0]

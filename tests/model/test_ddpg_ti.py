@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from line_family import LINE
 from torch import nn
 
 from aisdati.model.ddpg_ti import DDPGTIConfig, DDPGTITrainer, ddpg_ti_act
@@ -14,6 +13,7 @@ from aisdati.model.networks import EnsembleLinear
 from aisdati.model.rollout import rollout_policy
 from aisdati.selftest.protocol import evaluation_references
 from aisdati.selftest.sources import make_family_env
+from tests.helpers.line_family import LINE
 
 
 def _sb3_ddpg_ti(env, cfg: DDPGTIConfig):

@@ -1,9 +1,10 @@
-"""The trajectory-imitation environment, the synthetic families and the update rules."""
+"""The trajectory-imitation environment (`aisdati.model.env`): the Gymnasium API (and
+Stable-Baselines3's checker), determinism, the perfect policy, sticking at the region's edge and
+the reward's timing."""
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import replace
 
 import gymnasium
 import numpy as np
@@ -11,20 +12,18 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from aisdati.dtw import dtw
-from aisdati.errors import UserError
-from aisdati.geo import EARTH_RADIUS_M, haversine_m, spherical_step
 from aisdati.model.env import (
     ENV_ID,
     Reference,
     ReferenceSource,
     TrajectoryImitationEnv,
 )
-from aisdati.model.rules import PlanarRule, SphericalRule
-from aisdati.selftest.families import FAMILIES, Family, get_family, register_family
-from aisdati.selftest.sources import FamilySource, make_family_env
+from aisdati.model.rules import PlanarRule
+from aisdati.selftest.families import get_family
+from aisdati.selftest.sources import make_family_env
+from tests.helpers.line_family import LINE
 
 PAPER = ("fixedstart", "ushaped", "circles", "ribbons")
-NM_M = 1852.0
 
 
 # ---------------------------------------------------------------------------- Gymnasium API
@@ -219,144 +218,8 @@ def test_step_before_reset_raises():
         make_family_env("circles").step(np.zeros(2, dtype=np.float32))
 
 
-# ---------------------------------------------------------------------------- families
-@pytest.mark.parametrize("name", PAPER)
-def test_paper_family_geometry(name):
-    fam = get_family(name)
-    assert fam.diameter > 0 and np.isfinite(fam.diameter)
-    assert fam.max_speed > 0
-    lo, hi = fam.bounds
-    assert np.all(hi > lo)
-    for alpha in np.linspace(*fam.alpha_range, 5):
-        ref = fam.reference(alpha)
-        assert ref.shape == (fam.steps + 1, 2)
-        assert np.all(ref >= lo) and np.all(ref <= hi)
-        speeds = np.linalg.norm(np.diff(ref, axis=0), axis=1) / fam.dt
-        assert speeds.max() <= fam.max_speed
+def test_environment_passes_sb3_check_env():
+    from stable_baselines3.common.env_checker import check_env
 
-
-def test_ribbons_diameter_is_twice_the_distance_to_the_median_member():
-    fam = get_family("ribbons")
-    lo, hi = fam.alpha_range
-    assert fam.wraps
-    half = dtw(fam.reference(lo), fam.reference((lo + hi) / 2))
-    assert fam.diameter == pytest.approx(2 * half, rel=1e-12)
-    # the boundary members of a wrapping family coincide
-    np.testing.assert_allclose(fam.reference(lo), fam.reference(hi), atol=1e-9)
-
-
-def test_non_wrapping_diameter_is_the_distance_between_the_boundary_members():
-    fam = get_family("circles")
-    assert fam.diameter == pytest.approx(dtw(fam.reference(0.5), fam.reference(1.0)))
-
-
-@pytest.fixture
-def spiral():
-    fam = Family(
-        name="TestSpiral",
-        x=lambda t, a: a * t * np.cos(t),
-        y=lambda t, a: a * t * np.sin(t),
-        alpha_range=(0.5, 1.0),
-        omega=0.5,
-        steps=30,
-    )
-    yield register_family(fam)
-    FAMILIES.pop("testspiral", None)
-
-
-def test_registered_family_works_by_name(spiral):
-    assert get_family("testspiral") is spiral
-    env = make_family_env("TestSpiral")
-    assert env.source.family is spiral
-    env.reset(seed=2)
-    for a in env.perfect_actions.copy():
-        _, reward, terminated, _, info = env.step(a)
-        assert reward == 1.0 and info["dtw"] <= 1e-9
-    assert terminated and env.t == 30
-    assert gymnasium.make(ENV_ID, family="testspiral").unwrapped.source.family is spiral
-
-
-def test_family_object_with_fewer_steps():
-    fam = replace(get_family("circles"), steps=12)
-    env = TrajectoryImitationEnv(FamilySource(fam))
-    env.reset(seed=0)
-    assert env.reference.steps == 12 and env.perfect_actions.shape == (12, 2)
-    assert env.observation_space.high[2] == 12
-
-
-def test_unknown_family_is_a_user_error():
-    with pytest.raises(UserError, match="unknown family"):
-        get_family("nosuchfamily")
-    with pytest.raises(UserError, match="unknown family"):
-        make_family_env("nosuchfamily")
-
-
-# ---------------------------------------------------------------------------- update rules
-def test_planar_rule_perfect_decisions_map_each_point_onto_the_next():
-    fam = get_family("fixedstart")
-    rule = PlanarRule(dt=fam.dt, max_speed=fam.max_speed)
-    pos = fam.reference(7.3)
-    dec = rule.perfect_decisions(pos, np.full(fam.steps, fam.dt))
-    assert dec.shape == (fam.steps, 2)
-    np.testing.assert_allclose(rule.step(pos[:-1], dec), pos[1:], atol=1e-12)
-    for i in (0, 57, fam.steps - 1):  # one state at a time as well
-        np.testing.assert_allclose(rule.step(pos[i], dec[i]), pos[i + 1], atol=1e-12)
-    scaled = rule.decision_scaler.scale(dec)
-    assert np.all(scaled >= -1) and np.all(scaled <= 1)
-    np.testing.assert_allclose(rule.decision_scaler.unscale(scaled), dec, atol=1e-12)
-
-
-def _destination(lon, lat, course_deg, dist_m):
-    """Great-circle destination (exact on the sphere), independent of the update rule."""
-    phi, lam, th = np.radians(lat), np.radians(lon), np.radians(course_deg)
-    d = dist_m / EARTH_RADIUS_M
-    phi2 = np.arcsin(np.sin(phi) * np.cos(d) + np.cos(phi) * np.sin(d) * np.cos(th))
-    lam2 = lam + np.arctan2(
-        np.sin(th) * np.sin(d) * np.cos(phi), np.cos(d) - np.sin(phi) * np.sin(phi2)
-    )
-    return np.degrees(lam2), np.degrees(phi2)
-
-
-@pytest.fixture
-def ais_track():
-    """A vessel in the Florida Straits: 60 reports, irregular intervals (10 s to 6 min),
-    speed 4-18 kn, slowly turning."""
-    rng = np.random.default_rng(7)
-    n = 60
-    dts = rng.uniform(10, 360, n) / 3600.0
-    sog = np.clip(11 + np.cumsum(rng.normal(0, 0.8, n)), 4, 18)
-    cog = (35 + np.cumsum(rng.normal(0, 4, n))) % 360
-    lon, lat = [-80.1], [25.3]
-    for k in range(n):
-        x, y = _destination(lon[-1], lat[-1], cog[k], sog[k] * dts[k] * NM_M)
-        lon.append(float(x))
-        lat.append(float(y))
-    return np.stack([lon, lat], axis=1), dts, sog, cog
-
-
-def test_spherical_rule_perfect_decisions_map_each_report_onto_the_next(ais_track):
-    pos, dts, sog, cog = ais_track
-    rule = SphericalRule(max_sog=30.0, max_dt_h=0.5)
-    dec = rule.perfect_decisions(pos, dts)
-    assert dec.shape == (len(dts), 3)
-    np.testing.assert_allclose(dec[:, 2], dts)
-    np.testing.assert_allclose(rule.step(pos[:-1], dec), pos[1:], atol=1e-10, rtol=0)
-    # the decisions are the vessel's real speed and course, up to the flat-Earth step
-    np.testing.assert_allclose(dec[:, 0], sog, rtol=2e-3)
-    course_error = (dec[:, 1] - cog + 180) % 360 - 180
-    assert np.abs(course_error).max() < 0.1
-    scaled = rule.decision_scaler.scale(dec)
-    assert np.all(scaled >= -1) and np.all(scaled <= 1)
-
-
-@pytest.mark.parametrize("lat", [-60.0, -20.0, 0.0, 25.3, 45.0, 60.0])
-def test_spherical_step_distance_matches_haversine(lat):
-    """One step of SOG x dt nautical miles travels that far on the sphere, within 0.1 %."""
-    dists_m = np.array([50.0, 500.0, 2000.0, 4999.0])
-    dt_h = 0.1
-    for cog in np.arange(0.0, 360.0, 22.5):
-        sog = dists_m / NM_M / dt_h
-        lon2, lat2 = spherical_step(np.full(4, -80.0), np.full(4, lat), sog, cog, dt_h)
-        travelled = haversine_m(-80.0, lat, lon2, lat2)
-        rel = np.abs(travelled - dists_m) / dists_m
-        assert rel.max() < 1e-3, (lat, cog, rel)
+    check_env(make_family_env(LINE), warn=False)
+    check_env(make_family_env("circles"), warn=False)

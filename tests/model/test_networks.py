@@ -1,4 +1,5 @@
-"""DATI's ensemble networks: shapes, constraints, the rank-one reward term, ablations."""
+"""DATI's ensemble networks: shapes, constraints, the rank-one reward term, ablations (the
+self-test's ablation flags remove their inputs)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from aisdati.model.dati import DATIConfig, DATITrainer, gradient_penalty
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.networks import DATINetworks, NetworkConfig, NonNegativeLinear, one_member
 from aisdati.selftest.families import get_family
+from aisdati.selftest.settings import SelftestSettings
 from aisdati.selftest.sources import FamilySource
 
 E, B = 3, 5
@@ -313,3 +315,28 @@ def test_biases_start_at_zero_and_glorot_bounds_hold():
     w = nets.forward_actor.out.weight  # [E, 32, decision]
     bound = (6.0 / (32 + DECISION)) ** 0.5
     assert w.abs().max() <= bound
+
+
+def test_ablation_flags_remove_the_inputs():
+    settings = SelftestSettings()
+    full = DATINetworks(2, 2, settings.dati_config("dati").network, [0])
+    no_time = DATINetworks(2, 2, settings.dati_config("dati-no-time-embedding").network, [0])
+    no_reward = DATINetworks(2, 2, settings.dati_config("dati-no-reward-input").network, [0])
+
+    def first_widths(net):
+        return [w.shape[1] for w in net.hidden.first.weights]
+
+    # full: actors see (input 16, noise 16, time 1 + 75); critics (input 16, time, reward 92)
+    assert first_widths(full.forward_actor) == [16, 16, 1, 75]
+    assert first_widths(full.forward_critic) == [16, 1, 75, 92]
+    # no time embedding: no Time2Vec anywhere, the time blocks are gone from every network
+    assert no_time.time2vec is None and no_time.time_features(torch.zeros(1, 1, 1)) == []
+    assert first_widths(no_time.forward_actor) == [16, 16]
+    assert first_widths(no_time.backward_critic) == [16, 16]
+    # no reward input: critics lose the reward layer and block, actors are untouched
+    assert no_reward.forward_critic.reward_features is None
+    assert first_widths(no_reward.forward_critic) == [16, 1, 75]
+    assert _count(no_reward.forward_actor) == _count(full.forward_actor)
+    reward_params = 92 * 92 + 92 + 92 * 32  # tiled-reward layer and its first-layer block
+    assert _count(full.forward_critic) - _count(no_reward.forward_critic) == reward_params
+    assert _count(no_time) < _count(full)

@@ -8,13 +8,19 @@ import zipfile
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-from kitimat_sample import DMA_COLUMNS, DMA_SAMPLE, dma_layout, kitimat_rows, write_dma_sample
 
 from aisdati.preprocess.convert import to_canonical
 from aisdati.preprocess.inputs import Source
 from aisdati.preprocess.layouts import DMA, MARINECADASTRE, layout_of, resolve_columns
 from aisdati.preprocess.read import SourceReader
 from aisdati.preprocess.report import CODE
+from tests.helpers.kitimat_sample import (
+    DMA_COLUMNS,
+    DMA_SAMPLE,
+    dma_layout,
+    kitimat_rows,
+    write_dma_sample,
+)
 
 
 def test_the_dma_header_is_recognised_and_its_columns_found():

@@ -1,5 +1,7 @@
-"""Hardening (issue 13), piece by piece: the option ranges, the line guard against pyarrow's own
-CSV reader and numeric times in every unit (the model card validator: tests/test_model_card.py)."""
+"""The line guard (`aisdati.preprocess.lineguard`): one bad line costs one counted row, never
+the file. Against pyarrow's own CSV reader, at every offset, and through the real command line
+on the New York Harbor hour made bad the way a careless or unlucky analyst would (issue 13,
+items 9, 10, 13 and 14; issue 27)."""
 
 from __future__ import annotations
 
@@ -8,38 +10,13 @@ import io
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pcsv
+import pyarrow.parquet as pq
 import pytest
 
-from aisdati.errors import UserError
-from aisdati.options import check_option
-from aisdati.preprocess.convert import time_us
 from aisdati.preprocess.lineguard import LineGuard
+from tests.helpers.ingest import NY_ROWS, SETTINGS, ingest, ingest_ny_hour, ny_lines
 
 ROWS = b"".join(b"%d,x%d,z\n" % (i, i) for i in range(200))
-
-
-@pytest.mark.parametrize(
-    "name, value, ok",
-    [
-        ("--near-km", 10.0, True),
-        ("--near-km", float("nan"), False),
-        ("--near-km", 0.0, False),
-        ("--threshold", 1.0, True),
-        ("--threshold", 1.0000001, False),
-        ("--min-sog", -1.0, True),  # negative keeps every SOG, even 0, as before
-        ("--min-sog", float("-inf"), False),
-        ("--top-percent", None, True),  # an option left unset
-        ("--seed", 0, True),
-        ("--seed", 2**32, False),
-        ("--anything-else", float("inf"), False),  # any float must at least be finite
-    ],
-)
-def test_option_ranges(name, value, ok):
-    if ok:
-        check_option(name, value)
-    else:
-        with pytest.raises(UserError, match=f"^{name} must be"):
-            check_option(name, value)
 
 
 def _pyarrow_rows(data: bytes) -> tuple[int, int]:
@@ -96,18 +73,6 @@ def test_the_guard_passes_clean_files_unchanged(data):
     assert b"".join(iter(lambda: guard.read(4096), b"")) == raw.split(b"\n", 1)[1]
 
 
-def test_numeric_times_in_every_unit():
-    t = 1_593_475_200  # 2020-06-30T00:00:00Z
-    arr = pa.array([t, t * 1_000, t * 1_000_000, t * 1_000_000_000, 5, None], pa.int64())
-    us, bad = time_us(arr)
-    assert list(us[:4]) == [t * 1_000_000] * 4
-    assert list(bad) == [False, False, False, False, True, False]  # 1970 is no AIS time
-    us, bad = time_us(pa.array([str(t), "2020-06-30T00:00:00", "20200630", "soon"]))
-    assert list(us[:3]) == [t * 1_000_000] * 3 and list(bad) == [False, False, False, True]
-    us, bad = time_us(pa.array([t + 0.5, float("nan")]))
-    assert us[0] == t * 1_000_000 + 500_000 and list(bad) == [False, True]
-
-
 def test_the_guard_finds_every_header_line_at_every_offset_in_any_case():
     """A header met mid-file ends the stream there, wherever `mmsi` falls among the eight-byte
     words the search reads, whatever its case; `mmsi` inside a row's text ends nothing."""
@@ -129,3 +94,104 @@ def test_the_guard_finds_every_header_line_at_every_offset_in_any_case():
         assert before.decode().splitlines() == rows, trial
         assert guard.next_header().names == [f"{pad}{spelling}", "LAT"]
         assert met == [header.encode()]
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory):
+    """The clean NY hour, ingested once: what every damaged copy is compared with."""
+    return ingest_ny_hour(tmp_path_factory.mktemp("baseline"))
+
+
+# ----------------------------------------------------------------- 9: line ends, long header
+def test_old_mac_cr_line_endings(cli, data, tmp_path, baseline):
+    src = tmp_path / "cr.csv"
+    src.write_bytes(b"".join(line.rstrip(b"\r\n") + b"\r" for line in ny_lines(data)))
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS and report["kept_points"] == baseline["kept_points"]
+    assert report["rejected"]["malformed_row"] == 0
+
+
+# ---------------------------------------------------------------- 10: random bytes mid-file
+def test_random_bytes_mid_file_cost_their_rows_only(cli, data, tmp_path, baseline):
+    lines = ny_lines(data)
+    rng = np.random.default_rng(13)
+    noise = bytes(b for b in rng.integers(0, 256, 400, dtype=np.uint8) if b not in b'\r\n",')
+    middle = len(lines) // 2
+    lines[middle] = lines[middle][:30] + noise + lines[middle][30:]  # inside a row's fields
+    lines[middle + 1] = lines[middle + 1].replace(b"CG ", b"C\xff\xfeG ")  # a column not read
+    src = tmp_path / "noise.csv"
+    src.write_bytes(b"".join(lines))
+    result, report = ingest(cli, tmp_path / "out", src, extra=(*SETTINGS, "--keep-rejects"))
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS
+    lost = report["rejected_total"] - baseline["rejected_total"]
+    assert 0 <= lost <= 1  # the row with the noise in its fields, nothing else
+    assert baseline["kept_points"] - report["kept_points"] <= 1
+    assert all(c.isprintable() or c in "\n\t" for c in result.output)  # no raw bytes printed
+    rejects = pq.read_table(tmp_path / "out" / "rejects.parquet").to_pandas()
+    assert len(rejects) == report["rejected_total"]
+
+
+# -------------------------------------------------------------- 13: an unterminated quote
+def test_an_unterminated_quote_costs_one_row(cli, data, tmp_path, baseline):
+    lines = ny_lines(data)
+    lines[100] = lines[100].replace(b",", b',"', 7)  # opens a quote in the vessel name
+    src = tmp_path / "quote.csv"
+    src.write_bytes(b"".join(lines))
+    result, report = ingest(cli, tmp_path / "out", src, extra=(*SETTINGS, "--keep-rejects"))
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS
+    assert report["rejected"]["malformed_row"] == 1
+    assert baseline["kept_points"] - report["kept_points"] <= 1
+    raw = pq.read_table(tmp_path / "out" / "rejects.parquet").column("raw").to_pylist()
+    assert [r for r in raw if r] == [lines[100].decode().rstrip("\r\n")]
+
+
+def test_quoted_fields_with_commas_still_parse(cli, data, tmp_path):
+    """Kitimat's vessel types are quoted and hold commas: not one row is malformed."""
+    result, report = ingest(
+        cli, tmp_path / "out", data / "AIS_2018_07-08_Kitimat.csv.gz",
+        extra=("--roi", "none", "--min-points", "100"),
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == 134_758 and report["rejected"]["malformed_row"] == 0
+
+
+# ----------------------------------------------------------------------- 14: a 60 MB line
+def test_a_60_mb_line_among_good_rows(cli, data, tmp_path, baseline):
+    lines = ny_lines(data)
+    src = tmp_path / "huge_line.csv"
+    with src.open("wb") as f:
+        f.writelines(lines[:4000])
+        f.write(b"367000999,2020-06-30T00:10:00," + b"9" * (60 << 20) + b",1,2\n")
+        f.writelines(lines[4000:])
+    result, report = ingest(cli, tmp_path / "out", src, extra=(*SETTINGS, "--keep-rejects"))
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS + 1
+    assert report["rejected"]["malformed_row"] == 1
+    assert report["kept_points"] == baseline["kept_points"]
+    raw = pq.read_table(tmp_path / "out" / "rejects.parquet").column("raw").to_pylist()
+    raw = [r for r in raw if r]
+    assert len(raw) == 1 and len(raw[0]) < 2000 and "62,914,5" in raw[0]
+
+
+class _Trickle(io.BytesIO):
+    """A stream that gives a few bytes per read, so lines and headers straddle the reads."""
+
+    def read(self, n: int = -1) -> bytes:
+        return super().read(7)
+
+
+def test_the_guard_stops_at_a_header_that_straddles_reads(data):
+    header, *rows = ny_lines(data)[:40]
+    swapped = b"LAT,LON,BaseDateTime,MMSI\r\n"
+    raw = b"".join([header, *rows[:20], swapped, *rows[20:]])
+    guard = LineGuard(_Trickle(raw), pytest.fail, 1, lambda line: line.decode().split(","))
+    first = b"".join(iter(lambda: guard.read(1 << 16), b""))
+    found = guard.next_header()
+    rest = b"".join(iter(lambda: guard.read(1 << 16), b""))
+    assert found is not None and found.names == ["LAT", "LON", "BaseDateTime", "MMSI"]
+    assert guard.next_header() is None
+    assert first.split() == b"".join(rows[:20]).split()
+    assert rest.split() == b"".join(rows[20:]).split()

@@ -1,10 +1,12 @@
 """NMEA 0183 input: real receiver sentences (pyais's test data, tests/data/nmea) decoded and
-counted per reason, and real Kitimat tracks through `aisdati ingest` as !AIVDM sentences."""
+counted per reason, real Kitimat tracks through `aisdati ingest` as !AIVDM sentences, and
+non-finite times in a log bad times (issue 27, item 6)."""
 
 from __future__ import annotations
 
 import gzip
 import json
+import warnings
 from functools import reduce
 from operator import xor
 from pathlib import Path
@@ -14,7 +16,6 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from kitimat_sample import kitimat_rows
 from pyais.encode import encode_dict
 from pyais.messages import NMEASentenceFactory, TagBlock
 
@@ -25,8 +26,9 @@ from aisdati.preprocess.inputs import Source, expand_inputs
 from aisdati.preprocess.nmea import COLUMNS, NmeaDecoder, SkippedLines, read_lines
 from aisdati.preprocess.read import open_reader
 from aisdati.preprocess.report import CODE
+from tests.helpers.kitimat_sample import kitimat_rows
 
-NMEA = Path(__file__).parent / "data" / "nmea"
+NMEA = Path(__file__).parents[1] / "data" / "nmea"
 AIS_RESOLUTION_DEG = 1 / 600_000
 ZERO = {"not_ais": 0, "bad_checksum": 0, "truncated": 0, "not_position": 0, "no_time": 0}
 POSITION = "!AIVDM,1,1,,B,15NBj>PP1gG>1PVKTDTUJOv00<0M,0*"  # MMSI 367309370, from the samples
@@ -309,3 +311,17 @@ def test_kitimat_tracks_come_back_through_nmea(cli, tmp_path):
     for name in ("lon", "lat"):
         error = np.abs(got.column(name).to_numpy() - want.column(name).to_numpy())
         assert error.max() <= AIS_RESOLUTION_DEG, name
+
+
+def test_non_finite_times_in_an_nmea_log_are_bad_times(tmp_path):
+    sentence = "!AIVDM,1,1,,B,15NBj>PP1gG>1PVKTDTUJOv00<0M,0*09"  # real, tests/data/nmea
+    stamps = ["2020-12-01T00:00:00Z", "nan", "NaN", "inf", "-Infinity", "1e400", "9" * 60]
+    log = tmp_path / "log.nmea"
+    log.write_text("".join(f"{stamp},{sentence}\n" for stamp in stamps))
+    reader = open_reader(Source(log))
+    (batch,) = reader.batches()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        table, codes = to_canonical(batch, reader.columns, 0, reader.time_format)
+    assert codes.tolist() == [0] + [CODE["bad_time"]] * (len(stamps) - 1)
+    assert np.isfinite(table.column("lat").to_numpy()).all()

@@ -1,13 +1,21 @@
-"""Reading: column matching, type coercion, per-row rejection of bad values."""
+"""Reading (`aisdati.preprocess.read`): column matching, type coercion, per-row rejection of
+bad values. Through the real command line, on the New York Harbor hour made hostile the way a
+careless or unlucky analyst would (issue 13; issue 27, items 5, 6 and 20): joined exports and
+repeated headers, NaN and infinity in any spelling, long headers, blank lines, UTF-16 and UTF-32,
+binary files and Parquet columns of the wrong type."""
 
 from __future__ import annotations
 
+import codecs
 import gzip
+import re
 import zipfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 
 from aisdati.errors import UserError
@@ -17,6 +25,17 @@ from aisdati.preprocess.layouts import resolve_columns
 from aisdati.preprocess.lineguard import LineGuard
 from aisdati.preprocess.read import SourceReader
 from aisdati.preprocess.report import CODE
+from tests.helpers.cli import one_line_error
+from tests.helpers.ingest import (
+    NY_HOUR,
+    NY_ROWS,
+    SETTINGS,
+    ingest,
+    ingest_ny_hour,
+    ny_lines,
+    ny_table,
+    points,
+)
 
 
 def test_columns_match_case_underscores_and_spellings():
@@ -143,3 +162,185 @@ def test_the_guard_gives_blocks_of_the_size_asked_and_every_line_once(data, tmp_
     blocks = [bytes(b) for b in iter(lambda: guard.read(8192), b"")]
     assert b"".join(blocks) == text.split(b"\n", 1)[1]
     assert all(8192 - 400 < len(b) <= 8192 and b.endswith(b"\n") for b in blocks[:-1])
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory):
+    """The clean NY hour, ingested once: what every damaged copy is compared with."""
+    return ingest_ny_hour(tmp_path_factory.mktemp("baseline"))
+
+
+def test_header_and_field_longer_than_the_csv_modules_limit(cli, data, tmp_path, baseline):
+    import csv
+
+    big = csv.field_size_limit() + 1000
+    lines = [line.rstrip(b"\r\n") for line in ny_lines(data)]
+    lines[0] += b"," + b"Notes" * (big // 5)
+    lines[1:] = [line + b"," for line in lines[1:]]
+    lines[5] += b"y" * big
+    src = tmp_path / "wide.csv"
+    src.write_bytes(b"\n".join(lines) + b"\n")
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS and report["kept_points"] == baseline["kept_points"]
+
+
+def test_a_first_line_without_end_is_one_line(cli, tmp_path):
+    src = tmp_path / "blob.csv"
+    src.write_bytes(b"MMSI," * 300_000)
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(result, "no line break in the first 1 MiB")
+
+
+def test_a_binary_file_named_csv_is_one_line(cli, data, tmp_path):
+    src = tmp_path / "photo.csv"
+    src.write_bytes(bytes(np.random.default_rng(1).integers(0, 256, 5000, dtype=np.uint8)))
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(result, "photo.csv: the first line is not CSV text")
+
+
+NY_COLUMNS = ["BaseDateTime", "LON", "LAT", "MMSI", "SOG", "COG"]  # the hour's first six
+
+
+# --------------------------------------------------- 5: a second header with another order
+def test_joined_exports_are_read_under_each_ones_header(cli, data, tmp_path, baseline):
+    """Two exports joined with `cat`, the second with LAT and LON swapped and MMSI first: the
+    rows after the second header are read under it, not with latitude and longitude swapped."""
+    table = ny_table(data)
+    half = len(table) // 2
+    order = ["MMSI", "LAT", "LON", *[c for c in table.columns if c not in ("MMSI", "LAT", "LON")]]
+    src = tmp_path / "joined.csv"
+    src.write_text(
+        table.iloc[:half].to_csv(index=False) + table.iloc[half:][order].to_csv(index=False)
+    )
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS + 1 and report["rejected"]["header_line"] == 1
+    assert report["kept_points"] == baseline["kept_points"]
+    assert report["tracks"] == baseline["tracks"]
+    kept = points(tmp_path / "out")
+    assert kept["lat"].between(40, 41.5).all() and kept["lon"].between(-75, -73).all()
+
+
+def test_a_header_repeated_in_the_same_order_is_counted(cli, data, tmp_path, baseline):
+    lines = ny_lines(data)
+    src = tmp_path / "twice.csv"
+    src.write_bytes(b"".join([*lines[:4000], lines[0], *lines[4000:]]))
+    result, report = ingest(cli, tmp_path / "out", src, extra=(*SETTINGS, "--keep-rejects"))
+    assert result.exit_code == 0, result.output
+    assert report["rejected"]["header_line"] == 1
+    assert report["kept_points"] == baseline["kept_points"]
+    rejects = pq.read_table(tmp_path / "out" / "rejects.parquet").to_pandas()
+    header = rejects.loc[rejects["reason"] == "header_line", "raw"].tolist()
+    assert header == [lines[0].decode().rstrip("\r\n")]
+
+
+def test_a_second_header_naming_other_columns_is_one_line(cli, data, tmp_path):
+    table = ny_table(data)
+    src = tmp_path / "joined.csv"
+    positions = table.iloc[100:][["MMSI", "BaseDateTime", "LAT", "LON"]]
+    src.write_text(table.iloc[:100].to_csv(index=False) + positions.to_csv(index=False))
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(result, "joined.csv: a second header line mid-file names other columns")
+
+
+# ---------------------------------------------------------- 6: NaN and infinity, any spelling
+NAN_SPELLINGS = ["NaN", "NAN", "Nan", "nan", "+nan", "-nan", " nan "]
+INF_SPELLINGS = ["inf", "Inf", "INF", "+inf", "-inf", "Infinity", "-Infinity", "+Infinity", "1e400"]
+
+
+def _complete_rows(lines: list[bytes]) -> list[int]:
+    """Lines of the NY hour whose six needed fields are all numbers or times (no blank)."""
+    return [i for i in range(1, len(lines)) if all(lines[i].split(b",")[:6])]
+
+
+def test_nan_and_infinity_in_csv_are_rejected_in_every_spelling(cli, data, tmp_path, baseline):
+    lines = ny_lines(data)
+    rows = _complete_rows(lines)[::50]
+    spellings = NAN_SPELLINGS + INF_SPELLINGS
+    for k, spelling in enumerate(spellings):
+        for j, column in enumerate(("LON", "LAT", "SOG", "COG")):  # each spelling, each column
+            i = rows[4 * k + j]
+            fields = lines[i].split(b",")
+            fields[NY_COLUMNS.index(column)] = spelling.encode()
+            lines[i] = b",".join(fields)
+    src = tmp_path / "nan.csv"
+    src.write_bytes(b"".join(lines))
+    result, report = ingest(cli, tmp_path / "out", src)  # route clusters: the default
+    assert result.exit_code == 0, result.output
+    rejected, before = report["rejected"], baseline["rejected"]
+    assert rejected["missing_value"] == before["missing_value"] + 4 * len(NAN_SPELLINGS)
+    assert rejected["bad_number"] == before["bad_number"] + 4 * len(INF_SPELLINGS)
+    kept = points(tmp_path / "out")
+    assert np.isfinite(kept[["lon", "lat", "sog", "cog"]].to_numpy(float)).all()
+
+
+def test_nan_and_infinity_in_parquet_are_rejected(cli, data, tmp_path, baseline):
+    table = pd.read_csv(data / NY_HOUR)
+    rows = table.dropna(subset=["LAT", "LON", "SOG", "COG"]).index[::100][:8]
+    for k, (column, value) in enumerate(
+        [("LAT", np.nan), ("LON", np.inf), ("SOG", -np.inf), ("COG", np.nan)] * 2
+    ):
+        table.loc[rows[k], column] = value
+    src = tmp_path / "nan.parquet"
+    pq.write_table(pa.Table.from_pandas(table, preserve_index=False), src)
+    result, report = ingest(cli, tmp_path / "out", src, extra=SETTINGS)
+    assert result.exit_code == 0, result.output
+    rejected, before = report["rejected"], baseline["rejected"]
+    assert rejected["missing_value"] == before["missing_value"] + 4
+    assert rejected["bad_number"] == before["bad_number"] + 4
+    tracks = pq.read_table(tmp_path / "out" / "tracks.parquet").to_pandas()
+    assert np.isfinite(tracks["length_km"]).all()
+
+
+# ----------------------------------------------------------------------- 20: messages
+def test_blank_lines_before_the_header_are_skipped(cli, data, tmp_path, baseline):
+    src = tmp_path / "blank.csv"
+    src.write_bytes(b"\n\r\n   \n" + (data / NY_HOUR).read_bytes())
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS and report["kept_points"] == baseline["kept_points"]
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be-bom", "utf-32"])
+def test_utf16_and_utf32_with_a_bom_read_like_utf8(cli, data, tmp_path, baseline, encoding):
+    text = (data / NY_HOUR).read_text()
+    raw = (
+        codecs.BOM_UTF16_BE + text.encode("utf-16-be")
+        if encoding == "utf-16-be-bom"
+        else text.encode(encoding)
+    )
+    src = tmp_path / "wide.csv"
+    src.write_bytes(raw)
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    assert report["rows_read"] == NY_ROWS and report["kept_points"] == baseline["kept_points"]
+
+
+def test_utf16_without_a_bom_is_one_line(cli, data, tmp_path):
+    src = tmp_path / "wide.csv"
+    src.write_bytes((data / NY_HOUR).read_text().encode("utf-16-le"))
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(result, "wide.csv: UTF-16 text without a byte-order mark: save it as UTF-8")
+
+
+def test_a_struct_lat_in_parquet_is_one_line(cli, data, tmp_path):
+    table = pa.Table.from_pandas(pd.read_csv(data / NY_HOUR), preserve_index=False)
+    at = table.schema.get_field_index("LAT")
+    wrapped = pa.StructArray.from_arrays([table.column("LAT").combine_chunks()], ["value"])
+    src = tmp_path / "struct.parquet"
+    pq.write_table(table.set_column(at, "LAT", wrapped), src)
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(
+        result,
+        re.escape("struct.parquet: column LAT has type struct<value: double>, expected numbers"),
+    )
+
+
+def test_a_parquet_mmsi_of_booleans_is_one_line(cli, data, tmp_path):
+    table = pd.read_csv(data / NY_HOUR)
+    table["MMSI"] = table["MMSI"] % 2 == 0
+    src = tmp_path / "bool.parquet"
+    table.to_parquet(src, index=False)
+    result, _ = ingest(cli, tmp_path / "out", src)
+    one_line_error(result, "bool.parquet: column MMSI has type bool, expected numbers")

@@ -38,7 +38,7 @@ from aisdati.tracks.store import (
     select_cluster,
 )
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 KITIMAT = DATA / "AIS_2018_07-08_Kitimat.csv.gz"
 NY_WEEK = DATA / "NYHarbor_2020_12_first_week_points.csv.gz"
 NW_ENTRANCE = (-129.88, 53.75)

@@ -115,7 +115,7 @@ ST_GEORGE = (-74.0718, 40.6440)
 @pytest.fixture(scope="module")
 def ferry_week(tmp_path_factory):
     """The Staten Island Ferry's tracks in the NY Harbor week, with and without dwell stops."""
-    src = Path(__file__).parent / "data" / "NYHarbor_2020_12_first_week_points.csv.gz"
+    src = Path(__file__).parents[1] / "data" / "NYHarbor_2020_12_first_week_points.csv.gz"
     out = {}
     for name, dwell in (("dwell", 300.0), ("paper", 0.0)):
         folder = tmp_path_factory.mktemp(name)

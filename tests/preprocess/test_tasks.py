@@ -24,7 +24,6 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 import shapely
-from hardening import one_line_error
 
 import aisdati.preprocess.partition as partition
 import aisdati.preprocess.pipeline as pipeline
@@ -32,9 +31,10 @@ from aisdati.execution.runner import Execution
 from aisdati.outdir import staged_outputs
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.tracks.store import load_tracks
+from tests.helpers.cli import one_line_error
 
-DATA = Path(__file__).parent / "data"
-ROOT = Path(__file__).resolve().parent.parent
+DATA = Path(__file__).parents[1] / "data"
+ROOT = Path(__file__).resolve().parents[2]
 KITIMAT = DATA / "AIS_2018_07-08_Kitimat.csv.gz"
 NY_WEEK = DATA / "NYHarbor_2020_12_first_week_points.csv.gz"
 KITIMAT_ARGS = ("--roi", "none", "--min-points", "100", "--keep-rejects")

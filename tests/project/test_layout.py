@@ -8,7 +8,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent.parent / "aisdati"
+PACKAGE = Path(__file__).resolve().parents[2] / "aisdati"
 MAX_FUNCTION_LINES = 80
 KERNELS = {"aisdati.geo", "aisdati.dtw", "aisdati.coastline", "aisdati.errors"}
 ABOVE_MODEL = (

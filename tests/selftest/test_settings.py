@@ -1,5 +1,6 @@
 """The self-test's presets (`ours`, `paper`), the `bc-paper` baseline and `--repeats`, on tiny
-budgets: each point of the paper preset that can be checked cheaply is checked here."""
+budgets: each point of the paper preset that can be checked cheaply is checked here; the
+methods of `--methods`."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import torch
 
 from aisdati.commands.options import SelftestOptions
 from aisdati.errors import UserError
-from aisdati.model.bc import BC_PAPER, BCPolicy, BCTrainer
+from aisdati.model.bc import BC_PAPER, BCConfig, BCPolicy, BCTrainer
 from aisdati.model.dati import DATIConfig, DATITrainer
 from aisdati.model.env import TrajectoryImitationEnv
 from aisdati.model.noise import NoiseProcess
@@ -24,6 +25,7 @@ from aisdati.selftest.settings import (
     SELFTEST_PRESETS,
     SelftestSettings,
     family_for,
+    parse_methods,
     preset_settings,
 )
 from aisdati.selftest.sources import FamilySource
@@ -245,8 +247,13 @@ def test_bad_preset_options_are_one_line_errors(cli, tmp_path, args, message):
 
 
 def test_bc_config_round_trips_through_json_and_reads_older_cards():
-    from aisdati.model.bc import BCConfig
 
     assert BCConfig.from_dict(json.loads(json.dumps(BC_PAPER.to_dict()))) == BC_PAPER
     old = {k: v for k, v in BCConfig().to_dict().items() if k not in ("time_input", "epochs")}
     assert BCConfig.from_dict(old) == BCConfig()
+
+
+def test_parse_methods():
+    assert parse_methods("DATI, bc,ddpg-ti,bc") == ("dati", "bc", "ddpg-ti")
+    with pytest.raises(UserError, match="unknown method 'bogus'"):
+        parse_methods("dati,bogus")

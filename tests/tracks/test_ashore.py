@@ -21,7 +21,6 @@ import pyarrow.compute as pc
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
-from test_area import AUGUST, save_nearest
 from typer.testing import CliRunner
 
 from aisdati.ais.training import TrainSettings
@@ -33,9 +32,10 @@ from aisdati.geo import EARTH_RADIUS_M, courses_deg
 from aisdati.tracks import ashore
 from aisdati.tracks.ashore import LIFT_M, AshoreCheck, ashore_counts
 from aisdati.tracks.store import Track, load_tracks, read_track_table
+from tests.detection.test_routing import AUGUST, save_nearest
 
 RULE = AshoreCheck()
-NY_WEEK = Path(__file__).parent / "data" / "NYHarbor_2020_12_first_week_points.csv.gz"
+NY_WEEK = Path(__file__).parents[1] / "data" / "NYHarbor_2020_12_first_week_points.csv.gz"
 
 
 def moved(point: np.ndarray, bearing_deg: float, metres: float) -> np.ndarray:

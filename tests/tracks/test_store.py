@@ -1,0 +1,52 @@
+"""Reading ingest's tracks back (`aisdati.tracks.store`): each track's reports in time order
+whatever the order of the points file."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from aisdati.errors import UserError
+from aisdati.tracks.store import load_tracks, read_track_table
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory):
+    from typer.testing import CliRunner
+
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("processed")
+    src = Path(__file__).parents[1] / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+    args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_tracks_load_in_time_order_from_points_in_any_order(processed, tmp_path):
+    """The ingest's points written back as one file with their rows shuffled: each track's
+    positions and time steps are those of its own reports sorted by time (pandas, per track),
+    in the order the ids are asked for."""
+    points = pq.read_table(processed / "points.parquet").to_pandas()
+    shuffled = points.sample(frac=1.0, random_state=0).reset_index(drop=True)
+    data = tmp_path / "data"
+    data.mkdir()
+    shutil.copy(processed / "tracks.parquet", data / "tracks.parquet")
+    pq.write_table(pa.Table.from_pandas(shuffled, preserve_index=False), data / "points.parquet")
+    ids = read_track_table(processed)["track_id"].tolist()[::-1]
+    for tid, track in zip(ids, load_tracks(data, ids), strict=True):
+        mine = points[points["track_id"] == tid].sort_values("time")
+        hours = mine["time"].diff().dt.total_seconds().to_numpy()[1:] / 3600.0
+        assert track.track_id == tid
+        np.testing.assert_array_equal(track.positions, mine[["lon", "lat"]].to_numpy())
+        np.testing.assert_allclose(track.dts, hours, rtol=1e-12)
+    shuffled["time"] = shuffled["time"].astype(str)
+    pq.write_table(pa.Table.from_pandas(shuffled, preserve_index=False), data / "points.parquet")
+    with pytest.raises(UserError, match="not a timestamp"):
+        load_tracks(data, ids)
