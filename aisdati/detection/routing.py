@@ -156,7 +156,7 @@ def coverage_of(
     judged = pd.Series([names[o] for o in owner if o >= 0], dtype=object).value_counts()
     left = owner < 0
     outside = left & ~inside.any(axis=1)
-    training = left & ~outside & (trained | ~inside).all(axis=1)
+    training = left & ~outside & trained.any(axis=1)
     far = left & ~outside & ~training
     reasons = ((NOT_JUDGED_OUTSIDE, outside), (NOT_JUDGED_FAR, far))
     return Coverage(

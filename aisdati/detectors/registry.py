@@ -27,7 +27,7 @@ def check_model_names(names: Sequence[str]) -> None:
     that climbs out of the folder or names another one (`../x`, `/abs/x`, `a/b`) would load a
     model from anywhere the user (or a server behind a URL folder) can reach."""
     for name in names:
-        if not name or name in (".", "..") or any(c in name for c in "/\\") or ":" in name:
+        if not name or name in (".", "..") or Path(name).name != name:
             raise UserError(
                 f"--model {name!r}: give a model's name in --models (such as route-2 or "
                 "all-bc), not a path"

@@ -32,7 +32,7 @@ def _set(arrays, key, value):
 def test_nearest_positions_of_nan_or_inf_are_refused_not_a_segfault(ny_models, tmp_path, bad):
     """NaN costs made the DTW back-track leave its matrix and write past its path (rc 139):
     run in a process of its own, so that a crash fails this test instead of the session."""
-    models = copy_of(ny_models, tmp_path)
+    models = copy_of(ny_models, tmp_path, digests=False)
     rewrite_npz(models / "down-nearest.npz", lambda z: z["positions"].fill(bad))
     proc = subprocess.run(
         [sys.executable, "-m", "aisdati.cli", "detect", "--data", str(ny_models["proc"]),
@@ -77,7 +77,7 @@ NEAREST_DAMAGE = [
 @pytest.mark.parametrize("damage, needle", [d[1:] for d in NEAREST_DAMAGE],
                          ids=[d[0] for d in NEAREST_DAMAGE])  # fmt: skip
 def test_a_damaged_nearest_npz_is_one_line(ny_models, tmp_path, damage, needle):
-    models = copy_of(ny_models, tmp_path)
+    models = copy_of(ny_models, tmp_path, digests=False)
     damage(models / "down-nearest.npz")
     result = detect_with(ny_models, models, tmp_path / "r", "nearest", "--score", "rollout")
     one_line_error(result, r"cannot load .*down-nearest\.npz: " + needle)

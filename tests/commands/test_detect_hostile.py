@@ -19,7 +19,7 @@ from aisdati.detectors.nearest import NearestDetector
 from aisdati.errors import UserError
 from aisdati.tracks.store import load_tracks, read_track_table
 
-NY_HOUR = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
+NY_HOUR = Path(__file__).parents[1] / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +97,7 @@ def test_model_names_are_names_not_paths(area, kitimat, cli, tmp_path):
     models, det, _ = area
     other = tmp_path / "other"
     shutil.copytree(models, other)
-    for name in (f"../other/{det.name}", str(other / det.name), "..", "a\\b"):
+    for name in (f"../other/{det.name}", str(other / det.name), "..", f"sub/{det.name}"):
         r = cli("detect", "--data", kitimat, "--models", models, "-m", name,
                 "--out", tmp_path / "r")  # fmt: skip
         assert r.exit_code == 2 and "not a path" in r.output, name

@@ -19,7 +19,6 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 import torch
-from kitimat_sample import kitimat_rows
 from pyais.encode import encode_dict
 from pyais.messages import TagBlock
 
@@ -29,8 +28,9 @@ from aisdati.preprocess.convert import to_canonical
 from aisdati.preprocess.inputs import Source
 from aisdati.preprocess.nmea import RECEPTION_WINDOW_S
 from aisdati.preprocess.read import open_reader
+from tests.helpers.kitimat_sample import kitimat_rows
 
-NMEA = Path(__file__).parent / "data" / "nmea"
+NMEA = Path(__file__).parents[1] / "data" / "nmea"
 AIS_RESOLUTION_DEG = 1 / 600_000
 INGEST = ("--roi", "none", "--min-points", "20")
 POSITION = "!AIVDM,1,1,,B,15NBj>PP1gG>1PVKTDTUJOv00<0M,0*09"  # MMSI 367309370, pyais's sample
