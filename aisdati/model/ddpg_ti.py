@@ -4,7 +4,7 @@ batched ensemble: E seeds train in lockstep, every layer holding E members' weig
 It is Stable-Baselines3's `DDPG` (TD3 with one critic, no target policy noise, no policy delay)
 written over `aisdati.model.networks`' ensemble layers, because 120 SB3 models trained one after
 another spent most of Table 1's time in per-step Python overhead (`benchmarks/selftest_speed.py`).
-`tests/test_ddpg_ti.py` holds it to SB3: from the same weights and batches, SB3's `train` and
+`tests/model/test_ddpg_ti.py` holds it to SB3: from the same weights and batches, SB3's `train` and
 `DDPGTITrainer.update` end with the same weights. What it keeps of SB3's DDPG, point by point:
 - the agent observes (ŝ_t, t); a features extractor [tanh(W ŝ_t + b) (80), Time2Vec(t) (76)] of
   156 units is shared by actor and critic (`share_features_extractor=True`): it learns from the

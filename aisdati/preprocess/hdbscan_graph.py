@@ -11,7 +11,7 @@ tree, the single-linkage tree, the condensed tree, the clusters' stabilities and
 mass selection. Every step keeps the library's order (the spanning tree's edges sorted by the
 same `np.argsort`, the trees walked breadth first, stabilities summed row by row), so tied
 distances (vessels that start and end at the same berths) give the same labels too:
-`tests/test_routes.py` compares both on real and tie-heavy endpoints.
+`tests/preprocess/test_routes.py` compares both on real and tie-heavy endpoints.
 """
 
 from __future__ import annotations
