@@ -28,11 +28,11 @@ the vessel *dwells*:
 
 The defaults of ingest are 500 m and 5 minutes. MovingPandas' examples use 100 m across and one
 minute for people on foot (and speak of stops of 5 minutes); for ships they were chosen on the
-New York Harbor ferries (`tests/preprocess/test_stops.py`). At 1-3 minutes between reports the last report
-before a pier and the first after it lie 0.1-1 km apart (the Staten Island Ferry: about 0.5 km
-in the median), hence a 500 m radius (1 km across); the ferries' pier stops last 5-15 minutes,
-while reporting gaps of 3-10 minutes under way are common (Kitimat), hence 5 minutes, with the
-dwell estimate telling the two apart.
+New York Harbor ferries (`tests/preprocess/test_stops.py`). At 1-3 minutes between reports the
+last report before a pier and the first after it lie 0.1-1 km apart (the Staten Island Ferry:
+about 0.5 km in the median), hence a 500 m radius (1 km across); the ferries' pier stops last
+5-15 minutes, while reporting gaps of 3-10 minutes under way are common (Kitimat), hence 5
+minutes, with the dwell estimate telling the two apart.
 
 Every splitter maps reports sorted by (MMSI, time) to `Splits`: where a new track starts and
 which reports to drop. `split_reports` applies a list of them in order; `segment` then numbers the
