@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from report import Report, add_json_option  # (this folder: run as a script)
 
-from aisdati.ais.policy import AISPolicy, dati_act
+from aisdati.ais.policy import AISPolicy, dati_act, track_keys
 from aisdati.ais.source import build_source, make_env
 from aisdati.ais.space import LaneConfig
 from aisdati.dtw import batch_mean_dtw_m
@@ -70,7 +70,8 @@ def bench_scoring(n_tracks: int, rollouts: int, seed: int = 0) -> dict[str, floa
     horizons = np.array([t.steps for t in tracks])
     batch_mean_dtw_m(np.zeros((1, 2, 2)), np.array([2]), [np.zeros((2, 2))], np.array([0]))
     t0 = time.perf_counter()
-    paths = policy.generate(starts, horizons, rollouts, seed)
+    keys = track_keys([t.positions for t in tracks], seed)
+    paths = policy.generate(starts, horizons, keys, range(rollouts))
     t1 = time.perf_counter()
     batch_mean_dtw_m(
         paths,
