@@ -67,6 +67,39 @@ def kitimat(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def processed(tmp_path_factory) -> Path:
+    """The NY Harbor hour ingested once (`--roi none --min-points 30`): read, never changed."""
+    from aisdati.cli import app
+
+    out = tmp_path_factory.mktemp("processed")
+    args = ["ingest", "--input", str(DATA / "NYHarbor_2020_06_30_first_hour.csv"), "--roi", "none"]
+    result = CliRunner().invoke(app, [*args, "--min-points", "30", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="session")
+def months(kitimat) -> tuple[list, list, object]:
+    """Kitimat's July tracks (training), August's (judged) and the track table."""
+    from aisdati.tracks.store import load_tracks, read_track_table
+    from tests.helpers.area import AUGUST
+
+    table = read_track_table(kitimat)
+    july = table["start"] < AUGUST
+    ids = lambda mask: [int(i) for i in table.loc[mask, "track_id"]]  # noqa: E731
+    return load_tracks(kitimat, ids(july)), load_tracks(kitimat, ids(~july)), table
+
+
+@pytest.fixture(scope="session")
+def real(kitimat) -> list:
+    """The positions of Kitimat's first 40 tracks, for the kernels' checks on real tracks."""
+    from aisdati.tracks.store import load_tracks, read_track_table
+
+    ids = read_track_table(kitimat)["track_id"].tolist()[:40]
+    return [t.positions for t in load_tracks(kitimat, ids)]
+
+
+@pytest.fixture(scope="session")
 def ny_dati(tmp_path_factory) -> dict:
     """The NY hour ingested (tracks of >= 30 reports) and a 2-episode dati model of its `down`
     cluster ({"base", "proc", "models"}), built once per worker: tests copy it before they damage

@@ -9,7 +9,6 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,6 +30,7 @@ from aisdati.dtw import (
 )
 from aisdati.geo import arc_m, haversine_m
 from aisdati.tracks.store import load_tracks, read_track_table
+from tests.helpers.tracks import random_tracks
 
 COORD = st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
 # Few distinct values make exact ties between warping paths common.
@@ -289,20 +289,6 @@ def test_a_damaged_incremental_state_is_refused():
     assert restored.distance == dtw_state.distance
 
 
-@pytest.fixture(scope="module")
-def processed(tmp_path_factory):
-    from typer.testing import CliRunner
-
-    from aisdati.cli import app
-
-    out = tmp_path_factory.mktemp("processed")
-    src = Path(__file__).parent / "data" / "NYHarbor_2020_06_30_first_hour.csv"
-    args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    return out
-
-
 def mean_dtw_m(a: np.ndarray, b: np.ndarray) -> float:
     cost, length = dtw_path_length(a, b, "haversine")
     return cost / length
@@ -348,23 +334,6 @@ def test_batched_parallel_dtw_equals_reference_dtw():
     got = batch_mean_dtw_m(rolls, lengths, tracks, owner)
     want = [mean_dtw_m(rolls[i, : lengths[i]], tracks[owner[i]]) for i in range(6)]
     np.testing.assert_allclose(got, want, rtol=1e-9)
-
-
-@pytest.fixture(scope="module")
-def real(kitimat) -> list[np.ndarray]:
-    ids = read_track_table(kitimat)["track_id"].tolist()[:40]
-    return [t.positions for t in load_tracks(kitimat, ids)]
-
-
-def random_tracks(seed: int, count: int) -> list[np.ndarray]:
-    """Random walks near Kitimat, some standing still for a while (points with no course)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        steps = rng.normal(0, 0.01, (int(rng.integers(5, 120)), 2))
-        steps[rng.random(len(steps)) < 0.1] = 0.0
-        out.append(np.array([-129.0, 53.9]) + rng.normal(0, 0.05, 2) + np.cumsum(steps, 0))
-    return out
 
 
 def plain_nearest(query: np.ndarray, refs: list[np.ndarray]) -> tuple[float, int]:

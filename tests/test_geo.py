@@ -9,6 +9,7 @@ import pytest
 
 from aisdati.geo import courses_deg, haversine_m, lane_distances, spherical_step
 from aisdati.tracks.store import load_tracks, read_track_table
+from tests.helpers.tracks import random_tracks
 
 
 @pytest.mark.parametrize("lat", [0.0, 25.0, 40.7, 60.0])
@@ -37,23 +38,6 @@ def test_spherical_step_distance_matches_haversine(lat):
         travelled = haversine_m(-80.0, lat, lon2, lat2)
         rel = np.abs(travelled - dists_m) / dists_m
         assert rel.max() < 1e-3, (lat, cog, rel)
-
-
-@pytest.fixture(scope="module")
-def real(kitimat) -> list[np.ndarray]:
-    ids = read_track_table(kitimat)["track_id"].tolist()[:40]
-    return [t.positions for t in load_tracks(kitimat, ids)]
-
-
-def random_tracks(seed: int, count: int) -> list[np.ndarray]:
-    """Random walks near Kitimat, some standing still for a while (points with no course)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        steps = rng.normal(0, 0.01, (int(rng.integers(5, 120)), 2))
-        steps[rng.random(len(steps)) < 0.1] = 0.0
-        out.append(np.array([-129.0, 53.9]) + rng.normal(0, 0.05, 2) + np.cumsum(steps, 0))
-    return out
 
 
 def brute_lane(track: np.ndarray, lane: list[np.ndarray], course_m: float) -> np.ndarray:

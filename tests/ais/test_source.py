@@ -3,27 +3,11 @@ reproduces real New York Harbor tracks."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from aisdati.ais.source import build_source, make_env, track_reference
 from aisdati.tracks.store import load_tracks, read_track_table
-
-
-@pytest.fixture(scope="module")
-def processed(tmp_path_factory):
-    from typer.testing import CliRunner
-
-    from aisdati.cli import app
-
-    out = tmp_path_factory.mktemp("processed")
-    src = Path(__file__).parents[1] / "data" / "NYHarbor_2020_06_30_first_hour.csv"
-    args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    return out
 
 
 def test_perfect_policy_reproduces_real_tracks(processed):

@@ -24,15 +24,6 @@ from tests.helpers.models import card_of, not_an_archive, truncate
 DATA = Path(__file__).parents[1] / "data" / "NYHarbor_2020_06_30_first_hour.csv"
 
 
-@pytest.fixture(scope="module")
-def processed(tmp_path_factory):
-    out = tmp_path_factory.mktemp("processed")
-    args = ["ingest", "--input", str(DATA), "--roi", "none", "--min-points", "30", "--out"]
-    result = CliRunner().invoke(app, [*args, str(out)])
-    assert result.exit_code == 0, result.output
-    return out
-
-
 @pytest.mark.parametrize("lane", [()], ids=["live-actor"])
 def test_resume_equals_uninterrupted(processed, tmp_path, lane):
     def settings(out: str, resume: bool = False) -> TrainSettings:

@@ -8,9 +8,7 @@ import json
 
 import numpy as np
 import pandas as pd
-import pytest
 
-from aisdati.ais.training import TrainSettings
 from aisdati.detection.outputs import report_dict
 from aisdati.detection.routing import NOT_JUDGED_FAR, od_distances
 from aisdati.detection.run import (
@@ -18,27 +16,7 @@ from aisdati.detection.run import (
     DetectSettings,
     detect,
 )
-from aisdati.detectors import ScoreSettings
-from aisdati.detectors.nearest import NearestDetector
-from aisdati.tracks.store import Track, load_tracks, read_track_table
-
-AUGUST = pd.Timestamp("2018-08-01", tz="UTC")
-HOW = ScoreSettings(rollouts=2, lane_rollouts=4)
-"""Few rollouts: the tests check what judges a track and how, not how well."""
-
-
-@pytest.fixture(scope="module")
-def months(kitimat) -> tuple[list[Track], list[Track], pd.DataFrame]:
-    """July's tracks (training), August's (judged) and the track table."""
-    table = read_track_table(kitimat)
-    july = table["start"] < AUGUST
-    ids = lambda mask: [int(i) for i in table.loc[mask, "track_id"]]  # noqa: E731
-    return load_tracks(kitimat, ids(july)), load_tracks(kitimat, ids(~july)), table
-
-
-def save_nearest(tracks: list[Track], cluster: str, models) -> None:
-    det = NearestDetector(TrainSettings(cluster=cluster), HOW).fit(tracks)
-    det.save(models / det.name)
+from tests.helpers.area import save_nearest
 
 
 def test_every_track_is_judged_by_the_area_model_or_listed_with_its_reason(

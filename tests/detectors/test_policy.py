@@ -24,24 +24,11 @@ from aisdati.detection.run import (
 from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.dati import DATIDetector
-from aisdati.detectors.nearest import NearestDetector
 from aisdati.errors import UserError
 from aisdati.geo import draw_spread, haversine_m, moved_m, unit_vectors
 from aisdati.scores import NEAREST, SCORES, STEP_ERRORS, score
-from aisdati.tracks.store import Track, load_tracks, read_track_table
-
-AUGUST = pd.Timestamp("2018-08-01", tz="UTC")
-HOW = ScoreSettings(rollouts=2, lane_rollouts=4)
-"""Few rollouts: the tests check what judges a track and how, not how well."""
-
-
-@pytest.fixture(scope="module")
-def months(kitimat) -> tuple[list[Track], list[Track], pd.DataFrame]:
-    """July's tracks (training), August's (judged) and the track table."""
-    table = read_track_table(kitimat)
-    july = table["start"] < AUGUST
-    ids = lambda mask: [int(i) for i in table.loc[mask, "track_id"]]  # noqa: E731
-    return load_tracks(kitimat, ids(july)), load_tracks(kitimat, ids(~july)), table
+from aisdati.tracks.store import Track
+from tests.helpers.area import HOW, save_nearest
 
 
 def area_lane():
@@ -63,11 +50,6 @@ def area_dati(lane_tracks) -> DATIDetector:
     july = lane_tracks
     settings = TrainSettings(cluster="all", episodes=1, lane=area_lane(), preset="area")
     return DATIDetector(settings, HOW).fit(july)
-
-
-def save_nearest(tracks: list[Track], cluster: str, models) -> None:
-    det = NearestDetector(TrainSettings(cluster=cluster), HOW).fit(tracks)
-    det.save(models / det.name)
 
 
 def test_cross_fitting_calibrates_each_track_with_a_member_that_did_not_train_on_it(

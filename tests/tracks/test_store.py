@@ -4,7 +4,6 @@ whatever the order of the points file."""
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -13,20 +12,6 @@ import pytest
 
 from aisdati.errors import UserError
 from aisdati.tracks.store import load_tracks, read_track_table
-
-
-@pytest.fixture(scope="module")
-def processed(tmp_path_factory):
-    from typer.testing import CliRunner
-
-    from aisdati.cli import app
-
-    out = tmp_path_factory.mktemp("processed")
-    src = Path(__file__).parents[1] / "data" / "NYHarbor_2020_06_30_first_hour.csv"
-    args = ["ingest", "--input", str(src), "--roi", "none", "--min-points", "30"]
-    result = CliRunner().invoke(app, [*args, "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    return out
 
 
 def test_tracks_load_in_time_order_from_points_in_any_order(processed, tmp_path):
