@@ -436,6 +436,10 @@ class EnsembleRun:
         self.members = first.lane.members
         check_crossfit(first.lane, {r.settings.cluster: len(r.tracks) for r in self.routes})
         self.sources = [build_source(r.tracks, r.settings.lane) for r in self.routes]
+        self.corridor_files = [
+            None if s.space.corridor is None else s.space.corridor.to_bytes() for s in self.sources
+        ]
+        """Each route's corridor as its file holds it, serialised once for the run's saves."""
         # the members' seeds count from `first_member`: a route's seeds are the same whether it
         # trains alone or beside others (`aisdati.detectors.train.route_tasks`)
         self.seeds = member_seeds(first.seed, first_member + self.members * len(self.routes))
@@ -582,13 +586,6 @@ class EnsembleRun:
                 "(drop --resume to train again)"
             )
 
-    @functools.cache  # noqa: B019 (one run, a few routes: the cache lives as long as the run)
-    def corridor_bytes(self, k: int) -> bytes:
-        """Route k's corridor as its file holds it, serialised once for the run's saves."""
-        corridor = self.sources[k].space.corridor
-        assert corridor is not None
-        return corridor.to_bytes()
-
     def save(self, routes: set[int]) -> None:
         """Write the models of `routes` as they stand, and the checkpoint of a one-route run."""
         wall = self.elapsed()
@@ -598,8 +595,8 @@ class EnsembleRun:
                 continue
             nets = self.networks(k)
             files = {".pt": network_bytes(nets)}
-            if self.sources[k].space.corridor is not None:  # this run's, whatever was there
-                files[".corridor.npz"] = self.corridor_bytes(k)
+            if self.corridor_files[k] is not None:  # this run's, whatever was there
+                files[".corridor.npz"] = self.corridor_files[k]
             card = self.card(k, nets, wall)
             write_model(stem, files, card, network_meta(nets, self.config))
             atomic_write_bytes(stem.with_suffix(".log.jsonl"), "".join(self.log_lines[k]).encode())
