@@ -59,9 +59,8 @@ class ScoreSettings:
     """Lane score: free rollouts per track that make up its lane (the K of the rollout score
     and L - K more). A lane is where the policy goes, estimated from samples: on the Kitimat
     routes over three seeds and several noise draws, DATI's pooled lane AUC (by position only)
-    averaged 0.879 with 10, 0.892 with 30 and 0.904 with 100 rollouts (README, "every route of
-    an area"); with the course weighed, 100 add little. 30 keeps scoring and calibration
-    affordable."""
+    averaged 0.879 with 10, 0.892 with 30 and 0.904 with 100 rollouts (docs/results/levers.md);
+    with the course weighed, 100 add little. 30 keeps scoring and calibration affordable."""
     lane_reach: float = 2.0
     """Lane score: the rollouts run this many times the track's number of steps (the rollout
     score always uses the track's own number). DATI's rollouts on Kitimat ran at half to twice
@@ -72,20 +71,20 @@ class ScoreSettings:
     """Lane score: what sailing against the lane's course costs, km (across it: 0.7 x as
     much); 0 judges position only. See `aisdati.geo.lane_distances`. 2 km gave DATI the best
     pooled lane AUC averaged over two areas (Kitimat's fjord lanes, where 4 km was better, and
-    NY Harbor's ferry crossings, where 4 km was worse than none; README, "every route")."""
+    NY Harbor's ferry crossings, where 4 km was worse than none; docs/results/areas.md)."""
     lane_traffic: bool = True
     """Lane score of a learnt policy: each track's lane also holds one rollout from every
     training track's start (`PolicyDetector.traffic`), so the lane is where the model's
     traffic goes, not only where it goes from this track's start. A real track that starts
     off the lane and joins it was judged only against rollouts that never reached the lane
     it joined. With it DATI's pooled lane AUC rose 0.942 -> 0.966 on Kitimat and 0.945 ->
-    0.959 on NY Harbor (README, "every route of an area")."""
+    0.959 on NY Harbor (docs/results/areas.md)."""
     tail: float = 0.1
     """Step and lane scores: the mean of the largest `tail` of a track's per-report distances.
-    Measured at 0.05-1 on both areas (`benchmarks/lane_score.py --tail`): 0.1 gave DATI the
-    best pooled lane AUC averaged over Kitimat and NY Harbor (0.15 was level; larger fractions
-    dilute a short jump or loiter on the ferry routes, smaller ones let a few stray reports
-    decide); README, "every route of an area"."""
+    Measured at 0.05-1 on both areas (the one-off `benchmarks/lane_score.py --tail`, in git
+    history at de1e87e): 0.1 gave DATI the best pooled lane AUC averaged over Kitimat and NY
+    Harbor (0.15 was level; larger fractions dilute a short jump or loiter on the ferry routes,
+    smaller ones let a few stray reports decide); docs/results/areas.md."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0
