@@ -32,7 +32,7 @@ from aisdati.geo import EARTH_RADIUS_M, courses_deg
 from aisdati.tracks import ashore
 from aisdati.tracks.ashore import LIFT_M, AshoreCheck, ashore_counts
 from aisdati.tracks.store import Track, load_tracks, read_track_table
-from tests.detection.test_routing import AUGUST, save_nearest
+from tests.helpers.area import AUGUST, save_nearest
 
 RULE = AshoreCheck()
 NY_WEEK = Path(__file__).parents[1] / "data" / "NYHarbor_2020_12_first_week_points.csv.gz"
