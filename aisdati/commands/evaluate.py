@@ -13,6 +13,7 @@ from typing import Any
 
 import pandas as pd
 from rich.markup import escape
+from rich.table import Table
 
 from aisdati.ais.training import TrainSettings
 from aisdati.commands.common import console, err_console, lane_settings, shows_progress, spinner
@@ -40,6 +41,7 @@ from aisdati.evaluation.run import (
 from aisdati.execution import Execution, Runner, open_runner, resolve_device
 from aisdati.options import check_options
 from aisdati.outdir import OutputSet, removed_if_left_empty, staged_outputs
+from aisdati.preprocess.settings import parse_duration
 from aisdati.progress import TrainingProgress
 from aisdati.storage import fetched_models, shown_folder
 from aisdati.tracks.store import read_track_table, routes_with, select_cluster
@@ -69,6 +71,7 @@ def run(o: EvaluateOptions) -> None:
         altered=o.altered,
         strength=o.strength,
         at_sea=o.at_sea,
+        thin_s=None if o.thin is None else parse_duration(o.thin, "--thin"),
         device=resolve_device(o.device),
         **lane_settings(o.preset, o.lane, o.cluster),
     )
@@ -155,6 +158,7 @@ def evaluate_one(
         print(json.dumps(report(result), default=str))
         return
     console.print(results_table(result, console.width))
+    console.print(events_table(result.event_table))
     if settings.ashore:
         n = ashore_summary(result.scores)
         console.print(
@@ -190,6 +194,7 @@ def evaluate_every_route(
         print(json.dumps(routes_report(routes), default=str))
         return
     console.print(pooled_table(routes, console.width))
+    console.print(events_table(routes.event_table))
     for ev in routes.routes:
         times = ", ".join(
             f"{m} {t['train_s']:.0f} + {t['score_s']:.0f} s" for m, t in ev.timings.items()
@@ -204,3 +209,35 @@ def evaluate_every_route(
         f"[bold]{escape(str(settings.out_dir))}[/]",
         highlight=False,
     )
+
+
+def events_table(table: pd.DataFrame) -> Table:
+    """The event metrics (`aisdati.evaluation.metrics.event_metrics`) per detector and kind:
+    each share with its 95 % bootstrap interval."""
+    out = Table(
+        title="Events on the injected stretches",
+        caption="overlapped: stretches an event of any / the right kind overlaps; false/100: "
+        "right events per 100 normal tracks (any: every event); start error: median reports "
+        "from the right event's start to the stretch's; \\[low-high]: 95 % bootstrap intervals",
+    )
+    columns = ("detector", "kind", "n", "any event", "right event", "AUC", "false/100", "start err")
+    for name in columns:
+        out.add_column(name, justify="left" if name in ("detector", "kind") else "right")
+    for r in table.replace({float("nan"): None}).to_dict("records"):
+        out.add_row(
+            escape(str(r["detector"])), escape(str(r["kind"])), str(r["anomalies"]),
+            _with_ci(r, "overlapped_any"), _with_ci(r, "overlapped"), _with_ci(r, "roc_auc"),
+            _with_ci(r, "false_events_per_100", "{:.1f}"),
+            _with_ci(r, "median_start_error", "{:.0f}"),
+        )  # fmt: skip
+    return out
+
+
+def _with_ci(row: dict[str, Any], name: str, fmt: str = "{:.2f}") -> str:
+    """`value [low-high]`, '-' where the row has no value."""
+    value = row.get(name)
+    if value is None:
+        return "-"
+    low, high = row.get(f"{name}_ci") or (None, None)
+    interval = f" [{fmt.format(low)}-{fmt.format(high)}]" if low is not None else ""
+    return fmt.format(value) + interval

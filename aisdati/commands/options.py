@@ -284,9 +284,11 @@ class TrainOptions:
 @dataclass(frozen=True)
 class EvaluateOptions:
     """Measure detection on your own data: split a cluster's tracks by vessel, write anomalies
-    (detours, position jumps, loitering, speed changes, gaps, point noise) into half of the
-    held-out tracks, train the detectors on the rest and report how well each ranks and flags
-    the altered tracks (ROC AUC, average precision, precision/recall/F1), per anomaly kind.
+    (detours, position jumps, loitering, speed changes, gaps, point noise, shifted stretches,
+    noisy reported course or speed, drift) into half of the held-out tracks, train the
+    detectors on the rest and report how well each ranks and flags the altered tracks (ROC AUC,
+    average precision, precision/recall/F1) and how the events find the altered stretches, per
+    anomaly kind.
     Writes data/ (the injected set in ingest's schema, with labels.csv), models/,
     evaluation.json, scores.parquet, roc_pr.png and examples.png."""
 
@@ -322,7 +324,9 @@ class EvaluateOptions:
             help="Change an anomaly parameter, KIND.NAME=LO-HI (repeatable): detour.span=0.2-0.35, "
             "detour.km=2-5, jump.span=0.1-0.2, jump.km=3-6, loiter.radius_km=0.5-1.5, "
             "loiter.loops=1-2, speed.span, speed.slow=0.3, speed.fast=2-3, gap.span=0.2-0.4, "
-            "noise.fraction=0.2, noise.km=0.5-1.",
+            "noise.fraction=0.2, noise.km=0.5-1, shift.span=0.05-0.2, shift.km=1-2, "
+            "course-noise.sigma_deg=10-20, speed-noise.sigma_kn=2-5, drift.knots=1-5, "
+            "drift.heading_deg=60-120 (and each kind's span).",
         ),
     ] = None
     before: Annotated[
@@ -349,6 +353,15 @@ class EvaluateOptions:
             "vessel could sail, which the ashore rule cannot see.",
         ),
     ] = False
+    thin: Annotated[
+        str | None,
+        typer.Option(
+            "--thin",
+            help="Thin every track to one report per DURATION (e.g. 10min) before injection: "
+            "each kind measured where one report moves a vessel kilometres. Default: off.",
+            metavar="DURATION",
+        ),
+    ] = None
     models: Annotated[
         str | None,
         typer.Option(

@@ -3,7 +3,10 @@ tracks that start before a date train, the later ones are judged, as an analyst 
 month after month), anomalies written into a share of the held-out tracks (half by default), all
 saved in ingest's own schema (points.parquet,
 tracks.parquet) with `labels.csv` beside them, so `aisdati train` and `aisdati detect` read it
-like any ingest output."""
+like any ingest output. An altered track's reported motion (sog, cog, heading where the
+reports have it) is what its kind says it reports (`aisdati.evaluation.inject`); untouched
+tracks keep theirs. With `thin_s`, every track is first thinned to one report per `thin_s`
+seconds, so each kind is also measured where one report moves a vessel kilometres."""
 
 from __future__ import annotations
 
@@ -20,10 +23,10 @@ import shapely
 
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import MIN_POINTS, Injected, inject
-from aisdati.geo import initial_bearing_deg, legs_m
+from aisdati.geo import legs_m
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.ashore import AshoreCheck
-from aisdati.tracks.schema import KNOT_MPS, POINTS_SCHEMA, UTC_US
+from aisdati.tracks.schema import UTC_US
 from aisdati.tracks.store import read_track_table, select_cluster
 
 MIN_SPLIT = 4
@@ -51,6 +54,7 @@ def _anomaly(
     kind: str,
     pos: np.ndarray,
     times_s: np.ndarray,
+    motion: np.ndarray,
     rng: np.random.Generator,
     params: dict,
     at_sea: bool,
@@ -59,11 +63,11 @@ def _anomaly(
     draws that puts no more reports ashore (`aisdati.tracks.ashore`) than the track had, so
     that what is measured is what a vessel could sail; None when none does."""
     if not at_sea:
-        return inject(kind, pos, times_s, rng, params)
+        return inject(kind, pos, times_s, rng, params, motion)
     rule = AshoreCheck()
     before = int(rule.reports(pos).sum())
     for _ in range(AT_SEA_DRAWS):
-        got = inject(kind, pos, times_s, rng, params)
+        got = inject(kind, pos, times_s, rng, params, motion)
         if int(rule.reports(got.positions).sum()) <= before:
             return got
     return None
@@ -92,16 +96,6 @@ def split_by_vessel(
     )
 
 
-def _sog_cog(pos: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """SOG and COG of each report towards the next (the last repeats the one before)."""
-    d = legs_m(pos)
-    dt = np.maximum(np.diff(t), 1e-3)
-    sog = np.r_[d / dt / KNOT_MPS, 0.0]
-    cog = np.r_[initial_bearing_deg(pos[:-1, 0], pos[:-1, 1], pos[1:, 0], pos[1:, 1]), 0.0]
-    sog[-1], cog[-1] = sog[-2], cog[-2]
-    return sog.astype(np.float32), (cog % 360.0).astype(np.float32)
-
-
 def split_by_time(table: pd.DataFrame, before: pd.Timestamp) -> tuple[list[int], list[int]]:
     """Tracks that start before `before` train, the others are judged (the same vessels may
     sail on both sides, as they do month after month)."""
@@ -124,20 +118,25 @@ def build(
     before: pd.Timestamp | None = None,
     altered: float = 0.5,
     at_sea: bool = False,
+    thin_s: float | None = None,
 ) -> Split:
     """Split, inject and write the evaluation data set to `out`; see the module docstring.
     `before`: split by time instead of by vessel; `altered`: the share of the held-out tracks
     that take an anomaly; `at_sea`: only anomalies that keep the track off the land
-    (`_anomaly`)."""
+    (`_anomaly`); `thin_s`: every track thinned to one report per `thin_s` seconds first."""
     table = select_cluster(read_track_table(data_dir), cluster, data_dir)
-    table = table[table["n_points"] >= MIN_POINTS]
+    points, tracks, next_id = _read_sides(data_dir, [int(i) for i in table["track_id"]], thin_s)
+    sizes = pd.Series(points["track_id"].to_numpy()).value_counts()
+    table = table[table["track_id"].map(sizes).fillna(0) >= MIN_POINTS]
     train, held = _sides(table, train_fraction, seed, train_ids, before)
     _check_sides(table, cluster, train, held, before)
     assign = _kinds_of_altered(held, kinds, altered, seed)
-    points, tracks, next_id = _read_sides(data_dir, train + held)
-    changed = pa.array(list(assign))
-    keep_pts = [points.filter(pc.invert(pc.is_in(points["track_id"], changed)))]
-    keep_trk = [tracks.filter(pc.invert(pc.is_in(tracks["track_id"], changed)))]
+    used = pa.array(train + held, pa.int64())
+    points = points.filter(pc.is_in(points["track_id"], used))
+    tracks = tracks.filter(pc.is_in(tracks["track_id"], used))
+    changed = pc.invert(pc.is_in(points["track_id"], pa.array(list(assign), pa.int64())))
+    keep_pts = [points.filter(changed)]
+    keep_trk = [tracks.filter(pc.invert(pc.is_in(tracks["track_id"], pa.array(list(assign)))))]
     rows = [(tid, 0, "", tid, -1, -1) for tid in held if tid not in assign]
     alt_pts, alt_trk, alt_rows, not_at_sea = _with_anomalies(
         points, tracks, assign, next_id, seed, params, at_sea
@@ -145,7 +144,8 @@ def build(
     labels = pd.DataFrame(
         rows + alt_rows, columns=["track_id", "label", "kind", "source_track_id", "start", "end"]
     ).sort_values("track_id", kind="stable")
-    _write(out, pa.concat_tables(keep_pts + alt_pts), pa.concat_tables(keep_trk + alt_trk), labels)
+    points = pa.concat_tables(keep_pts + alt_pts)
+    _write(out, points, _redrawn(pa.concat_tables(keep_trk + alt_trk), points), labels)
     heldout = sorted(int(i) for i in labels["track_id"])
     return Split(train, heldout, labels.reset_index(drop=True), not_at_sea)
 
@@ -203,16 +203,50 @@ def _kinds_of_altered(
     return {tid: kinds[k % len(kinds)] for k, tid in enumerate(chosen)}
 
 
-def _read_sides(data_dir: Path, ids: list[int]) -> tuple[pa.Table, pa.Table, int]:
-    """The reports (by track and time) and the tracks.parquet rows of the tracks `ids`, and
-    the first track id that no track of the ingest output has (the altered tracks' ids)."""
+def _read_sides(
+    data_dir: Path, ids: list[int], thin_s: float | None
+) -> tuple[pa.Table, pa.Table, int]:
+    """The reports (by track and time, thinned with `thin_s`) and the tracks.parquet rows of
+    the tracks `ids`, and the first track id that no track of the ingest output has (the
+    altered tracks' ids)."""
     points = pq.read_table(data_dir / "points.parquet", filters=[("track_id", "in", ids)]).sort_by(
         [("track_id", "ascending"), ("time", "ascending")]
     )
+    if thin_s is not None:
+        points = points.filter(thinned(points, thin_s))
     tracks = pq.read_table(data_dir / "tracks.parquet")
     next_id = int(pc.max(tracks["track_id"]).as_py()) + 1
     tracks = tracks.filter(pc.is_in(tracks["track_id"], pa.array(ids, pa.int64())))
     return points, tracks, next_id
+
+
+def thinned(points: pa.Table, every_s: float) -> np.ndarray:
+    """Which reports (sorted by track and time) a track keeps at one report per `every_s`
+    seconds: its first, then each that comes `every_s` or more after the last one kept."""
+    track = points["track_id"].to_numpy()
+    t = points["time"].cast(pa.int64()).to_numpy() / 1e6
+    keep = np.zeros(len(t), bool)
+    last_track, last_t = None, 0.0
+    for k in range(len(t)):
+        if track[k] != last_track or t[k] - last_t >= every_s:
+            keep[k] = True
+            last_track, last_t = track[k], t[k]
+    return keep
+
+
+def _redrawn(tracks: pa.Table, points: pa.Table) -> pa.Table:
+    """The tracks' rows, each whose reports were thinned (fewer than its `n_points`) redrawn
+    from those it keeps."""
+    sizes = pd.Series(points["track_id"].to_numpy()).value_counts()
+    rows = []
+    for k, (tid, n) in enumerate(
+        zip(tracks["track_id"].to_pylist(), tracks["n_points"].to_pylist(), strict=True)
+    ):
+        row = tracks.slice(k, 1)
+        if sizes.get(tid, n) != n:
+            row = _track_row(row, tid, points.filter(pc.equal(points["track_id"], tid)), None)
+        rows.append(row)
+    return pa.concat_tables(rows) if rows else tracks
 
 
 def _with_anomalies(
@@ -263,44 +297,63 @@ def _altered(
     pos = np.column_stack([pts["lon"].to_numpy(), pts["lat"].to_numpy()])
     t_us = pts["time"].cast(pa.int64()).to_numpy()
     t0 = int(t_us[0])
-    got = _anomaly(kind, pos, (t_us - t0) / 1e6, rng, params, at_sea)
+    motion = np.column_stack([_floats(pts, name) for name in MOTION])
+    got = _anomaly(kind, pos, (t_us - t0) / 1e6, motion, rng, params, at_sea)
     if got is None:
         return None
-    new_pts = _points(new_id, pts["mmsi"][0].as_py(), t0, got)
-    return new_pts, _track_row(source_row, new_id, t0, got), got
+    new_pts = _points(pts, new_id, t0, got)
+    return new_pts, _track_row(source_row, new_id, new_pts, "inject"), got
 
 
-def _points(track_id: int, mmsi: int, t0_us: int, got: Injected) -> pa.Table:
+MOTION = ("sog", "cog", "heading")
+"""The reported motion an anomaly rewrites, in `Injected.motion`'s order."""
+
+
+def _floats(pts: pa.Table, name: str) -> np.ndarray:
+    """A column as float64, NaN where null or where the reports do not have it."""
+    if name not in pts.column_names:
+        return np.full(pts.num_rows, np.nan)
+    return pc.fill_null(pts[name].cast(pa.float64()), np.nan).to_numpy()
+
+
+def _points(pts: pa.Table, track_id: int, t0_us: int, got: Injected) -> pa.Table:
+    """The altered track's reports in the source's schema: positions, times and reported
+    motion from the anomaly, every other field from each report's source report."""
     n = len(got.positions)
-    sog, cog = _sog_cog(got.positions, got.times_s)
     time_us = t0_us + np.round(got.times_s * 1e6).astype(np.int64)
-    return pa.table(
-        [
-            np.full(n, track_id, np.int64),
-            np.full(n, mmsi, np.int64),
-            pa.array(time_us).view(UTC_US),
-            got.positions[:, 0],
-            got.positions[:, 1],
-            sog,
-            cog,
-        ],
-        schema=POINTS_SCHEMA,
-    )
+    new = {
+        "track_id": np.full(n, track_id, np.int64),
+        "time": pa.array(time_us).view(UTC_US),
+        "lon": got.positions[:, 0],
+        "lat": got.positions[:, 1],
+        **{name: got.motion[:, k] for k, name in enumerate(MOTION)},
+    }
+    source = pts.take(pa.array(got.rows, pa.int64()))
+    columns = []
+    for field_ in pts.schema:
+        if field_.name not in new:
+            columns.append(source[field_.name])
+            continue
+        values = new[field_.name]
+        if pa.types.is_integer(field_.type) and field_.name in MOTION:
+            values = np.round(values)
+        columns.append(pa.array(values, from_pandas=True).cast(field_.type, safe=False))
+    return pa.table(columns, schema=pts.schema)
 
 
-def _track_row(row: pa.Table, track_id: int, t0_us: int, got: Injected) -> pa.Table:
-    """The source track's row (cluster, route, ...) with what the anomaly changed."""
-    p = got.positions
-    length = float(legs_m(p).sum()) / 1000.0
-    end_us = t0_us + round(float(got.times_s[-1]) * 1e6)
+def _track_row(row: pa.Table, track_id: int, pts: pa.Table, stage: str | None) -> pa.Table:
+    """The source track's row (cluster, route, ...) redrawn from its new reports `pts`, and
+    its `stage` where given."""
+    p = np.column_stack([pts["lon"].to_numpy(), pts["lat"].to_numpy()])
     changes = {
         "track_id": pa.array([track_id], pa.int64()),
-        "end": pa.array([end_us], pa.int64()).cast(row.schema.field("end").type),
+        "end": pa.array([pts["time"][-1].as_py()], row.schema.field("end").type),
         "n_points": pa.array([len(p)], pa.int64()),
-        "length_km": pa.array([length]),
-        "stage": pa.array(["inject"]),
+        "length_km": pa.array([float(legs_m(p).sum()) / 1000.0]),
         "geometry": pa.array([shapely.to_wkb(shapely.linestrings(p))], pa.binary()),
     }
+    if stage is not None:
+        changes["stage"] = pa.array([stage])
     for name, value in changes.items():
         if name in row.column_names:
             i = row.column_names.index(name)

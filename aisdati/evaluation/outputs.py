@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from aisdati.evaluation.metrics import RIGHT_EVENTS
 from aisdati.evaluation.run import Evaluation, RoutesEvaluation
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.ashore import AshoreCheck
@@ -50,6 +51,17 @@ def report(ev: Evaluation) -> dict[str, Any]:
         "ashore": ashore_summary(ev.scores),
         "timings_s": {k: {n: round(v, 2) for n, v in t.items()} for k, t in ev.timings.items()},
         "results": table.to_dict(orient="records"),
+        "events": event_rows(ev.event_table),
+    }
+
+
+def event_rows(table: pd.DataFrame) -> dict[str, Any]:
+    """evaluation.json's events: which event kinds name each injected kind rightly, and the
+    event metrics' rows (`aisdati.evaluation.metrics.event_metrics`; `*_ci`: 95 % bootstrap
+    intervals)."""
+    return {
+        "right_events": {k: list(v) for k, v in RIGHT_EVENTS.items()},
+        "results": table.replace({np.nan: None}).to_dict(orient="records"),
     }
 
 
@@ -82,6 +94,7 @@ def routes_report(rev: RoutesEvaluation) -> dict[str, Any]:
         "routes": per_route,
         "skipped": rev.skipped,
         "results": rev.table.replace({np.nan: None}).to_dict(orient="records"),
+        "events": event_rows(rev.event_table),
     }
 
 

@@ -15,6 +15,9 @@
    stepspread) in one scoring pass. For them the median normal rollout score is the *lane
    fidelity*: how far (mean metres along the DTW path) the best of K rollouts stays from unseen
    normal tracks.
+5. Find the held-out tracks' events as `aisdati detect` does (`aisdati.evaluation.events`:
+   the model-free kinds, and off-traffic from each detector's `DETECT_SCORE`) and report, per
+   detector and kind, how they find the injected stretches (`event_metrics`).
 """
 
 from __future__ import annotations
@@ -34,8 +37,9 @@ from aisdati.ais.training import TrainSettings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
+from aisdati.evaluation.events import model_free, on_reports, with_off_traffic
 from aisdati.evaluation.inject import parse_params, with_strength
-from aisdati.evaluation.metrics import flagging, ranking
+from aisdati.evaluation.metrics import event_metrics, flagging, ranking
 from aisdati.execution import Runner
 from aisdati.scores import score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
@@ -78,6 +82,8 @@ class EvaluateSettings:
     at_sea: bool = False
     """Write only anomalies that put no more reports ashore than their track had
     (`aisdati.evaluation.dataset`): what a vessel could sail, which the ashore rule cannot see."""
+    thin_s: float | None = None
+    """Every track thinned to one report per this many seconds before injection; None: all."""
 
     @property
     def models_named(self) -> str | Path | None:
@@ -106,6 +112,10 @@ class Evaluation:
     detectors: dict[str, Detector]
     profiles: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict)
     evidence: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict)
+    events: pd.DataFrame = field(default_factory=pd.DataFrame)
+    """The held-out tracks' events per detector: `detector` and `EVENT_FIELDS`."""
+    event_table: pd.DataFrame = field(default_factory=pd.DataFrame)
+    """One row per detector x injected kind (`event_metrics`), and 'any'."""
 
 
 def check(settings: EvaluateSettings) -> None:
@@ -220,6 +230,7 @@ def _prepare(settings: EvaluateSettings, existing: dict[str, Detector]) -> _Prep
         settings.before,
         settings.altered,
         settings.at_sea,
+        settings.thin_s,
     )
     return _Prepared(settings, split, existing)
 
@@ -305,7 +316,46 @@ def _score(
     scores = pd.DataFrame(score_rows, columns=columns)
     scores = scores.merge(pd.concat(per_track), on=["detector", "track_id"], how="left")
     result.scores = scores.merge(split.labels, on="track_id", how="left")
+    say("finding events")
+    result.events = _events(prepared, detectors, heldout, result)
+    result.event_table = _event_table(result.events, split.labels, settings)
     return result
+
+
+DETECT_SCORE = ScoreSettings().score
+"""The score whose flags make off-traffic events: the one `aisdati detect` uses by default."""
+
+
+def _events(
+    prepared: _Prepared, detectors: dict[str, Detector], heldout: list, result: Evaluation
+) -> pd.DataFrame:
+    """Each detector's events of the held-out tracks on their reports (`aisdati.evaluation.
+    events`): the model-free ones, the same for all, and its own off-traffic ones."""
+    settings = prepared.settings
+    free = model_free(prepared.data, prepared.split.heldout_ids, list(detectors.values()),
+                      settings.ashore)  # fmt: skip
+    parts = []
+    for method, det in detectors.items():
+        s = result.scores[(result.scores["detector"] == method)]
+        s = s[s["score"] == DETECT_SCORE].set_index("track_id").loc[prepared.split.heldout_ids]
+        profiles = result.profiles[(method, DETECT_SCORE)]
+        threshold = float(s["threshold"].iloc[0])
+        events = with_off_traffic(free, heldout, s["value"].to_numpy(), threshold, profiles,
+                                  det.name)  # fmt: skip
+        parts.append(on_reports(events, heldout).assign(detector=method))
+    return pd.concat(parts, ignore_index=True)
+
+
+def _event_table(
+    events: pd.DataFrame, labels: pd.DataFrame, settings: EvaluateSettings
+) -> pd.DataFrame:
+    """`event_metrics` of each detector's events."""
+    rows = [
+        {"detector": method, **row}
+        for method in settings.detectors
+        for row in event_metrics(labels, events[events["detector"] == method], settings.kinds)
+    ]
+    return pd.DataFrame(rows)
 
 
 def scored_kinds(det: Detector) -> list[str]:
@@ -334,6 +384,8 @@ class RoutesEvaluation:
     its route model's calibrated threshold (medians in multiples of the threshold)."""
     scores: pd.DataFrame
     """Every route's `Evaluation.scores`, with `route` and `ratio` (value / threshold)."""
+    event_table: pd.DataFrame = field(default_factory=pd.DataFrame)
+    """As `Evaluation.event_table`, over the held-out tracks of all routes."""
 
 
 def evaluate_routes(
@@ -380,7 +432,8 @@ def evaluate_routes(
         _score(p, d, t, say, runner) for p, d, t in zip(prepared, detectors, train_s, strict=True)
     ]
     scores, table = _pooled(evaluations, settings.kinds)
-    return RoutesEvaluation(settings, evaluations, skipped, table, scores)
+    events = _pooled_events(evaluations, settings)
+    return RoutesEvaluation(settings, evaluations, skipped, table, scores, events)
 
 
 def _prepare_routes(
@@ -421,6 +474,21 @@ def _pooled(
         flagged = g["flagged"].to_numpy()
         rows += _rows(method, kind, labels, values, ranked, flagged, 1.0, kinds, POOLED_UNIT)
     return scores, pd.DataFrame(rows)
+
+
+def _pooled_events(evaluations: Sequence[Evaluation], settings: EvaluateSettings) -> pd.DataFrame:
+    """`event_metrics` over every route's held-out tracks, each named by route and id (the
+    altered tracks of two routes may share an id)."""
+
+    def named(frame: pd.DataFrame, route: str) -> pd.DataFrame:
+        return frame.assign(track_id=route + "/" + frame["track_id"].astype(str))
+
+    routes = [ev.settings.cluster for ev in evaluations]
+    events = pd.concat([named(ev.events, r) for ev, r in zip(evaluations, routes, strict=True)])
+    labels = pd.concat(
+        [named(ev.split.labels, r) for ev, r in zip(evaluations, routes, strict=True)]
+    )
+    return _event_table(events, labels, settings)
 
 
 POOLED_UNIT = "x threshold"

@@ -1,0 +1,78 @@
+"""The evaluation's events: what `aisdati detect` reports of the held-out tracks, by the same
+code (`aisdati.detection.events`: the model-free kinds over the reports, off-traffic over the
+tracks a model flags), placed on each track's reports so that `event_metrics` can tell which
+injected stretches they find.
+
+Each held-out track's reports are judged on their own, not as one vessel's: an injected kind
+that re-times its track (loiter, speed, drift) can make it overlap in time the vessel's next
+held-out track, which a vessel's reports never do."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from aisdati.detection.events import all_events, model_free_events, off_traffic_events
+from aisdati.detectors import Detector
+from aisdati.evaluation.metrics import EVENT_FIELDS
+from aisdati.tracks.reports import read_reports, read_vessels
+from aisdati.tracks.store import Track
+
+TOLERANCE_US = 1000
+"""Event times (from track hours) meet report times (microseconds) within this."""
+
+
+def model_free(
+    data: Path, track_ids: Sequence[int], detectors: Sequence[Detector], ashore: bool
+) -> pd.DataFrame:
+    """Every model-free event of each of the tracks (`model_free_events`), judged track by
+    track, with the water the detectors' training traffic sailed ashore as detect takes it;
+    without `ashore`, no ashore events (as `detect --no-ashore`)."""
+    reports = read_reports(data, list(track_ids))
+    identity = read_vessels(data)
+    seen = [np.asarray(d.card.data.ashore, np.float64).reshape(-1, 2) for d in detectors]
+    where = np.concatenate(seen) if seen else None
+    parts = [model_free_events(g, identity, where) for _, g in reports.groupby("track_id")]
+    events = all_events(parts)
+    return events if ashore else events[events["kind"] != "ashore"]
+
+
+def with_off_traffic(
+    free: pd.DataFrame,
+    tracks: Sequence[Track],
+    values: np.ndarray,
+    threshold: float,
+    profiles: Sequence[np.ndarray],
+    model: str,
+) -> pd.DataFrame:
+    """The model-free events and the off-traffic events of the tracks whose `values` exceed
+    `threshold` (`off_traffic_events`, `model` naming the model)."""
+    scores = pd.DataFrame({"score": values, "threshold": threshold, "model": model})
+    learned = off_traffic_events(tracks, scores, profiles, pd.DataFrame())
+    return all_events([learned, free.drop(columns="event_id", errors="ignore")])
+
+
+def on_reports(events: pd.DataFrame, tracks: Sequence[Track]) -> pd.DataFrame:
+    """The events as `EVENT_FIELDS`: each one's first and last report on its track."""
+    times = {t.track_id: _times_us(t) for t in tracks}
+    rows = []
+    for e in events.dropna(subset=["track_id"]).itertuples():
+        t = times.get(int(e.track_id))
+        if t is None:
+            continue
+        first = int(np.searchsorted(t, _us(e.start) - TOLERANCE_US))
+        last = int(np.searchsorted(t, _us(e.end) + TOLERANCE_US, side="right")) - 1
+        rows.append((int(e.track_id), e.kind, first, last, float(e.strength)))
+    return pd.DataFrame(rows, columns=list(EVENT_FIELDS))
+
+
+def _times_us(track: Track) -> np.ndarray:
+    hours = np.r_[0.0, np.cumsum(track.dts)]
+    return _us(track.start) + np.round(hours * 3.6e9).astype(np.int64)
+
+
+def _us(time: pd.Timestamp) -> int:
+    return int(pd.Timestamp(time).value) // 1000  # .value: nanoseconds whatever the unit
