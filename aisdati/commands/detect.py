@@ -13,14 +13,21 @@ from rich.markup import escape
 from aisdati.ais.card import unfinished_models
 from aisdati.commands.common import console, shows_progress, spinner, warn
 from aisdati.commands.options import DetectOptions
-from aisdati.commands.tables import detection_table
-from aisdati.detection.outputs import OUTPUTS, REPORT, report_dict, write_outputs
+from aisdati.commands.tables import detection_table, events_table
+from aisdati.detection.outputs import (
+    OUTPUTS,
+    REPORT,
+    report_dict,
+    write_event_outputs,
+    write_outputs,
+)
 from aisdati.detection.run import (
     Coverage,
     Detection,
     DetectSettings,
     check_settings,
     detect,
+    events_only,
     with_own_method,
 )
 from aisdati.detectors import parse_detectors
@@ -35,6 +42,9 @@ from aisdati.tracks.ashore import AshoreCheck
 
 def run(o: DetectOptions) -> None:
     """`aisdati detect` with its options (`aisdati.commands.options.DetectOptions`)."""
+    if o.models_dir.strip().lower() == NO_MODEL:
+        run_events_only(o)
+        return
     settings = detect_settings(o)
     execution = Execution.parse(o.workers)
     with (
@@ -59,6 +69,33 @@ def run(o: DetectOptions) -> None:
         print(json.dumps(doc, default=str))
     else:
         print_detection(result, files, settings.out_dir)
+
+
+NO_MODEL = "none"
+"""`--models none`: the events that need no model, over every report."""
+
+
+def run_events_only(o: DetectOptions) -> None:
+    """`detect --models none`: the model-free events of every report of --data."""
+    out = o.out or Path("reports") / f"{datetime.now():%Y%m%d-%H%M%S}"
+    with (
+        removed_if_left_empty(out),
+        staged_outputs(out, OUTPUTS, REPORT) as outputs,
+    ):
+        with spinner(console, "finding events", show=shows_progress(o.as_json)):
+            result = events_only(o.data)
+            files = [outputs.final(f) for f in write_event_outputs(result, outputs.folder)]
+        outputs.commit()
+    if o.as_json:
+        print(json.dumps({**report_dict(result), "files": [str(f) for f in files]}, default=str))
+        return
+    console.print(events_table(result.events))
+    console.print(
+        f"{result.reports_judged:,} reports judged, no model (--models none: the kinds that "
+        f"need one are left out); wrote {escape(', '.join(f.name for f in files))} to "
+        f"[bold]{escape(str(out))}[/]",
+        highlight=False,
+    )
 
 
 def detect_settings(o: DetectOptions) -> DetectSettings:
@@ -122,6 +159,7 @@ def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     """The flagged tracks, the scores against hand labels if given, and what was written."""
     rule = result.settings.rule if result.settings else "calibrated"
     console.print(detection_table(result.scores, result.score, rule))
+    console.print(events_table(result.events))
     if result.coverage is not None:
         console.print(coverage_line(result.coverage), highlight=False)
     check = AshoreCheck()

@@ -390,15 +390,21 @@ class EvaluateOptions:
 
 @dataclass(frozen=True)
 class DetectOptions:
-    """Score test tracks against trained models: writes scores.parquet, profiles.parquet,
-    anomalies.geojson, map.png, map.html and report.json to --out and prints the flagged
-    tracks."""
+    """Score test tracks against trained models and find events: writes scores.parquet,
+    profiles.parquet, anomalies.geojson, events.parquet, events.geojson, map.png, map.html and
+    report.json to --out and prints the flagged tracks and the events."""
 
     data: Annotated[Path, typer.Option("--data", help="Ingest output folder.")] = Path(
         "data/processed"
     )
     models_dir: Annotated[
-        str, typer.Option("--models", help="Model folder, or the URL `train --out` copied them to.")
+        str,
+        typer.Option(
+            "--models",
+            help="Model folder, or the URL `train --out` copied them to; `none`: no model, "
+            "only the events that need none (drift, sudden speed change, gap, inconsistent "
+            "motion, loitering, ashore) over every report.",
+        ),
     ] = "models"
     model: Annotated[
         list[str] | None,

@@ -301,12 +301,12 @@ def detection_table(
     cols = [
         "rank", "track", "mmsi", *(["model"] if several else []),
         f"score ({kind.readable_unit})", "threshold", "max km", "at (lat, lon)",
-        *(["ashore"] if ashore else []),
+        *(["ashore"] if ashore else []), "events",
     ]  # fmt: skip
     rows = [(detection_row(r, kind, several, ashore), bool(r.flagged))
             for r in shown.head(limit).itertuples()]  # fmt: skip
     # every figure whole at 80 columns (a log, a pipe): only the place and the model wrap
-    wraps = ("model", "at (lat, lon)")
+    wraps = ("model", "at (lat, lon)", "events")
     for k, col in enumerate(cols):
         whole = max([len(col), *(len(row[k]) for row, _ in rows)])
         table.add_column(
@@ -333,5 +333,29 @@ def detection_row(r: Any, kind: Score, several: bool, ashore: bool) -> list[str]
         str(r.rank), str(r.track_id), str(r.mmsi), *([str(r.model)] if several else []),
         f"{kind.readable(r.score):,.2f}", f"{kind.readable(r.threshold):,.2f}",
         f"{r.max_dev_m / 1000:,.2f}", f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
-        *([str(r.ashore_reports)] if ashore else []),
+        *([str(r.ashore_reports)] if ashore else []), r.event_kinds or "-",
     ]  # fmt: skip
+
+
+def events_table(events: pd.DataFrame, limit: int = 20) -> Table:
+    """The events found, in time order: which vessel did what, from when, for how long, where,
+    and how far over its threshold (strength 1 = at it)."""
+    title = f"{len(events)} event(s)" if len(events) else "no events"
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+    for col in ("kind", "vessel", "start (UTC)", "for", "at (lat, lon)", "x thr", "evidence"):
+        table.add_column(col, overflow="fold", justify="right" if col == "x thr" else "left")
+    for e in events.head(limit).itertuples():
+        vessel = f"{e.mmsi}" + (f" {e.name}" if isinstance(e.name, str) and e.name else "")
+        table.add_row(
+            e.kind, escape(vessel), f"{e.start:%Y-%m-%d %H:%M:%S}", _duration(e.duration_s),
+            f"{e.lat:.4f}, {e.lon:.4f}", f"{e.strength:.2f}", escape(str(e.evidence)),
+        )  # fmt: skip
+    if len(events) > limit:
+        table.caption = f"... and {len(events) - limit} more in events.parquet"
+    return table
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"

@@ -53,6 +53,14 @@ L.geoJSON(L_.deviations, {
 overlays[D.names.flagged] = flagged;
 if (D.optional.stretches) overlays[D.names.stretches] = lines(D.optional.stretches,
   {color: '#ff7f0e', weight: 6, opacity: 0.8}, false);
+if (D.optional.events) overlays[D.names.events] = L.geoJSON(D.optional.events, {
+  style: {color: '#e6550d', weight: 7, opacity: 0.85},
+  pointToLayer: (f, ll) => L.circleMarker(ll, {radius: 7, color: '#e6550d', weight: 3}),
+  onEachFeature: (f, layer) => {
+    layer.bindTooltip(`${f.properties.label}: ${f.properties.mmsi} from ${f.properties.start}`, {sticky: true});
+    layer.bindPopup(() => table(f.properties));
+  },
+});
 const boxes = L.layerGroup(D.regions.map(b => L.rectangle(b, {color: 'black', weight: 1, dashArray: '5', fill: false, interactive: false})));
 overlays[D.names.regions] = boxes;
 for (const [name, layer] of Object.entries(overlays)) {

@@ -15,6 +15,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from aisdati.detection.webmap import html_detection_map
+from aisdati.events.stretch import deviation_stretch
+from aisdati.events.table import events_geojson
 from aisdati.execution import InProcess, Runner
 from aisdati.outdir import atomic_write_bytes
 from aisdati.plots import draw_land, drawn, plain_text, set_map_limits
@@ -232,20 +234,6 @@ def _profile_panel(
 
 
 # ------------------------------------------------------------------ a detection's maps
-def deviation_stretch(profile: np.ndarray) -> tuple[int, int]:
-    """The contiguous stretch around a profile's peak where it stays above half the peak: where
-    the track strays most, as an index range [start, end)."""
-    k = int(np.argmax(profile))
-    above = profile >= profile[k] / 2
-    a = k
-    while a > 0 and above[a - 1]:
-        a -= 1
-    b = k + 1
-    while b < len(profile) and above[b]:
-        b += 1
-    return a, b
-
-
 FigureJob = tuple[Callable[..., bytes], tuple, dict[str, Any]]
 """A figure to draw: (function returning its PNG, positional arguments, keyword arguments)."""
 
@@ -301,6 +289,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
             for t, (a, b), f in zip(result.tracks, stretches, flagged, strict=True)
             if f
         ],
+        events=events_geojson(result.events),
         title=title,
     )
     if len(figures) > 1:

@@ -12,6 +12,7 @@ import pyarrow as pa
 
 from aisdati.ais.card import card_warnings
 from aisdati.detection.run import Detection
+from aisdati.events.table import events_geojson, events_summary, write_events
 from aisdati.execution import Runner
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.ashore import AshoreCheck
@@ -20,6 +21,8 @@ OUTPUTS = (
     "scores.parquet",
     "profiles.parquet",
     "anomalies.geojson",
+    "events.parquet",
+    "events.geojson",
     "map.png",
     "map.html",
     "metrics.json",
@@ -46,6 +49,8 @@ SCORES_SCHEMA = pa.schema(
         ("max_dev_lat", pa.float64()),
         ("max_dev_index", pa.int64()),
         ("ashore_reports", pa.int64()),
+        ("events", pa.int64()),
+        ("event_kinds", pa.string()),
     ]
 )
 """scores.parquet, one row per test track, sorted by rank (1 = most abnormal). score: the
@@ -53,7 +58,8 @@ judging model's score, in the unit the file's metadata (`aisdati.score_unit`) an
 name; threshold: what flags it, in the same unit (the model's calibrated threshold, or the
 batch-relative one asked for); max_dev_*: the track point with the largest local deviation;
 ashore_reports: reports well inland (`aisdati.tracks.ashore`; 0 with --no-ashore), which flag
-the track from `AshoreCheck.min_reports` on and rank it above every track at sea."""
+the track from `AshoreCheck.min_reports` on and rank it above every track at sea; events,
+event_kinds: the track's events (events.parquet), any of which flags it."""
 
 def write_outputs(result: Detection, out: Path, runner: Runner | None = None) -> list[Path]:
     """Every output of a detection in `out` (the command's staging folder: `OutputSet`), each
@@ -77,6 +83,7 @@ def write_outputs(result: Detection, out: Path, runner: Runner | None = None) ->
     path = out / "anomalies.geojson"
     atomic_write_bytes(path, json.dumps(anomalies_geojson(result)).encode())
     files.append(path)
+    files += write_events(result.events, out)
     files += write_maps(result, out, runner)
     if result.metrics is not None:
         path = out / "metrics.json"
@@ -86,6 +93,22 @@ def write_outputs(result: Detection, out: Path, runner: Runner | None = None) ->
     atomic_write_bytes(path, json.dumps(report_dict(result), indent=2, default=str).encode())
     files.append(path)
     return files
+
+
+def write_event_outputs(result: Detection, out: Path) -> list[Path]:
+    """What `detect --models none` writes: the events, a map of them and report.json."""
+    from aisdati.detection.webmap import html_detection_map
+
+    out.mkdir(parents=True, exist_ok=True)
+    files = write_events(result.events, out)
+    page = out / "map.html"
+    title = f"aisdati: {len(result.events)} event(s), no model"
+    html_detection_map(
+        [], [], [], np.zeros(0, bool), [], page, events=events_geojson(result.events), title=title
+    )
+    path = out / "report.json"
+    atomic_write_bytes(path, json.dumps(report_dict(result), indent=2, default=str).encode())
+    return [*files, page, path]
 
 
 def profiles_table(result: Detection) -> pa.Table:
@@ -223,4 +246,5 @@ def report_dict(result: Detection) -> dict[str, Any]:
         "timings": {k: round(v, 3) for k, v in result.timings.items()},
         "metrics": result.metrics,
         "score_definition": result.judged_by.definition if s else None,
+        **events_summary(result.events, result.reports_judged),
     }

@@ -35,6 +35,16 @@ import pandas as pd
 
 from aisdati.ais import AREA_METHOD
 from aisdati.ais.card import card_methods
+from aisdati.detection.events import (
+    all_events,
+    empty_events,
+    event_settings,
+    judged_reports,
+    model_free_events,
+    off_traffic_events,
+    uncalibrated_note,
+    with_events,
+)
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detection.routing import Coverage, check_region, route_test_tracks
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detectors
@@ -43,6 +53,7 @@ from aisdati.errors import UserError
 from aisdati.execution import Runner
 from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
+from aisdati.tracks.reports import read_reports, read_vessels
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -117,6 +128,9 @@ class Detection:
     coverage: Coverage | None = None
     notes: list[str] = field(default_factory=list)
     """Warnings about the run itself (`small_batch_note`), printed and in report.json."""
+    events: pd.DataFrame = field(default_factory=empty_events)
+    """What happened (`aisdati.detection.events`): one row per event, `EVENT_COLUMNS`."""
+    reports_judged: int = 0
 
     @property
     def score(self) -> str:
@@ -266,15 +280,56 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
         ashore = ashore_counts(seen, [t.positions for t in tracks], owner, runner)
     names = [models[o].name for o in owner]
     scores = score_table(tracks, names, raw, threshold, profiles, ashore)
+    t2 = time.perf_counter()
+    events, judged = _events(settings, models, tracks, scores, profiles, coverage)
+    scores = with_events(scores, events)
+    timings["events_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
-    note = small_batch_note(len(tracks), settings)
+    judging = [m for m in models if m.name in set(scores["model"])]
+    notes = [small_batch_note(len(tracks), settings), uncalibrated_note(judging)]
     result = Detection(
         scores, tracks, evidence, models, profiles, timings, settings, coverage=coverage,
-        notes=[note] if note else [],
+        notes=[n for n in notes if n], events=events, reports_judged=judged,
     )  # fmt: skip
     if settings.labels is not None:
         result.metrics = evaluate_labels(scores, tracks, settings.labels)
     return result
+
+
+def _events(
+    settings: DetectSettings,
+    models: Sequence[Detector],
+    tracks: list[Track],
+    scores: pd.DataFrame,
+    profiles: Sequence[np.ndarray],
+    coverage: Coverage,
+) -> tuple[pd.DataFrame, int]:
+    """The detection's events (`aisdati.detection.events`) and the reports they judged."""
+    identity = read_vessels(settings.data_dir)
+    every = settings.cluster == AREA and not settings.track_ids
+    reports = judged_reports(
+        read_reports(settings.data_dir, None if every else [t.track_id for t in tracks]),
+        tracks, coverage.training, every,
+    )  # fmt: skip
+    seen = [np.asarray(m.card.data.ashore, np.float64).reshape(-1, 2) for m in models]
+    how = event_settings([m for m in models if m.name in set(scores["model"])])
+    free = model_free_events(reports, identity, np.concatenate(seen) if seen else None, how)
+    if not settings.ashore:
+        free = free[free["kind"] != "ashore"]
+    learned = off_traffic_events(tracks, scores, profiles, identity)
+    return all_events([learned, free]), len(reports)
+
+
+def events_only(data_dir: Path) -> Detection:
+    """The events that need no model (`aisdati.events.kinds.MODEL_FREE`) over every report of
+    an ingest output: `detect --models none`."""
+    t0 = time.perf_counter()
+    reports = read_reports(data_dir)
+    events = all_events([model_free_events(reports, read_vessels(data_dir))])
+    scores = pd.DataFrame(columns=list(SCORE_COLUMNS))
+    timings = {"events_s": time.perf_counter() - t0, "score_s": 0.0}
+    judged = len(reports)
+    return Detection(scores, [], [], [], timings=timings, events=events, reports_judged=judged)
 
 
 def judged_tracks(
@@ -298,6 +353,14 @@ def judged_tracks(
     owner = [int(o) for o in owners if o >= 0]
     settings = with_own_score(settings, [models[m] for m in sorted(set(owner))])
     return settings, models, tracks, owner, coverage
+
+
+SCORE_COLUMNS = (
+    "track_id", "mmsi", "model", "n_points", "score", "threshold", "flagged", "rank",
+    "max_dev_m", "max_dev_lon", "max_dev_lat", "max_dev_index", "ashore_reports", "events",
+    "event_kinds",
+)  # fmt: skip
+"""scores.parquet's columns (`aisdati.detection.outputs.SCORES_SCHEMA`)."""
 
 
 def score_table(

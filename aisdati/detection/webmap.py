@@ -33,6 +33,7 @@ LAYER_FLAGGED = "flagged tracks"
 LAYER_ROLLOUTS = "nearest rollouts (flagged)"
 LAYER_BEST_ROLLOUTS = "best rollouts (all tracks)"
 LAYER_STRETCHES = "stretches"
+LAYER_EVENTS = "events"
 LAYER_MEDOIDS = "route medoids"
 LAYER_REGIONS = "model regions"
 BASE_OFFLINE = "no tiles (offline)"
@@ -209,19 +210,24 @@ def map_data(
     best_rollouts: Sequence[np.ndarray | None] | None = None,
     stretches: Sequence[np.ndarray | tuple[str, np.ndarray]] | None = None,
     medoids: Sequence[tuple[str, np.ndarray]] | None = None,
+    events: dict[str, Any] | None = None,
     title: str = "",
 ) -> dict[str, Any]:
-    """Everything the page draws, as plain JSON (the page's script only styles it)."""
+    """Everything the page draws, as plain JSON (the page's script only styles it); `events`:
+    the events' GeoJSON (`aisdati.events.table.events_geojson`), a popup each."""
     flagged = np.asarray(flagged, dtype=bool)
     stretch_lines = _labelled(stretches or [], "stretch")
     medoid_lines = _labelled(medoids or [], "route")
     corners = [np.stack([lo, hi]) for lo, hi in regions]
-    extent = _extent([tracks, [xy for _, xy in (*stretch_lines, *medoid_lines)], corners])
+    places = [np.reshape(f["geometry"]["coordinates"], (-1, 2)) for f in _features(events)]
+    lines = [xy for _, xy in (*stretch_lines, *medoid_lines)]
+    extent = _extent([tracks, lines + places, corners])
     optional = _optional_layers(
         best_rollouts,
         None if stretches is None else stretch_lines,
         None if medoids is None else medoid_lines,
     )
+    optional["events"] = events
     return {
         "title": title,
         "layers": _track_layers(tracks, rollouts, props, flagged),
@@ -234,6 +240,10 @@ def map_data(
         "tile_url": TILE_URL,
         "coast_attribution": COAST_ATTRIBUTION,
     }
+
+
+def _features(collection: dict[str, Any] | None) -> list[dict[str, Any]]:
+    return collection["features"] if collection else []
 
 
 def _optional_layers(
@@ -293,8 +303,13 @@ def _layer_names(optional: dict[str, dict[str, Any] | None]) -> dict[str, str]:
         "offline": BASE_OFFLINE,
         "tiles": BASE_TILES,
     }
-    extra = {"best": LAYER_BEST_ROLLOUTS, "stretches": LAYER_STRETCHES, "medoids": LAYER_MEDOIDS}
-    names.update({k: v for k, v in extra.items() if optional[k] is not None})
+    extra = {
+        "best": LAYER_BEST_ROLLOUTS,
+        "stretches": LAYER_STRETCHES,
+        "medoids": LAYER_MEDOIDS,
+        "events": LAYER_EVENTS,
+    }
+    names.update({k: v for k, v in extra.items() if optional.get(k) is not None})
     return names
 
 

@@ -26,10 +26,13 @@ from aisdati.ais.training import TrainSettings, check_settings, model_stem, trai
 from aisdati.detectors.base import detector_class
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
+from aisdati.events.calibrate import calibration
+from aisdati.events.reports import VesselReports
 from aisdati.execution import InProcess, Runner
 from aisdati.model.trainer import Callback
 from aisdati.progress import EpisodeProgress
 from aisdati.storage import RemoteFolder, staging_folder
+from aisdati.tracks.reports import read_reports
 from aisdati.tracks.store import read_track_table, select_cluster
 
 ROUTES_PER_TASK = 1
@@ -200,14 +203,25 @@ def fit_and_save(
     sets = [training_set(s) for s in settings]
     detectors = cls.fit_routes(settings, sets, how, on_step, first_member)
     trained = []
-    for s, det in zip(settings, detectors, strict=True):
+    for s, det, (tracks, _) in zip(settings, detectors, sets, strict=True):
         stem = model_stem(s)
         assert stem is not None  # every settings has an out_dir (checked above)
+        det.card.calibration |= event_calibration(s.data_dir, [t.track_id for t in tracks])
         det.save(stem)
         wall = time.perf_counter() - t0
         model = stem.with_suffix(det.model_suffix)
         trained.append(Trained(model, det.card.to_dict(), wall, det.resumed_from))
     return trained
+
+
+def event_calibration(data_dir: Path | None, track_ids: list[int]) -> dict[str, list[float]]:
+    """The training tracks' own event statistics (`aisdati.events.calibrate`), read from
+    their reports, for the card beside its scores."""
+    if data_dir is None:
+        return {}
+    reports = read_reports(data_dir, track_ids)
+    tracks = [VesselReports.of(group) for _, group in reports.groupby("track_id", sort=True)]
+    return calibration(tracks)
 
 
 def train_detector(

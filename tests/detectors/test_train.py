@@ -46,6 +46,8 @@ def test_preset_round_trips_through_the_model_card_and_old_cards_load(kitimat, t
     # the lane of K rollouts is never farther from a report than the best rollout's match
     # (by position: the course weight is a metric of its own)
     assert len(card["calibration"]["lane"]) == len(ids)
+    # beside the scores, each training track's event statistics (`aisdati.events.calibrate`)
+    assert len(card["calibration"]["event:speed-inconsistent"]) == len(ids)
     few = load_tracks(kitimat, list(ids[:2]))
     where = ScoreSettings(score="lane", rollouts=3, lane_course_km=0.0)
     lane_s = det.score(few, where, also=("rollout",))

@@ -1,0 +1,150 @@
+"""A detection's events: the model-free kinds over the judged reports, the learned kind
+(off-traffic) over the tracks the model flags; a track is flagged when it has an event.
+
+Which reports are judged: with a model, every report of the judged tracks' time span but the
+models' own training tracks (`--cluster all`), or the reports of the chosen tracks; with no
+model, every report of the ingest output. Slow reports are judged with the rest:
+reports.parquet keeps what the paper's SOG filter keeps out of the tracks."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from aisdati.detectors import Detector
+from aisdati.events.calibrate import KEY, calibrated
+from aisdati.events.find import EVENT_COLUMNS, find_events, placed
+from aisdati.events.reports import vessels
+from aisdati.events.settings import EventSettings
+from aisdati.events.stretch import deviation_stretch
+from aisdati.tracks.store import Track
+
+NO_IDENTITY = {"name": None, "ship_type": None, "length_m": np.nan}
+
+
+def event_settings(models: Sequence[Detector]) -> EventSettings:
+    """The event thresholds of the judging models' areas (`aisdati.events.calibrate`): their
+    training tracks' statistics pooled; the defaults for a model from before them."""
+    pooled: dict[str, list[float]] = {}
+    for model in models:
+        for key, values in model.card.calibration.items():
+            if key.startswith(KEY):
+                pooled.setdefault(key, []).extend(values)
+    return calibrated(pooled)
+
+
+def uncalibrated_note(models: Sequence[Detector]) -> str | None:
+    """The warning models trained before event calibration earn: their events are judged by
+    the defaults, not by their area's traffic."""
+    old = [m.name for m in models if not any(k.startswith(KEY) for k in m.card.calibration)]
+    if not old:
+        return None
+    return (
+        f"{', '.join(old)} predate(s) event calibration: the events' thresholds are the "
+        "defaults, not the area's; retrain to calibrate them on its training tracks"
+    )
+
+
+def judged_reports(
+    reports: pd.DataFrame, tracks: Sequence[Track], training: Sequence[int], every: bool
+) -> pd.DataFrame:
+    """The reports to judge of those read (`aisdati.tracks.reports.read_reports`): `every`
+    (no model, or the whole area): all in the judged tracks' span but the training tracks';
+    else only the judged tracks'."""
+    track_id = reports["track_id"].fillna(-1).astype("int64")
+    if not every:
+        return reports[track_id.isin([t.track_id for t in tracks])]
+    keep = ~track_id.isin(list(training))
+    if tracks:
+        first = min(t.start for t in tracks)
+        last = max(t.start + pd.Timedelta(hours=float(np.sum(t.dts))) for t in tracks)
+        keep &= (reports["time"] >= first) & (reports["time"] <= last)
+    return reports[keep]
+
+
+def model_free_events(
+    reports: pd.DataFrame,
+    identity: pd.DataFrame,
+    seen: np.ndarray | None = None,
+    settings: EventSettings = EventSettings(),
+) -> pd.DataFrame:
+    """Every model-free event of every vessel of `reports` (`identity`: vessels.parquet by
+    MMSI; `seen`: where training traffic reported ashore)."""
+    frames = [
+        placed(v, find_events(v, settings, _who(identity, v.mmsi)["length_m"], seen),
+               _who(identity, v.mmsi))
+        for v in vessels(reports)
+    ]  # fmt: skip
+    frames = [f for f in frames if len(f)]
+    return pd.concat(frames, ignore_index=True) if frames else empty_events()
+
+
+def _who(identity: pd.DataFrame, mmsi: int) -> dict:
+    if mmsi not in identity.index:
+        return NO_IDENTITY
+    row = identity.loc[mmsi]
+    return {k: (None if pd.isna(row[k]) else row[k]) for k in NO_IDENTITY} | {
+        "length_m": float(row["length_m"]) if pd.notna(row["length_m"]) else np.nan
+    }
+
+
+def off_traffic_events(
+    tracks: Sequence[Track],
+    scores: pd.DataFrame,
+    profiles: Sequence[np.ndarray],
+    identity: pd.DataFrame,
+) -> pd.DataFrame:
+    """For each track whose score is above its threshold, the stretch where it strays most
+    (`deviation_stretch`) as an off-traffic event, its strength the score over the threshold."""
+    rows = []
+    for track, (_, s), profile in zip(tracks, scores.iterrows(), profiles, strict=True):
+        if not s["score"] > s["threshold"]:
+            continue
+        a, b = deviation_stretch(profile)
+        who = _who(identity, track.mmsi)
+        times = track.start + pd.to_timedelta(np.r_[0, np.cumsum(track.dts)], unit="h")
+        peak = int(np.argmax(profile))
+        rows.append(
+            {
+                "mmsi": track.mmsi, "name": who["name"], "ship_type": who["ship_type"],
+                "kind": "off-traffic", "start": times[a], "end": times[b - 1],
+                "duration_s": (times[b - 1] - times[a]).total_seconds(), "n_reports": b - a,
+                "lon": float(track.positions[peak, 0]), "lat": float(track.positions[peak, 1]),
+                "track_id": track.track_id,
+                "strength": round(float(s["score"] / s["threshold"]), 3),
+                "evidence": f"strays {profile[peak]:,.0f} m from what {s['model']} generates",
+                "model": s["model"], "lons": track.positions[a:b, 0].tolist(),
+                "lats": track.positions[a:b, 1].tolist(),
+            }
+        )  # fmt: skip
+    return pd.DataFrame(rows, columns=list(EVENT_COLUMNS))
+
+
+def empty_events() -> pd.DataFrame:
+    return pd.DataFrame(columns=list(EVENT_COLUMNS))
+
+
+def with_events(scores: pd.DataFrame, events: pd.DataFrame) -> pd.DataFrame:
+    """`scores` with each track's number of events and kinds, flagged where it has one."""
+    on_track = events.dropna(subset=["track_id"])
+    per = on_track.groupby(on_track["track_id"].astype("int64"))["kind"]
+    counts = per.size()
+    kinds = per.agg(lambda k: ", ".join(sorted(set(k))))
+    out = scores.copy()
+    out["events"] = out["track_id"].map(counts).fillna(0).astype("int64")
+    out["event_kinds"] = out["track_id"].map(kinds).fillna("")
+    out["flagged"] = out["flagged"] | (out["events"] > 0)
+    return out
+
+
+def all_events(parts: Sequence[pd.DataFrame]) -> pd.DataFrame:
+    """The events of a detection together, strongest first within each vessel's time order."""
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return empty_events()
+    events = pd.concat(parts, ignore_index=True).sort_values(["start", "mmsi", "kind"])
+    events.insert(0, "event_id", np.arange(1, len(events) + 1))
+    return events.reset_index(drop=True)
+

@@ -1,0 +1,108 @@
+"""events.parquet and events.geojson: one row (feature) per event, its stretch as the
+geometry (a point where the event is one report), and the events' part of report.json."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import shapely
+
+from aisdati.events.kinds import KINDS
+from aisdati.outdir import atomic_write_bytes, parquet_bytes
+
+UTC_US = pa.timestamp("us", tz="UTC")
+EVENTS_SCHEMA = pa.schema(
+    [
+        ("event_id", pa.int64()),
+        ("mmsi", pa.int64()),
+        ("name", pa.string()),
+        ("ship_type", pa.string()),
+        ("kind", pa.string()),
+        ("start", UTC_US),
+        ("end", UTC_US),
+        ("duration_s", pa.float64()),
+        ("n_reports", pa.int64()),
+        ("lon", pa.float64()),
+        ("lat", pa.float64()),
+        ("track_id", pa.int64()),
+        ("strength", pa.float64()),
+        ("evidence", pa.string()),
+        ("model", pa.string()),
+        ("geometry", pa.binary()),
+    ]
+)
+"""events.parquet (GeoParquet, WKB in WGS84 lon/lat): `start`/`end` the event's first and
+last report; `lon`/`lat` the report where it is strongest; `track_id` that report's track
+(null: a report in no track, e.g. a slow one); `strength` how far over its threshold (1 = at
+it); `model` the model of an off-traffic event; `geometry` the stretch."""
+GEO_METADATA = {
+    "version": "1.1.0",
+    "primary_column": "geometry",
+    "columns": {"geometry": {"encoding": "WKB", "geometry_types": ["LineString", "Point"]}},
+}
+
+
+def _shape(lons: list[float], lats: list[float]) -> shapely.Geometry:
+    xy = np.round(np.column_stack([lons, lats]), 6)
+    return shapely.Point(xy[0]) if len(xy) == 1 else shapely.LineString(xy)
+
+
+def events_arrow(events: pd.DataFrame) -> pa.Table:
+    """The events as events.parquet's table."""
+    stretches = zip(events["lons"], events["lats"], strict=True)
+    geometry = [shapely.to_wkb(_shape(a, b)) for a, b in stretches]
+    frame = events.drop(columns=["lons", "lats"]).assign(geometry=geometry)
+    frame["track_id"] = frame["track_id"].astype("Int64")
+    table = pa.Table.from_pandas(frame, schema=EVENTS_SCHEMA, preserve_index=False)
+    return table.replace_schema_metadata({b"geo": json.dumps(GEO_METADATA).encode()})
+
+
+def events_geojson(events: pd.DataFrame) -> dict[str, Any]:
+    """The events as a GeoJSON FeatureCollection (the stretch; properties: the fields)."""
+    features = []
+    for e in _records(events):
+        shape = _shape(e.pop("lons"), e.pop("lats"))
+        features.append(
+            {"type": "Feature", "geometry": shapely.geometry.mapping(shape), "properties": e}
+        )
+    return {"type": "FeatureCollection", "features": features}
+
+
+def _records(events: pd.DataFrame) -> list[dict[str, Any]]:
+    out = []
+    for row in events.to_dict("records"):
+        row = {k: (None if _missing(v) else v) for k, v in row.items()}
+        for key in ("start", "end"):
+            row[key] = row[key].isoformat() if row[key] is not None else None
+        row["label"] = KINDS[row["kind"]].label
+        out.append(row)
+    return out
+
+
+def _missing(v: Any) -> bool:
+    return not isinstance(v, list) and pd.isna(v)
+
+
+def write_events(events: pd.DataFrame, out: Path) -> list[Path]:
+    """events.parquet and events.geojson in `out`, each whole or not at all."""
+    parquet, geojson = out / "events.parquet", out / "events.geojson"
+    atomic_write_bytes(parquet, parquet_bytes(events_arrow(events)))
+    atomic_write_bytes(geojson, json.dumps(events_geojson(events), default=str).encode())
+    return [parquet, geojson]
+
+
+def events_summary(events: pd.DataFrame, reports_judged: int) -> dict[str, Any]:
+    """report.json's events: how many reports were judged, events per kind, and each event
+    (its stretch's positions left to events.geojson)."""
+    return {
+        "reports_judged": reports_judged,
+        "events_by_kind": events["kind"].value_counts().to_dict() if len(events) else {},
+        "events": [
+            {k: v for k, v in e.items() if k not in ("lons", "lats")} for e in _records(events)
+        ],
+    }

@@ -1,0 +1,45 @@
+"""Reading back what ingest kept of every report (reports.parquet) and of every vessel
+(vessels.parquet), for the event finders. An ingest output from before reports.parquet (or
+evaluate's injected copy, which has only tracks) is read from points.parquet: its tracks'
+reports, heading and status where it has them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pyarrow.dataset as ds
+
+from aisdati.errors import UserError
+
+REPORTS = "reports.parquet"
+VESSELS = "vessels.parquet"
+IDENTITY = ("name", "ship_type", "length_m")
+
+
+def has_reports(data_dir: Path) -> bool:
+    """Whether the ingest output holds every report (reports.parquet), not only its tracks'."""
+    return (data_dir / REPORTS).exists()
+
+
+def read_reports(data_dir: Path, track_ids: list[int] | None = None) -> pd.DataFrame:
+    """The reports to judge, sorted by vessel and time: every report of reports.parquet (or,
+    where the output predates it, of points.parquet's tracks); `track_ids`: only the reports of
+    those tracks."""
+    path = data_dir / (REPORTS if has_reports(data_dir) else "points.parquet")
+    try:
+        dataset = ds.dataset(path, format="parquet")
+        wanted = ds.field("track_id").isin(track_ids) if track_ids is not None else None
+        frame = dataset.to_table(filter=wanted).to_pandas()
+    except (OSError, ValueError) as exc:
+        raise UserError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
+    return frame.sort_values(["mmsi", "time"], kind="stable").reset_index(drop=True)
+
+
+def read_vessels(data_dir: Path) -> pd.DataFrame:
+    """Each vessel's name, type and length (vessels.parquet), indexed by MMSI; empty where the
+    ingest output predates it."""
+    path = data_dir / VESSELS
+    if not path.exists():
+        return pd.DataFrame(columns=list(IDENTITY), index=pd.Index([], name="mmsi"))
+    return pd.read_parquet(path).set_index("mmsi")
