@@ -14,15 +14,7 @@ from aisdati.tracks.store import read_track_table
 
 def _evaluate(cli, data, out, *extra):
     return cli(
-        "evaluate",
-        "--data",
-        data,
-        "--cluster",
-        "other",
-        "--detectors",
-        "nearest",
-        "--out",
-        out,
+        "evaluate", "--data", data, "--cluster", "other", "--detectors", "nearest", "--out", out,
         *extra,
     )
 
@@ -48,23 +40,9 @@ def test_evaluate_nearest_is_deterministic_and_writes_everything(cli, kitimat, t
         assert (a / name).stat().st_size > 10_000
     # the injected set is an ingest output: detect reads it
     det = cli(
-        "detect",
-        "--data",
-        a / "data",
-        "--models",
-        a / "models",
-        "--method",
-        "nearest",
-        "--cluster",
-        "other",
-        "--labels",
-        a / "data" / "labels.csv",
-        "--out",
-        tmp_path / "r",
-        "--contamination",
-        "0.05",
-        "--score",
-        "lane",
+        "detect", "--data", a / "data", "--models", a / "models", "--method", "nearest",
+        "--cluster", "other", "--labels", a / "data" / "labels.csv", "--out", tmp_path / "r",
+        "--contamination", "0.05", "--score", "lane",
     )
     assert det.exit_code == 0, det.output
     assert "ROC AUC" in det.output
@@ -101,28 +79,16 @@ def test_evaluate_bad_input_is_one_line_and_writes_nothing(cli, kitimat, tmp_pat
 
 def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
     models = tmp_path / "models"
-    r = cli(
-        "train", "--cluster", "other", "--method", "nearest", "--data", kitimat, "--out", models
-    )
+    r = cli("train", "--cluster", "other", "--method", "nearest", "--data", kitimat, "--out",
+            models)
     assert r.exit_code == 0, r.output
     card_path = models / "other-nearest.json"
     card = json.loads(card_path.read_text())
     card["region"]["lon"] = [x + 30 for x in card["region"]["lon"]]
     card_path.write_text(json.dumps(card))
     out = tmp_path / "ev"
-    r = cli(
-        "evaluate",
-        "--data",
-        kitimat,
-        "--cluster",
-        "other",
-        "--detectors",
-        "nearest",
-        "--models",
-        models,
-        "--out",
-        out,
-    )  # not quiet: no progress line before the error
+    r = cli("evaluate", "--data", kitimat, "--cluster", "other", "--detectors", "nearest",
+            "--models", models, "--out", out)  # not quiet: no progress line before the error
     assert r.exit_code == 2, r.output
     assert "another region" in r.output and len(r.output.strip().splitlines()) == 1
     assert not (out / "evaluation.json").exists()
@@ -130,19 +96,8 @@ def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
 
 def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat, tmp_path):
     out = tmp_path / "routes"
-    r = cli(
-        "evaluate",
-        "--data",
-        kitimat,
-        "--cluster",
-        "routes",
-        "--detectors",
-        "nearest",
-        "--kinds",
-        "detour,jump,loiter",
-        "--out",
-        out,
-    )
+    r = cli("evaluate", "--data", kitimat, "--cluster", "routes", "--detectors", "nearest",
+            "--kinds", "detour,jump,loiter", "--out", out)
     assert r.exit_code == 0, r.output
     assert "over 2 routes" in " ".join(r.output.split())
     doc = json.loads((out / "evaluation.json").read_text())
@@ -172,17 +127,8 @@ def test_evaluate_every_route_needs_routes(cli, kitimat, tmp_path):
     shutil.copytree(kitimat / "points.parquet", data / "points.parquet")  # a dataset folder
     tracks = pd.read_parquet(kitimat / "tracks.parquet")
     tracks.assign(route=None).to_parquet(data / "tracks.parquet")
-    r = cli(
-        "evaluate",
-        "--data",
-        data,
-        "--cluster",
-        "routes",
-        "--detectors",
-        "nearest",
-        "--out",
-        tmp_path / "o",
-    )
+    r = cli("evaluate", "--data", data, "--cluster", "routes", "--detectors", "nearest",
+            "--out", tmp_path / "o")
     assert r.exit_code == 2 and "no route in" in r.output, r.output
     assert len(r.output.strip().splitlines()) == 1
 
