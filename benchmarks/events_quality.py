@@ -120,9 +120,9 @@ def area_rows(data: Path, thin_s: float | None, args: argparse.Namespace) -> lis
 
 
 def derived(data: Path) -> bool:
-    """Whether ingest derived SOG/COG from positions (a positions-only file)."""
+    """Whether ingest derived SOG/COG from positions for a file it read (positions only)."""
     doc = json.loads((data / "ingest_report.json").read_text())
-    return bool(doc.get("derived"))
+    return any(f.get("derived") for f in doc.get("files", []))
 
 
 def cell(row: dict, name: str, fmt: str = "{:.2f}") -> str:
