@@ -71,4 +71,12 @@ print(f"   August: {m['labelled_tracks']} tracks, {m['anomalies_labelled']} alte
 print(f"   at the calibrated threshold: {m['false_alarm_rate']:.0%} of the {normal} normal tracks "
       f"flagged, {found} of {m['anomalies_labelled']} anomalies (recall {m['recall']:.2f}); "
       f"{rep['flagged_ashore']} of the flags for reports ashore (--no-ashore: the model alone)")
+kinds = ", ".join(f"{n} {k}" for k, n in rep["events_by_kind"].items()) or "none"
+print(f"   events: {len(rep['events'])} over {rep['reports_judged']:,} reports judged ({kinds});"
+      " on map.html's events layer, in events.parquet / events.geojson")
+for e in rep["events"][:12]:
+    print(f"     {e['start'][:16]}  {e['kind']:<20} MMSI {e['mmsi']}  track {e['track_id']}"
+          f"  at {e['lat']:.4f}, {e['lon']:.4f}  x{e['strength']:.2f}  {e['evidence']}")
+if len(rep["events"]) > 12:
+    print(f"     ... and {len(rep['events']) - 12} more in report.json")
 PY

@@ -51,9 +51,11 @@ def plot_detection_map(
     regions: Sequence[tuple[np.ndarray, np.ndarray]],
     title: str = "",
     evidence_label: str = "nearest rollout",
+    events: np.ndarray | None = None,
 ) -> bytes:
     """map.png (its bytes): test tracks grey, flagged tracks red with their nearest rollout blue
-    and a cross where they deviate most, the models' regions dashed, over the offline coastline
+    and a cross where they deviate most, events ([k, 2] lon/lat, where each is strongest) as
+    orange diamonds, the models' regions dashed, over the offline coastline
     (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
     stretched by 1/cos(latitude) so that shapes are true)."""
     from matplotlib.collections import LineCollection
@@ -69,6 +71,8 @@ def plot_detection_map(
             ax.plot(*xy[0], "o", color="tab:red", ms=3, zorder=3)
     if flagged.any():
         ax.plot(max_dev[flagged, 0], max_dev[flagged, 1], "kx", ms=7, mew=1.6, zorder=4)
+    places = np.empty((0, 2)) if events is None else np.reshape(events, (-1, 2))
+    ax.plot(places[:, 0], places[:, 1], "D", color="tab:orange", mec="k", ms=6, zorder=5)
     for lo, hi in regions:
         ax.plot(
             [lo[0], hi[0], hi[0], lo[0], lo[0]],
@@ -87,6 +91,7 @@ def plot_detection_map(
         plt.Line2D([], [], color="tab:red", lw=1.4, label="flagged track"),
         plt.Line2D([], [], color="tab:blue", lw=1, label=evidence_label),
         plt.Line2D([], [], color="k", marker="x", ls="", label="largest deviation"),
+        plt.Line2D([], [], color="tab:orange", mec="k", marker="D", ls="", label="event"),
         plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
     ]
     ax.legend(handles=handles, fontsize=8, loc="best")
@@ -267,7 +272,11 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
             (
                 plot_detection_map,
                 (tracks, rollouts, shown, max_dev, regions),
-                {"title": title, "evidence_label": result.evidence_kind},
+                {
+                    "title": title,
+                    "evidence_label": result.evidence_kind,
+                    "events": result.events[["lon", "lat"]].to_numpy(np.float64),
+                },
             ),
         ),
         *evidence_figures(result, evidence, stretches),
