@@ -18,6 +18,10 @@ pair's full DTW; a fresh k-d tree of every candidate point per track, as `lane_d
 measured on the first `--before` test tracks and extrapolated linearly to all of them (both
 cost the same per test track).
 
+The events row times the model-free event finders on the test tracks' reports (reported
+motion as the positions show it; the target: detect with events within 2x the area default's
+time).
+
 Run: python benchmarks/detection_speed.py [--tracks 1000] [--points 500] [--draws 10]
 [--before 20] [--only-scale] [--json PATH] (not part of the test suite; prints markdown tables,
 their rows as JSON in benchmarks/results/detection_speed.json).
@@ -30,6 +34,7 @@ import os
 import time
 
 import numpy as np
+import pandas as pd
 import torch
 from report import Report, add_json_option  # (this folder: run as a script)
 from scipy.spatial import cKDTree
@@ -39,12 +44,19 @@ from aisdati.ais.policy import AISPolicy, dati_act
 from aisdati.ais.source import build_source
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
+from aisdati.detection.events import model_free_events
 from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.nearest import NearestDetector
 from aisdati.detectors.scoring import ScoreSettings, tail_mean
 from aisdati.detectors.traffic import Traffic
 from aisdati.dtw import batch_mean_dtw_m
-from aisdati.geo import EARTH_RADIUS_M, courses_deg, lane_distances, unit_vectors
+from aisdati.geo import (
+    EARTH_RADIUS_M,
+    courses_deg,
+    lane_distances,
+    spherical_decision,
+    unit_vectors,
+)
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks
 from aisdati.tracks.store import Track
@@ -67,6 +79,32 @@ def lanes(rng: np.random.Generator, n_tracks: int, points: int, heads: np.ndarra
         lon = lon + rng.normal(0, 0.004)
         out.append(Track(i, 100000000 + i, None, np.stack([lon, lat], 1), dt, "other"))
     return out
+
+
+def bench_events(tracks: list[Track]) -> float:
+    """Seconds to find the model-free events of every track's reports, as `detect` does
+    (`aisdati.detection.events.model_free_events`): reported SOG and COG those the positions
+    show, times from the tracks' steps, one vessel per track."""
+    rows = []
+    for t in tracks:
+        hours = np.r_[0.0, np.cumsum(t.dts)]
+        sog, cog = spherical_decision(*t.positions[:-1].T, *t.positions[1:].T, t.dts)
+        rows.append(
+            pd.DataFrame({
+                "mmsi": t.mmsi, "track_id": t.track_id, "lon": t.positions[:, 0],
+                "lat": t.positions[:, 1], "sog": np.r_[sog, sog[-1]], "cog": np.r_[cog, cog[-1]],
+                "time": pd.Timestamp("2020-01-01", tz="UTC") + pd.to_timedelta(hours, unit="h"),
+            })
+        )  # fmt: skip
+    reports = pd.concat(rows, ignore_index=True)
+    t0 = time.perf_counter()
+    model_free_events(reports, read_vessels_none())
+    return time.perf_counter() - t0
+
+
+def read_vessels_none() -> pd.DataFrame:
+    """No vessel identities (as an ingest output without vessels.parquet)."""
+    return pd.DataFrame(columns=["name", "ship_type", "length_m"], index=pd.Index([], name="mmsi"))
 
 
 def untrained_policy(tracks: list[Track]) -> AISPolicy:
@@ -216,6 +254,7 @@ def bench_scores(
     area_s = bench_area(train, test, args.draws)
     lane_s = bench_lane(test, args.draws)
     near_s, med = bench_nearest(train, test)
+    events_s = bench_events(test)
     n, p = args.tracks, args.points
     report.say(f"Detection speed on {os.cpu_count()} CPU cores, torch {torch.__version__}\n")
     table = report.table(["what", "measured", "target"], title="Detection speed")
@@ -233,6 +272,15 @@ def bench_scores(
             "",
         ],
         {"what": "area default (bc, stepspread)", **size, "seconds": area_s},
+    )
+    table.row(
+        [
+            f"events that need no model (`model_free_events`) of the same reports; with the "
+            f"area default: {(area_s + events_s) / area_s:.2f}x its time",
+            f"{events_s:.1f} s",
+            "<= 2x",
+        ],
+        {"what": "events", **size, "seconds": events_s, "ratio": (area_s + events_s) / area_s},
     )
     table.row(
         [

@@ -23,6 +23,9 @@ Ingest first, e.g.:
 Run: python benchmarks/events_quality.py /tmp/evq/kitimat /tmp/evq/nyharbor ...
      [--kinds shift,course-noise,speed-noise,gap,drift,jump] [--min-anomalies 200]
      [--max-seeds 10] [--share 0.5] [--thin none,10min] [--resamples 1000] [--json PATH]
+     [--no-calibrate]
+By default half the vessels' tracks calibrate the thresholds (as a model's training tracks do)
+and the other half are judged; `--no-calibrate` judges every track with the defaults.
 Not part of the test suite.
 """
 
@@ -41,8 +44,10 @@ from report import Report, add_json_option  # (this folder: run as a script)
 from aisdati.evaluation.dataset import thinned
 from aisdati.evaluation.inject import MIN_POINTS, inject
 from aisdati.evaluation.metrics import EVENT_FIELDS, event_metrics
+from aisdati.events.calibrate import calibrated, calibration
 from aisdati.events.find import find_events
 from aisdati.events.reports import VesselReports
+from aisdati.events.settings import EventSettings
 from aisdati.preprocess.settings import parse_duration
 
 KINDS = "shift,course-noise,speed-noise,gap,drift,jump"
@@ -77,12 +82,23 @@ def altered(v: VesselReports, kind: str, rng: np.random.Generator) -> tuple[Vess
     return new, got.stretch
 
 
-def events_of(key: str, v: VesselReports) -> list[tuple]:
-    return [(key, e.kind, e.start, e.end, e.strength) for e in find_events(v)]
+def events_of(key: str, v: VesselReports, settings: EventSettings) -> list[tuple]:
+    return [(key, e.kind, e.start, e.end, e.strength) for e in find_events(v, settings)]
+
+
+def calibrating(tracks: list[VesselReports]) -> tuple[list[VesselReports], list[VesselReports]]:
+    """The tracks of every other vessel (by MMSI order) calibrate the thresholds, as a
+    model's training tracks do in `aisdati detect` (`aisdati.events.calibrate`); the rest are
+    judged."""
+    vessels = sorted({v.mmsi for v in tracks})
+    calibrates = set(vessels[::2])
+    return [v for v in tracks if v.mmsi in calibrates], [
+        v for v in tracks if v.mmsi not in calibrates
+    ]
 
 
 def one_kind(
-    tracks: list[VesselReports], kind: str, args: argparse.Namespace
+    tracks: list[VesselReports], kind: str, args: argparse.Namespace, settings: EventSettings
 ) -> tuple[list[tuple], list[tuple], int]:
     """The altered tracks' labels and events of one kind, over seeds until enough."""
     labels, events, seeds = [], [], 0
@@ -97,18 +113,22 @@ def one_kind(
             key = f"{seed}/{kind}/{k}"
             v, (start, end) = altered(tracks[k], kind, rng)
             labels.append((key, 1, kind, start, end))
-            events += events_of(key, v)
+            events += events_of(key, v, settings)
     return labels, events, seeds
 
 
 def area_rows(data: Path, thin_s: float | None, args: argparse.Namespace) -> list[dict]:
     """`event_metrics`' rows of one area and thinning, each kind's seeds pooled."""
     tracks = tracks_of(data, thin_s)
+    settings = EventSettings()
+    if args.calibrate:
+        calibrates, tracks = calibrating(tracks)
+        settings = calibrated(calibration(calibrates))
     labels = [(f"n{k}", 0, "", -1, -1) for k in range(len(tracks))]
-    events = [e for k, v in enumerate(tracks) for e in events_of(f"n{k}", v)]
+    events = [e for k, v in enumerate(tracks) for e in events_of(f"n{k}", v, settings)]
     seeds = {}
     for kind in args.kinds:
-        got_labels, got_events, seeds[kind] = one_kind(tracks, kind, args)
+        got_labels, got_events, seeds[kind] = one_kind(tracks, kind, args, settings)
         labels += got_labels
         events += got_events
     frame = pd.DataFrame(labels, columns=["track_id", "label", "kind", "start", "end"])
@@ -144,6 +164,11 @@ def main() -> None:
     parser.add_argument("--share", type=float, default=0.5)
     parser.add_argument("--thin", default="none,10min")
     parser.add_argument("--resamples", type=int, default=1000)
+    parser.add_argument(
+        "--no-calibrate", dest="calibrate", action="store_false",
+        help="judge with EventSettings' defaults (detect --models none) instead of thresholds "
+        "calibrated on half the vessels (detect with a model)",
+    )  # fmt: skip
     add_json_option(parser, "events_quality")
     args = parser.parse_args()
     args.kinds = [k.strip() for k in args.kinds.split(",")]
@@ -160,6 +185,7 @@ def main() -> None:
                 t0 = time.perf_counter()
                 rows = area_rows(data, thin_s, args)
                 thin = "-" if thin_s is None else f"{thin_s / 60:g} min"
+                every = next(r for r in rows if r["kind"] == "any")
                 for r in rows:
                     if r["kind"] == "any":
                         continue
@@ -171,7 +197,8 @@ def main() -> None:
                         {**r, "area": data.name, "thin_s": thin_s},
                     )  # fmt: skip
                 report.note(f"{data.name}, thin {thin}: {rows[0]['normal']} normal tracks, "
-                            f"{time.perf_counter() - t0:.0f} s")  # fmt: skip
+                            f"{cell(every, 'false_events_per_100', '{:.1f}')} events of any "
+                            f"kind per 100 of them, {time.perf_counter() - t0:.0f} s")  # fmt: skip
 
 
 if __name__ == "__main__":
