@@ -27,6 +27,7 @@ from aisdati.commands.options import (
     IngestOptions,
     SelftestOptions,
     TrainOptions,
+    WatchOptions,
 )
 from aisdati.startup import end_startup_guard
 
@@ -83,6 +84,7 @@ for _options, _name in (
     (TrainOptions, "train"),
     (EvaluateOptions, "evaluate"),
     (DetectOptions, "detect"),
+    (WatchOptions, "watch"),
 ):
     app.command(name=_name)(command(_options, _name))
 

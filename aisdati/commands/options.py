@@ -490,3 +490,66 @@ class DetectOptions:
     as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON on stdout.")] = (
         False
     )
+
+
+@dataclass(frozen=True)
+class WatchOptions:
+    """Watch a live AIS feed (or replay a recording): judge each vessel's recent reports as
+    they arrive with the event kinds that need no model, and keep the events opened, extended
+    and closed in a database (SQLite, or PostgreSQL), optionally on a live page."""
+
+    source: Annotated[
+        str,
+        typer.Option(
+            "--input",
+            "-i",
+            help="tcp://HOST:PORT (connect, reconnecting with back-off), udp://:PORT (listen), a "
+            "file or folder of NMEA (replayed; as fast as possible unless --speed), or - (stdin).",
+            show_default=False,
+        ),
+    ]
+    db: Annotated[
+        str,
+        typer.Option(
+            "--db",
+            help="Where the events and vessels go: a SQLite file, or postgresql://USER@HOST/DB. "
+            "A restart on the same database resumes its open events.",
+        ),
+    ] = "aisdati-watch.sqlite"
+    serve: Annotated[
+        str | None,
+        typer.Option(
+            "--serve",
+            help="Serve the live page (offline map, vessels, open and recent events, the feed's "
+            "summary) at HOST:PORT, e.g. 127.0.0.1:8080.",
+            show_default=False,
+        ),
+    ] = None
+    speed: Annotated[
+        float | None,
+        typer.Option(
+            "--speed",
+            help="Replay a file at this many times real time by its reports' times (default: as "
+            "fast as possible).",
+            show_default=False,
+        ),
+    ] = None
+    window: Annotated[
+        str,
+        typer.Option(
+            "--window", help="How much of each vessel's recent reports is judged (e.g. 3h, 90min)."
+        ),
+    ] = "3h"
+    max_vessels: Annotated[
+        int,
+        typer.Option(
+            "--max-vessels",
+            help="Vessels kept at most; beyond, the longest silent are forgotten (and counted).",
+        ),
+    ] = 50_000
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json", help="Print each event change as one JSON line on stdout, and nothing else."
+        ),
+    ] = False

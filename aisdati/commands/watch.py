@@ -1,0 +1,114 @@
+"""`aisdati watch`: a live feed (or a replayed recording) judged as it arrives, its events kept
+in a database, printed, and shown on a live page (`aisdati.live`)."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from aisdati.commands.common import err_console
+from aisdati.commands.options import WatchOptions
+from aisdati.errors import UserError
+from aisdati.events.kinds import KINDS
+from aisdati.live.ledger import Change
+from aisdati.live.loop import Watch
+from aisdati.live.serve import LiveState, start_server
+from aisdati.live.sources import Pacer, open_source
+from aisdati.live.store import open_store
+from aisdati.live.vessels import Vessels
+from aisdati.options import Range
+from aisdati.preprocess.settings import parse_duration
+
+PROGRESS_S = 5.0
+"""Wall seconds between two progress lines on stderr."""
+
+
+def say(message: str) -> None:
+    """One line on stderr (a reconnection, the progress, the end)."""
+    err_console.print(f"watch: {message}", highlight=False, markup=False, soft_wrap=True)
+
+
+def change_record(change: Change) -> dict[str, Any]:
+    """An event change as one JSON object: what changed, the event's id, state and fields."""
+    e = change.event
+    record = {"change": change.what, "event_id": e.event_id, "state": e.state}
+    for key, value in e.fields.items():
+        record[key] = value.isoformat() if hasattr(value, "isoformat") else value
+    record["label"] = KINDS[e.fields["kind"]].label
+    return record
+
+
+def printer(as_json: bool) -> Callable[[list[Change]], None]:
+    """Where the changes go: JSON lines on stdout, or one readable line each."""
+
+    def emit(changes: list[Change]) -> None:
+        for c in changes:
+            if as_json:
+                print(json.dumps(change_record(c), default=str), flush=True)
+                continue
+            f = c.event.fields
+            who = f["name"] or f["mmsi"]
+            print(f"{c.what:8} #{c.event.event_id} {f['kind']} {who} since "
+                  f"{f['start']:%Y-%m-%d %H:%M:%S} at {f['lat']:.4f},{f['lon']:.4f}: "
+                  f"{f['evidence']}", flush=True)  # fmt: skip
+
+    return emit
+
+
+def check(o: WatchOptions) -> float:
+    """The options' mistakes as one line each; the window in seconds."""
+    if o.speed is not None and not Range(low=0.0, low_open=True).accepts(o.speed):
+        raise UserError(f"--speed must be a finite number > 0, got {o.speed}")
+    if o.max_vessels < 1:
+        raise UserError(f"--max-vessels must be an integer >= 1, got {o.max_vessels}")
+    if o.speed is not None and (o.source == "-" or "://" in o.source):
+        raise UserError("--speed replays a file or folder; a live source comes at its own pace")
+    return parse_duration(o.window, "--window")
+
+
+def summary(w: Watch) -> str:
+    return (
+        f"{w.counters.lines:,} lines ({w.counters.rate():,.0f}/s), {w.counters.reports:,} "
+        f"reports, {len(w.vessels.recent):,} vessels ({w.vessels.forgotten:,} forgotten), "
+        f"{len(w.ledger.open_events())} open events, {w.decoder.rejected:,} rejected"
+    )
+
+
+def run(o: WatchOptions) -> None:
+    window_s = check(o)
+    chunks = open_source(o.source, say, paced=o.speed is not None)
+    store, state, show = open_store(o.db), LiveState(), printer(o.as_json)
+
+    def emit(changes: list[Change]) -> None:
+        show(changes)
+        state.record(changes)
+
+    watch = Watch(
+        store, Vessels(window_s=window_s, max_vessels=o.max_vessels),
+        pacer=None if o.speed is None else Pacer(o.speed), emit=emit,
+    )  # fmt: skip
+    server = start_server(o.serve, state) if o.serve else None
+    try:
+        if resumed := watch.resume():
+            say(f"resumed {resumed} open event(s) from {o.db}")
+        if server:
+            say(f"live page at http://{o.serve}/")
+        shown = time.monotonic()
+        for lines in chunks:
+            watch.step(lines)
+            state.refresh(watch)
+            if time.monotonic() - shown >= PROGRESS_S:
+                say(summary(watch))
+                shown = time.monotonic()
+        state.refresh(watch, force=True)
+        say(f"feed ended: {summary(watch)}")
+    finally:
+        left = watch.stop()
+        store.close()
+        if server:
+            server.shutdown()
+        say(f"stopped; {left} open event(s) kept open in {o.db}")
+    sys.stdout.flush()

@@ -1,0 +1,163 @@
+"""Events as they happen: each judgement of a vessel's window finds its events again, and the
+ledger tells which are new (opened), which grew (extended) and which ended (closed).
+
+An event found again is the one it overlaps in time (same vessel and kind). It is open while
+its stretch reaches the vessel's latest report (a drift still drifting, a CUSUM stretch still
+rising) and closed once a later report is not part of it; an event found already ended (a
+loitering, which needs the vessel under way again; a gap, found when the vessel reappears) is
+closed at once. A vessel under way that falls silent for longer than the gap kind allows opens
+a gap, which closes when the vessel is heard again (or is forgotten)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from aisdati.events.find import EVENT_COLUMNS
+from aisdati.events.settings import EventSettings
+from aisdati.live.judge import Judged, LastReport
+from aisdati.tracks.ashore import AshoreCheck
+
+COMPARED = ("start", "end", "n_reports", "strength", "evidence", "lon", "lat")
+"""The fields whose change makes an event's new version (`extended` or `revised`)."""
+
+
+@dataclass
+class LiveEvent:
+    """An event with its id and state; `fields` are events.parquet's (`EVENT_COLUMNS`)."""
+
+    event_id: int
+    fields: dict[str, Any]
+    state: str = "open"
+
+    @property
+    def span_s(self) -> tuple[float, float]:
+        return self.fields["start"].timestamp(), self.fields["end"].timestamp()
+
+    def overlaps(self, kind: str, start_s: float, end_s: float) -> bool:
+        a, b = self.span_s
+        return self.fields["kind"] == kind and start_s <= b and end_s >= a
+
+
+@dataclass(frozen=True)
+class Change:
+    """What happened to an event: opened, extended, closed, or revised (a closed event whose
+    stretch a later judgement read differently)."""
+
+    what: str
+    event: LiveEvent
+
+    @classmethod
+    def of(cls, what: str, e: LiveEvent) -> Change:
+        """The change with the event as it stands now (the ledger's own copy changes on)."""
+        return cls(what, LiveEvent(e.event_id, dict(e.fields), e.state))
+
+
+@dataclass
+class Ledger:
+    settings: EventSettings = field(default_factory=EventSettings)
+    known: dict[int, list[LiveEvent]] = field(default_factory=dict)
+    next_id: int = 1
+
+    def load(self, events: list[LiveEvent]) -> None:
+        """The events a store kept (open ones, and recent closed ones to match again)."""
+        for e in events:
+            self.known.setdefault(int(e.fields["mmsi"]), []).append(e)
+            self.next_id = max(self.next_id, e.event_id + 1)
+
+    def update(self, mmsi: int, judged: Judged) -> list[Change]:
+        """The changes one judgement of a vessel's window brings."""
+        known = self.known.setdefault(mmsi, [])
+        changes, matched = [], set()
+        for row in judged.events.to_dict("records") if len(judged.events) else []:
+            start_s, end_s = row["start"].timestamp(), row["end"].timestamp()
+            state = "open" if end_s >= judged.last_s and row["kind"] != "gap" else "closed"
+            match = next((e for e in known if e.overlaps(row["kind"], start_s, end_s)), None)
+            if match is None:
+                match = LiveEvent(self._new_id(), row, state)
+                known.append(match)
+                changes.append(Change.of("opened" if state == "open" else "closed", match))
+            elif change := _changed(match, row, state, judged.first_s):
+                changes.append(Change.of(change, match))
+            matched.add(match.event_id)
+        for e in known:
+            if e.state == "open" and e.event_id not in matched:
+                e.state = "closed"  # its condition ended and nothing in the window says more
+                changes.append(Change.of("closed", e))
+        self.known[mmsi] = [e for e in known if e.state == "open" or e.span_s[1] >= judged.first_s]
+        return changes
+
+    def silent(
+        self, last: LastReport, clock_s: float, ashore: AshoreCheck, who: dict[str, Any]
+    ) -> Change | None:
+        """A gap opened for a vessel under way silent too long at sea (None: not one); `who`:
+        its name and ship type."""
+        silence = clock_s - last.time_s
+        if last.limit_s is None or not last.limit_s < silence <= self.settings.gap_max_s:
+            return None
+        known = self.known.setdefault(last.mmsi, [])
+        if any(e.overlaps("gap", last.time_s, last.time_s) for e in known):
+            return None
+        if ashore.reports(np.array([[last.lon, last.lat]])).any():
+            return None
+        event = LiveEvent(self._new_id(), _gap_fields(last, silence, clock_s) | who)
+        known.append(event)
+        return Change.of("opened", event)
+
+    def forget(self, mmsi: int) -> list[Change]:
+        """A vessel forgotten: its open events close where they last stood."""
+        changes = []
+        for e in self.known.pop(mmsi, []):
+            if e.state == "open":
+                e.state = "closed"
+                changes.append(Change.of("closed", e))
+        return changes
+
+    def open_events(self) -> list[LiveEvent]:
+        return [e for events in self.known.values() for e in events if e.state == "open"]
+
+    def _new_id(self) -> int:
+        self.next_id += 1
+        return self.next_id - 1
+
+
+def _changed(e: LiveEvent, row: dict[str, Any], state: str, first_s: float) -> str | None:
+    """Update `e` from a judgement's `row`; what changed (None: nothing). A start before the
+    window is kept: the window no longer holds the event's beginning."""
+    if e.fields["start"].timestamp() < first_s:
+        row = {**row, "start": e.fields["start"]}
+        row["duration_s"] = (row["end"] - row["start"]).total_seconds()
+    same = all(_same(e.fields[k], row[k]) for k in COMPARED)
+    if same and state == e.state:
+        return None
+    was, e.fields, e.state = e.state, row, state
+    if state == "closed":
+        return "closed" if was == "open" else "revised"
+    return "extended" if was == "open" else "opened"
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (np.isnan(a) and np.isnan(b))
+    return bool(a == b)
+
+
+def _utc(seconds: float) -> pd.Timestamp:
+    return pd.Timestamp(round(seconds * 1e6), unit="us", tz="UTC")
+
+
+def _gap_fields(last: LastReport, silence: float, clock_s: float) -> dict:
+    """An open gap's fields: from the vessel's last report, to the feed's time it opened."""
+    row = dict.fromkeys(EVENT_COLUMNS)
+    row |= {
+        "mmsi": last.mmsi, "kind": "gap", "start": _utc(last.time_s), "end": _utc(clock_s),
+        "duration_s": silence, "n_reports": 1, "lon": last.lon, "lat": last.lat,
+        "strength": round(silence / float(last.limit_s), 3),
+        "evidence": f"silent {silence / 60:.0f} min at sea so far (usually every "
+        f"{last.usual_s:.0f} s)",
+        "lons": [last.lon], "lats": [last.lat],
+    }  # fmt: skip
+    return row

@@ -1,0 +1,144 @@
+"""The watch itself: each chunk of lines decoded, its vessels judged once each, the events'
+changes stored, printed and shown; silences and forgotten vessels checked as the feed's clock
+moves; counters kept for the page and the progress line."""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import pandas as pd
+
+from aisdati.events.settings import EventSettings
+from aisdati.live.decode import Decoder
+from aisdati.live.judge import LastReport, judge
+from aisdati.live.ledger import Change, Ledger
+from aisdati.live.sources import Pacer
+from aisdati.live.store import Store
+from aisdati.live.vessels import Recent, Vessels
+from aisdati.preprocess.settings import IngestSettings
+from aisdati.tracks.ashore import AshoreCheck
+
+SCAN_S = 60.0
+"""Feed seconds between two looks for silent vessels and vessels to forget."""
+RATE_S = 5.0
+"""Wall seconds over which messages/s is measured."""
+
+
+@dataclass
+class Counters:
+    """The feed's summary, for the page and the progress line."""
+
+    lines: int = 0
+    reports: int = 0
+    changes: int = 0
+    recent: deque = field(default_factory=deque)  # (monotonic s, lines) of the last RATE_S
+
+    def count(self, lines: int, reports: int, changes: int) -> None:
+        now = time.monotonic()
+        self.lines += lines
+        self.reports += reports
+        self.changes += changes
+        self.recent.append((now, lines))
+        while self.recent and self.recent[0][0] < now - RATE_S:
+            self.recent.popleft()
+
+    def rate(self) -> float:
+        if len(self.recent) < 2:
+            return 0.0
+        span = max(self.recent[-1][0] - self.recent[0][0], 1e-3)
+        return sum(n for _, n in list(self.recent)[1:]) / span
+
+
+@dataclass
+class Watch:
+    store: Store
+    vessels: Vessels = field(default_factory=Vessels)
+    settings: EventSettings = field(default_factory=EventSettings)
+    ingest: IngestSettings = field(default_factory=IngestSettings)
+    pacer: Pacer | None = None
+    emit: Callable[[list[Change]], None] = lambda changes: None
+    decoder: Decoder = field(default_factory=Decoder)
+    counters: Counters = field(default_factory=Counters)
+    ledger: Ledger = field(init=False)
+    last: dict[int, LastReport] = field(default_factory=dict)
+    scanned_s: float = 0.0
+    ashore: AshoreCheck = field(default_factory=AshoreCheck)
+
+    def __post_init__(self) -> None:
+        self.ledger = Ledger(self.settings)
+
+    def resume(self) -> int:
+        """Pick up where the database left off: its open and recent events, and the vessels'
+        windows kept when the watch stopped. The number of open events resumed."""
+        self.ledger.load(self.store.resume())
+        for mmsi, (cols, identity) in self.store.windows().items():
+            self.vessels.recent[mmsi] = Recent(cols, identity)
+            if len(cols["time_us"]):
+                self.vessels.recent[mmsi].heard_us = int(cols["time_us"].max())
+                self.vessels.clock_us = max(self.vessels.clock_us, int(cols["time_us"].max()))
+        return len(self.ledger.open_events())
+
+    def step(self, lines: list[bytes]) -> list[Change]:
+        """One chunk of lines through; the event changes it brought (already stored)."""
+        reports = self.decoder.reports(lines)
+        self.vessels.identify(self.decoder.identities())
+        dirty = self.vessels.add(reports)
+        if self.pacer is not None and reports.num_rows:
+            self.pacer.wait(self.vessels.clock_us / 1e6)
+        changes = [c for mmsi in sorted(dirty) for c in self._judge(mmsi)]
+        changes += self._scan()
+        self.store.write(changes, [self._position(m) for m in sorted(dirty) if m in self.last])
+        self.counters.count(len(lines), reports.num_rows, len(changes))
+        if changes:
+            self.emit(changes)
+        return changes
+
+    def _judge(self, mmsi: int) -> list[Change]:
+        one = self.vessels.recent[mmsi]
+        judged = judge(mmsi, self.vessels.window(mmsi), one.identity, self.settings, self.ingest)
+        if judged is None:
+            return []
+        self.last[mmsi] = judged.last
+        return self.ledger.update(mmsi, judged)
+
+    def _scan(self) -> list[Change]:
+        """Every `SCAN_S` of the feed's clock: gaps opened for vessels silent at sea, and the
+        vessels to forget (their open events closed)."""
+        clock_s = self.vessels.clock_us / 1e6
+        if clock_s - self.scanned_s < SCAN_S:
+            return []
+        self.scanned_s = clock_s
+        changes = []
+        for mmsi, last in self.last.items():
+            identity = self.vessels.recent[mmsi].identity
+            who = {"name": identity.name, "ship_type": identity.ship_type}
+            if change := self.ledger.silent(last, clock_s, self.ashore, who):
+                changes.append(change)
+        for mmsi in self.vessels.forget():
+            self.last.pop(mmsi, None)
+            changes += self.ledger.forget(mmsi)
+        return changes
+
+    def _position(self, mmsi: int) -> dict[str, Any]:
+        """A vessel's row of the vessels table: who it is and its last report."""
+        one = self.vessels.recent[mmsi]
+        last = {k: v[-1] for k, v in one.columns.items()}
+        return {
+            "mmsi": mmsi,
+            "name": one.identity.name,
+            "ship_type": one.identity.ship_type,
+            "length_m": one.identity.length_m,
+            "time": pd.Timestamp(int(last["time_us"]), unit="us", tz="UTC"),
+            **{k: float(last[k]) for k in ("lon", "lat", "sog", "cog", "heading")},
+            "status": None if last["status"] < 0 else int(last["status"]),
+        }
+
+    def stop(self) -> int:
+        """Keep what a restart resumes from: the windows, and the open events marked stopped.
+        The number of events left open."""
+        windows = {m: self.vessels.window(m) for m in list(self.vessels.recent)}
+        return self.store.stop({m: w for m, w in windows.items() if len(w["time_us"])})

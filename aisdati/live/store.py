@@ -1,0 +1,261 @@
+"""The watch's database: one table of events (every version of an event overwrites the last:
+one row per event, open or closed), one of vessels (last known position and identity, and the
+recent window kept when the watch stops, to resume from). SQLite by default (a file), or
+PostgreSQL (`postgresql://...`, through psycopg), with a PostGIS geometry column where the
+extension is installed. docs/usage/watch.md prints the schema."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sqlite3
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from aisdati.errors import UserError
+from aisdati.live.decode import Identity
+from aisdati.live.ledger import Change, LiveEvent
+from aisdati.live.vessels import FIELDS
+
+EVENT_FIELDS = (
+    "event_id", "mmsi", "name", "ship_type", "kind", "start_time", "end_time", "duration_s",
+    "n_reports", "lon", "lat", "strength", "evidence", "model", "state", "stopped_at",
+    "updated_at", "stretch",
+)  # fmt: skip
+VESSEL_FIELDS = (
+    "mmsi", "name", "ship_type", "length_m", "time", "lon", "lat", "sog", "cog", "heading",
+    "status", "recent",
+)  # fmt: skip
+RESUME_S = 86400.0
+"""Closed events this recent (by their end, before the newest) are read back on a restart, so
+that a replay of the same stretch finds them again rather than twice."""
+
+
+@dataclass(frozen=True)
+class Dialect:
+    """What differs between SQLite and PostgreSQL here: the placeholder and the column types."""
+
+    mark: str
+    time: str
+    real: str
+    geometry: bool = False
+
+
+SQLITE = Dialect("?", "TEXT", "REAL")
+POSTGRES = Dialect("%s", "TIMESTAMPTZ", "DOUBLE PRECISION")
+
+
+def schema(d: Dialect) -> list[str]:
+    """The CREATE TABLE statements (idempotent)."""
+    return [
+        f"""CREATE TABLE IF NOT EXISTS events (
+            event_id BIGINT PRIMARY KEY, mmsi BIGINT NOT NULL, name TEXT, ship_type TEXT,
+            kind TEXT NOT NULL, start_time {d.time} NOT NULL, end_time {d.time} NOT NULL,
+            duration_s {d.real}, n_reports BIGINT, lon {d.real}, lat {d.real},
+            strength {d.real}, evidence TEXT, model TEXT,
+            state TEXT NOT NULL CHECK (state IN ('open', 'closed')),
+            stopped_at {d.time}, updated_at {d.time} NOT NULL, stretch TEXT)""",
+        "CREATE INDEX IF NOT EXISTS events_state ON events (state, end_time)",
+        f"""CREATE TABLE IF NOT EXISTS vessels (
+            mmsi BIGINT PRIMARY KEY, name TEXT, ship_type TEXT, length_m {d.real},
+            time {d.time}, lon {d.real}, lat {d.real}, sog {d.real}, cog {d.real},
+            heading {d.real}, status BIGINT, recent TEXT)""",
+    ]
+
+
+def upsert(d: Dialect, table: str, columns: Sequence[str], key: str) -> str:
+    marks = ", ".join([d.mark] * len(columns))
+    sets = ", ".join(f"{c} = excluded.{c}" for c in columns if c != key)
+    return (
+        f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({marks}) "
+        f"ON CONFLICT ({key}) DO UPDATE SET {sets}"
+    )
+
+
+def _number(x: Any) -> Any:
+    """A value a driver takes: None for NaN, plain Python numbers."""
+    if x is None or (isinstance(x, float) and np.isnan(x)):
+        return None
+    return x.item() if isinstance(x, np.generic) else x
+
+
+class Store:
+    """A connection and its dialect; every write is one transaction."""
+
+    def __init__(self, conn: Any, dialect: Dialect) -> None:
+        self.conn, self.d = conn, dialect
+        with self.transaction():
+            for statement in schema(dialect):
+                self.conn.execute(statement)
+
+    @contextlib.contextmanager
+    def transaction(self) -> Iterator[None]:
+        """A block committed whole (SQLite's connection as a context; psycopg's transaction)."""
+        with self.conn if self.d is SQLITE else self.conn.transaction():
+            yield
+
+    def when(self, t: pd.Timestamp | datetime | None) -> Any:
+        """A time as the database takes it (SQLite: ISO 8601 text)."""
+        if t is None:
+            return None
+        return t.isoformat() if self.d is SQLITE else t
+
+    def _event_row(self, e: LiveEvent, now: datetime) -> list[Any]:
+        f = e.fields
+        stretch = json.dumps([np.round(f["lons"], 6).tolist(), np.round(f["lats"], 6).tolist()])
+        return [
+            e.event_id, int(f["mmsi"]), f["name"], f["ship_type"], f["kind"],
+            self.when(f["start"]), self.when(f["end"]), _number(f["duration_s"]),
+            int(f["n_reports"]), _number(f["lon"]), _number(f["lat"]),
+            _number(f["strength"]), f["evidence"], f["model"], e.state, None,
+            self.when(now), stretch,
+        ]  # fmt: skip
+
+    def write(self, changes: Sequence[Change], vessels: Sequence[dict[str, Any]]) -> None:
+        """The events changed and the vessels' last positions, in one transaction."""
+        now = datetime.now(timezone.utc)
+        events = {c.event.event_id: c.event for c in changes}.values()
+        with self.transaction():
+            cur = self.conn.cursor()
+            if events:
+                cur.executemany(
+                    upsert(self.d, "events", EVENT_FIELDS, "event_id"),
+                    [self._event_row(e, now) for e in events],
+                )
+            if vessels:
+                columns = VESSEL_FIELDS[:-1]
+                cur.executemany(
+                    upsert(self.d, "vessels", columns, "mmsi"),
+                    [[self.when(v[c]) if c == "time" else _number(v[c]) for c in columns]
+                     for v in vessels],
+                )  # fmt: skip
+            if self.d.geometry and events:
+                cur.executemany(
+                    "UPDATE events SET geom = ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326) "
+                    "WHERE event_id = %s",
+                    [(_geojson(e.fields), e.event_id) for e in events],
+                )
+
+    def resume(self) -> list[LiveEvent]:
+        """The events to pick up: every open one (no longer marked stopped) and the closed ones
+        of the last `RESUME_S` before the newest."""
+        m = self.d.mark
+        cur = self.conn.execute("SELECT max(end_time) FROM events")
+        newest = cur.fetchone()[0]
+        if newest is None:
+            return []
+        since = pd.Timestamp(newest) - pd.Timedelta(seconds=RESUME_S)
+        cur = self.conn.execute(
+            f"SELECT {', '.join(EVENT_FIELDS)} FROM events WHERE state = 'open' OR end_time >= {m}",
+            (self.when(since),),
+        )
+        found = [_event_of(dict(zip(EVENT_FIELDS, row, strict=True))) for row in cur.fetchall()]
+        with self.transaction():
+            self.conn.execute("UPDATE events SET stopped_at = NULL WHERE state = 'open'")
+        return found
+
+    def windows(self) -> dict[int, tuple[dict[str, np.ndarray], Identity]]:
+        """The vessels' windows kept when the watch last stopped (then cleared)."""
+        cur = self.conn.execute(
+            "SELECT mmsi, name, ship_type, length_m, recent FROM vessels WHERE recent IS NOT NULL"
+        )
+        out = {}
+        for mmsi, name, ship_type, length, recent in cur.fetchall():
+            cols = json.loads(recent)
+            arrays = {k: np.asarray(cols[k], np.int64 if k == "time_us" else np.float64)
+                      for k in FIELDS}  # fmt: skip
+            out[int(mmsi)] = (
+                arrays,
+                Identity(name, ship_type, np.nan if length is None else length),
+            )
+        with self.transaction():
+            self.conn.execute("UPDATE vessels SET recent = NULL")
+        return out
+
+    def stop(self, windows: dict[int, dict[str, np.ndarray]]) -> int:
+        """The watch stops: open events stay open, marked with the time it stopped; each
+        vessel's window is kept to resume from. The number of events left open."""
+        now = self.when(datetime.now(timezone.utc))
+        m = self.d.mark
+        with self.transaction():
+            cur = self.conn.cursor()
+            cur.execute(f"UPDATE events SET stopped_at = {m} WHERE state = 'open'", (now,))
+            left = cur.rowcount
+            cur.executemany(
+                f"UPDATE vessels SET recent = {m} WHERE mmsi = {m}",
+                [(json.dumps({k: v.tolist() for k, v in cols.items()}), mmsi)
+                 for mmsi, cols in windows.items()],
+            )  # fmt: skip
+        return left
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def _event_of(row: dict[str, Any]) -> LiveEvent:
+    lons, lats = json.loads(row["stretch"])
+    fields = {
+        "mmsi": int(row["mmsi"]), "name": row["name"], "ship_type": row["ship_type"],
+        "kind": row["kind"], "start": _timestamp(row["start_time"]),
+        "end": _timestamp(row["end_time"]), "duration_s": row["duration_s"],
+        "n_reports": row["n_reports"], "lon": row["lon"], "lat": row["lat"], "track_id": None,
+        "strength": row["strength"], "evidence": row["evidence"], "model": row["model"],
+        "lons": lons, "lats": lats,
+    }  # fmt: skip
+    return LiveEvent(int(row["event_id"]), fields, row["state"])
+
+
+def _timestamp(value: Any) -> pd.Timestamp:
+    t = pd.Timestamp(value)
+    return t.tz_localize("UTC") if t.tzinfo is None else t.tz_convert("UTC")
+
+
+def _geojson(f: dict[str, Any]) -> str:
+    xy = [[x, y] for x, y in zip(f["lons"], f["lats"], strict=True)]
+    shape = {"type": "Point", "coordinates": xy[0]} if len(xy) == 1 else {
+        "type": "LineString", "coordinates": xy}  # fmt: skip
+    return json.dumps(shape)
+
+
+def open_store(url: str) -> Store:
+    """The database at `url`: postgresql://... (psycopg), else a SQLite file's path."""
+    if url.startswith(("postgresql://", "postgres://")):
+        return _postgres(url)
+    path = Path(url)
+    if path.parent and not path.parent.is_dir():
+        raise UserError(f"{path.parent}: no such folder for the database")
+    try:
+        conn = sqlite3.connect(path, check_same_thread=False)
+    except sqlite3.Error as exc:
+        raise UserError(f"{path}: {exc}") from None
+    conn.execute("PRAGMA journal_mode=WAL")
+    conn.execute("PRAGMA synchronous=NORMAL")  # WAL: a crash of the watch loses nothing
+    return Store(conn, SQLITE)
+
+
+def _postgres(url: str) -> Store:
+    try:
+        import psycopg
+    except ImportError:
+        raise UserError("PostgreSQL needs psycopg: pip install 'psycopg[binary]'") from None
+    try:
+        conn = psycopg.connect(url)
+    except psycopg.Error as exc:
+        raise UserError(f"{url}: {str(exc).strip().splitlines()[0]}") from None
+    conn.autocommit = True  # each block is its own transaction (`Store.transaction`)
+    store = Store(conn, POSTGRES)
+    cur = conn.execute("SELECT 1 FROM pg_available_extensions WHERE name = 'postgis'")
+    if cur.fetchone() is not None:
+        with store.transaction():
+            conn.execute("CREATE EXTENSION IF NOT EXISTS postgis")
+            conn.execute(
+                "ALTER TABLE events ADD COLUMN IF NOT EXISTS geom geometry(Geometry, 4326)"
+            )
+        store.d = Dialect(POSTGRES.mark, POSTGRES.time, POSTGRES.real, geometry=True)
+    return store

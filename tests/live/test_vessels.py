@@ -1,0 +1,50 @@
+"""Each vessel's window stays within its bounds, and vessels are forgotten (and counted) when
+silent too long or too many: memory stays bounded when vessels keep appearing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+
+from aisdati.live.decode import Identity
+from aisdati.live.vessels import Vessels
+from aisdati.preprocess.convert import PARTITION_SCHEMA
+
+
+def reports(mmsi: list[int], seconds: list[float]) -> pa.Table:
+    n = len(mmsi)
+    return pa.table(
+        [
+            np.array(mmsi, np.int64),
+            pa.array((np.array(seconds) * 1e6).astype(np.int64)).cast(pa.timestamp("us", "UTC")),
+            np.linspace(10, 11, n), np.linspace(57, 58, n), np.full(n, 8.0), np.full(n, 90.0),
+            np.full(n, 90.0, np.float32), pa.nulls(n, pa.int16()), np.zeros(n, np.int32),
+        ],
+        schema=PARTITION_SCHEMA,
+    )  # fmt: skip
+
+
+def test_a_window_keeps_its_last_reports_in_time_order():
+    v = Vessels(window_s=100.0, max_reports=5)
+    v.add(reports([1] * 8, [70, 0, 10, 20, 30, 40, 50, 60]))  # one late report first
+    cols = v.window(1)
+    assert cols["time_us"].tolist() == [30e6, 40e6, 50e6, 60e6, 70e6]
+    v.add(reports([1, 1], [200, 210]))
+    assert v.window(1)["time_us"].tolist() == [200e6, 210e6]  # the older left the 100 s
+    assert v.window(1)["status"].tolist() == [-1, -1]
+
+
+def test_vessels_silent_too_long_or_too_many_are_forgotten():
+    v = Vessels(forget_s=1000.0, max_vessels=3)
+    v.add(reports([1, 2, 3, 4, 5], [0, 10, 20, 30, 40]))
+    assert sorted(v.forget()) == [1, 2]  # five heard, three kept: the longest silent go
+    v.add(reports([9], [2000.0]))
+    assert sorted(v.forget()) == [3, 4, 5]  # silent over 1000 s of the feed's clock
+    assert list(v.recent) == [9] and v.forgotten == 5
+
+
+def test_identity_fields_not_given_are_kept():
+    v = Vessels()
+    v.identify({7: Identity("FRIO", None, np.nan)})
+    v.identify({7: Identity(None, "Tanker", 274.0)})
+    assert v.recent[7].identity == Identity("FRIO", "Tanker", 274.0)
