@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup test demo quick selftest docs browser bench
+.PHONY: setup test demo quick selftest docs browser postgres bench
 
 setup: $(VENV)/.installed
 
@@ -12,7 +12,7 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $@
 
-test: setup browser
+test: setup browser postgres
 	$(BIN)/ruff check aisdati tests benchmarks scripts
 	$(BIN)/pytest -n 2 --dist loadfile
 
@@ -22,6 +22,14 @@ browser:
 	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null \
 	  && { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
 	  >/dev/null 2>&1; } || echo "chromium could not be installed: the offline-map browser test will skip"
+
+# A PostgreSQL server (Debian's package) for the watch's database test, which starts a throwaway
+# cluster of its own; where it cannot be installed that test skips with a message.
+postgres:
+	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || command -v initdb >/dev/null 2>&1 || { \
+	  [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null \
+	  && { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql; } \
+	  >/dev/null 2>&1; } || echo "postgresql could not be installed: the watch's PostgreSQL test will skip"
 
 demo: setup
 	bash scripts/demo.sh

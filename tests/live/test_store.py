@@ -19,11 +19,11 @@ from aisdati.live.sources import PACED_LINES, replay
 from aisdati.live.store import open_store
 from tests.helpers.live import FRIO, free_port
 
-PG_BIN = Path("/usr/lib/postgresql/15/bin")
-
 
 def pg_tool(name: str) -> str | None:
-    return shutil.which(name) or (str(PG_BIN / name) if (PG_BIN / name).exists() else None)
+    """A PostgreSQL server program: on the PATH, or where Debian's package puts it."""
+    found = sorted(Path("/usr/lib/postgresql").glob(f"*/bin/{name}"))
+    return shutil.which(name) or (str(found[-1]) if found else None)
 
 
 def as_postgres(cmd: list[str]) -> list[str]:
