@@ -24,8 +24,9 @@ Run: python benchmarks/events_quality.py /tmp/evq/kitimat /tmp/evq/nyharbor ...
      [--kinds shift,course-noise,speed-noise,gap,drift,jump] [--min-anomalies 200]
      [--max-seeds 10] [--share 0.5] [--thin none,10min] [--resamples 1000] [--json PATH]
      [--no-calibrate]
-By default half the vessels' tracks calibrate the thresholds (as a model's training tracks do)
-and the other half are judged; `--no-calibrate` judges every track with the defaults.
+By default half the vessels' tracks calibrate the thresholds and say where traffic reports
+ashore (as a model's training tracks do) and the other half are judged; `--no-calibrate`
+judges every track with the defaults.
 Not part of the test suite.
 """
 
@@ -34,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +51,7 @@ from aisdati.events.find import find_events
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
 from aisdati.preprocess.settings import parse_duration
+from aisdati.tracks.ashore import AshoreCheck
 
 KINDS = "shift,course-noise,speed-noise,gap,drift,jump"
 POSITIONS_ONLY = (
@@ -82,8 +85,18 @@ def altered(v: VesselReports, kind: str, rng: np.random.Generator) -> tuple[Vess
     return new, got.stretch
 
 
-def events_of(key: str, v: VesselReports, settings: EventSettings) -> list[tuple]:
-    return [(key, e.kind, e.start, e.end, e.strength) for e in find_events(v, settings)]
+def events_of(key: str, v: VesselReports, judge: Judge) -> list[tuple]:
+    found = find_events(v, judge.settings, seen=judge.seen)
+    return [(key, e.kind, e.start, e.end, e.strength) for e in found]
+
+
+@dataclass(frozen=True)
+class Judge:
+    """How tracks are judged: the thresholds and where the calibrating traffic reported ashore
+    (as a model's card records it, `aisdati.tracks.ashore`)."""
+
+    settings: EventSettings = field(default_factory=EventSettings)
+    seen: np.ndarray | None = None
 
 
 def calibrating(tracks: list[VesselReports]) -> tuple[list[VesselReports], list[VesselReports]]:
@@ -98,7 +111,7 @@ def calibrating(tracks: list[VesselReports]) -> tuple[list[VesselReports], list[
 
 
 def one_kind(
-    tracks: list[VesselReports], kind: str, args: argparse.Namespace, settings: EventSettings
+    tracks: list[VesselReports], kind: str, args: argparse.Namespace, judge: Judge
 ) -> tuple[list[tuple], list[tuple], int]:
     """The altered tracks' labels and events of one kind, over seeds until enough."""
     labels, events, seeds = [], [], 0
@@ -113,29 +126,32 @@ def one_kind(
             key = f"{seed}/{kind}/{k}"
             v, (start, end) = altered(tracks[k], kind, rng)
             labels.append((key, 1, kind, start, end))
-            events += events_of(key, v, settings)
+            events += events_of(key, v, judge)
     return labels, events, seeds
 
 
 def area_rows(data: Path, thin_s: float | None, args: argparse.Namespace) -> list[dict]:
     """`event_metrics`' rows of one area and thinning, each kind's seeds pooled."""
     tracks = tracks_of(data, thin_s)
-    settings = EventSettings()
+    judge = Judge()
     if args.calibrate:
         calibrates, tracks = calibrating(tracks)
-        settings = calibrated(calibration(calibrates))
+        seen = AshoreCheck().seen([v.positions() for v in calibrates])
+        judge = Judge(calibrated(calibration(calibrates)), np.reshape(seen, (-1, 2)))
     labels = [(f"n{k}", 0, "", -1, -1) for k in range(len(tracks))]
-    events = [e for k, v in enumerate(tracks) for e in events_of(f"n{k}", v, settings)]
+    events = [e for k, v in enumerate(tracks) for e in events_of(f"n{k}", v, judge)]
+    on_normal = pd.Series([e[1] for e in events], dtype=object).value_counts()
+    by_kind = {k: round(100 * n / len(tracks), 1) for k, n in on_normal.items()}
     seeds = {}
     for kind in args.kinds:
-        got_labels, got_events, seeds[kind] = one_kind(tracks, kind, args, settings)
+        got_labels, got_events, seeds[kind] = one_kind(tracks, kind, args, judge)
         labels += got_labels
         events += got_events
     frame = pd.DataFrame(labels, columns=["track_id", "label", "kind", "start", "end"])
     found = pd.DataFrame(events, columns=list(EVENT_FIELDS))
     rows = event_metrics(frame, found, args.kinds, args.resamples)
     for r in rows:
-        r.update(normal=len(tracks), seeds=seeds.get(r["kind"]))
+        r.update(normal=len(tracks), seeds=seeds.get(r["kind"]), normal_events=by_kind)
     return rows
 
 
@@ -198,7 +214,8 @@ def main() -> None:
                     )  # fmt: skip
                 report.note(f"{data.name}, thin {thin}: {rows[0]['normal']} normal tracks, "
                             f"{cell(every, 'false_events_per_100', '{:.1f}')} events of any "
-                            f"kind per 100 of them, {time.perf_counter() - t0:.0f} s")  # fmt: skip
+                            f"kind per 100 of them ({every['normal_events']}), "
+                            f"{time.perf_counter() - t0:.0f} s")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -27,6 +27,9 @@ def read_reports(data_dir: Path, track_ids: list[int] | None = None) -> pd.DataF
     where the output predates it, of points.parquet's tracks); `track_ids`: only the reports of
     those tracks."""
     path = data_dir / (REPORTS if has_reports(data_dir) else "points.parquet")
+    if not path.exists():
+        wanted = data_dir / REPORTS
+        raise UserError(f"{wanted} not found: run `aisdati ingest --out {data_dir}` first")
     try:
         dataset = ds.dataset(path, format="parquet")
         wanted = ds.field("track_id").isin(track_ids) if track_ids is not None else None
