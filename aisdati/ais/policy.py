@@ -40,7 +40,7 @@ import torch
 
 from aisdati.ais.space import AISSpace
 from aisdati.dtw import batch_mean_dtw_m
-from aisdati.geo import haversine_m
+from aisdati.geo import haversine_m, spherical_step
 from aisdati.model.dati import DATIConfig
 from aisdati.model.networks import DATINetworks, one_member
 from aisdati.model.noise import GOLDEN, KeyedNoise, NoiseProcess, mix64
@@ -258,6 +258,23 @@ class AISPolicy:
         first ([n - 1] for n reports; `step_draws`), and the best predicted positions
         [n - 1, 2]."""
         return best_draws(*self.step_draws(tracks, dts, draws, seed))
+
+
+def reported_next(
+    positions: np.ndarray, dts: np.ndarray, sog: np.ndarray, cog: np.ndarray
+) -> np.ndarray:
+    """[n - 1, 2] where each report's reported motion puts the vessel at the next report's
+    time: the kinematic rule (`aisdati.geo.spherical_step`) from the report over the real time
+    step, at the mean of the two reports' reported velocities (as `aisdati.events.reports`
+    does: exact for a vessel that turns or speeds up steadily); NaN where either lacks SOG or
+    COG. The second target of a one-step prediction (`ScoreSettings.reported_motion`)."""
+    course = np.radians(cog)
+    east, north = sog * np.sin(course), sog * np.cos(course)
+    east, north = (east[:-1] + east[1:]) / 2, (north[:-1] + north[1:]) / 2
+    heading = np.degrees(np.arctan2(east, north)) % 360.0
+    lon, lat = spherical_step(positions[:-1, 0], positions[:-1, 1], np.hypot(east, north),
+                              heading, dts[: len(positions) - 1])  # fmt: skip
+    return np.column_stack([lon, lat])
 
 
 def best_draws(

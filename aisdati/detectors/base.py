@@ -38,6 +38,7 @@ from aisdati.errors import UserError
 from aisdati.execution import InProcess, Runner
 from aisdati.model.readers import first_line
 from aisdati.model.trainer import Callback
+from aisdati.scores import scores_from
 from aisdati.tracks.store import Track
 
 DEFAULT_CONTAMINATION = 0.05
@@ -45,6 +46,9 @@ DEFAULT_CONTAMINATION = 0.05
 SPREAD_DRAWS = 200
 SPREAD_SEED = 0
 D = TypeVar("D", bound="Detector")
+STEP_SETTINGS = ("reported_motion",)
+"""The `ScoreSettings` the step scores depend on beyond K: a threshold needs them as
+calibrated."""
 
 DETECTORS: dict[str, type[Detector]] = {}
 """Every registered detector class by method, in the order they were defined."""
@@ -210,11 +214,14 @@ class Detector(ABC):
                 "retrain it, or flag with --threshold / --top-percent"
             )
         recorded = self.card.calibrated_with or CalibratedWith()
-        for name in self.lane_settings if key == "lane" else ():
+        kind = "lane" if key == "lane" else "step" if key in scores_from("steps") else None
+        names = {"lane": self.lane_settings, "step": STEP_SETTINGS}.get(kind or "", ())
+        for name in names:
             was, now = getattr(recorded, name), getattr(how, name)
-            if not math.isclose(float(was), float(now)):
+            same = was == now if isinstance(was, str) else math.isclose(float(was), float(now))
+            if not same:
                 raise UserError(
-                    f"model {self.name}'s lane scores were calibrated with {name}={was}, not "
+                    f"model {self.name}'s {kind} scores were calibrated with {name}={was}, not "
                     f"{now}: score with its card's settings (`calibrated_with`) or retrain it"
                 )
         return float(np.quantile(np.asarray(cal, np.float64), 1.0 - contamination))
@@ -286,6 +293,7 @@ def load_detector(stem: Path) -> Detector:
         lane_traffic=recorded.lane_traffic,
         rollouts=recorded.rollouts,
         lane_rollouts=recorded.lane_rollouts,
+        reported_motion=recorded.reported_motion,
     )
     det.loaded_from = path
     return det

@@ -9,18 +9,18 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
-from aisdati.ais.policy import Act, AISPolicy, Draws, best_draws, track_keys
+from aisdati.ais.policy import Act, AISPolicy, Draws, reported_next, track_keys
 from aisdati.detectors.base import Detector
 from aisdati.detectors.scoring import Scores, ScoreSettings, error_surprises, tail_mean
 from aisdati.dtw import matched_distances
-from aisdati.geo import lane_distances
+from aisdati.geo import haversine_m, lane_distances
 from aisdati.scores import SCORES, scores_from
 from aisdati.tracks.store import Track
 
@@ -96,17 +96,26 @@ class PolicyDetector(Detector):
             ]
             parts["lane"] = np.array([tail_mean(d, how.tail) for d in profiles["lane"]])
         if wanted & set(scores_from("steps")):
-            draws = policy.step_draws(positions, [t.dts for t in tracks], how.rollouts, how.seed)
-            errors, predicted = best_draws(*draws)
-            parts["step"] = np.array([tail_mean(e, how.tail) for e in errors])
+            errors, draws = policy.step_draws(
+                positions, [t.dts for t in tracks], how.rollouts, how.seed
+            )
+            judged = [
+                judged_steps(e, q, reported_target(t, how), how.reported_motion)
+                for e, q, t in zip(errors, draws, tracks, strict=True)
+            ]
+            parts["step"] = np.array(
+                [tail_mean(np.concatenate([e for e, _ in j.errors]), how.tail) for j in judged]
+            )
             parts["stepspread"] = np.array(
                 [
-                    tail_mean(error_surprises(e, q), how.tail)
-                    for e, q in zip(errors, draws[1], strict=True)
+                    tail_mean(
+                        np.concatenate([error_surprises(e, q) for e, q in j.errors]), how.tail
+                    )
+                    for j in judged
                 ]
             )
-            profile = [np.concatenate([[0.0], e]) for e in errors]
-            shown = [np.vstack([p[:1], q]) for p, q in zip(positions, predicted, strict=True)]
+            profile = [np.concatenate([[0.0], j.profile]) for j in judged]
+            shown = [np.vstack([p[:1], j.shown]) for p, j in zip(positions, judged, strict=True)]
             for name in scores_from("steps"):
                 profiles[name], evidence[name] = profile, shown
         return Scores(
@@ -150,6 +159,52 @@ class PolicyDetector(Detector):
         cal = {k: [round(float(v), SCORES[k].digits) for v in parts[k]] for k in kinds}
         self.card.calibration = cal
         self.card.calibrated_with = how.calibrated_with()
+
+
+@dataclass(frozen=True)
+class JudgedSteps:
+    """What the step scores judge of one track's one-step draws (`judged_steps`)."""
+
+    errors: list[tuple[np.ndarray, np.ndarray]]
+    """The best-of-K errors (m) that enter the track's tail, each with the K draws of its
+    reports ([m], [m, K, 2]: what `error_surprises` divides by)."""
+    profile: np.ndarray
+    """[n - 1] each report's error (m): the larger of the two where both are judged."""
+    shown: np.ndarray
+    """[n - 1, 2] the predicted position shown at each report."""
+
+
+def reported_target(track: Track, how: ScoreSettings) -> np.ndarray | None:
+    """Where the track's reported motion puts each next report (`reported_next`), when the
+    step scores read it and the track has it."""
+    if how.reported_motion == "none" or track.sog is None or track.cog is None:
+        return None
+    return reported_next(track.positions, track.dts, track.sog, track.cog)
+
+
+def judged_steps(
+    errors: np.ndarray, draws: np.ndarray, target: np.ndarray | None, mode: str
+) -> JudgedSteps:
+    """One track's K one-step errors ([n - 1, K] m) and draws ([n - 1, K, 2]) as the step
+    scores judge them: the best draw's error (`mode` "none", or no `target`); the best draw by
+    the larger of its distances to the next position and to the `target` ("max"); or the best
+    draw to each, both in the tail ("both"; reports without a target leave the second out)."""
+    rows = np.arange(len(errors))
+    if mode == "none" or target is None:
+        best = errors.argmin(axis=1)
+        e = errors[rows, best]
+        return JudgedSteps([(e, draws)], e, draws[rows, best])
+    with np.errstate(invalid="ignore"):
+        away = haversine_m(draws[..., 0], draws[..., 1], target[:, None, 0], target[:, None, 1])
+    if mode == "max":
+        both = np.fmax(errors, away)
+        best = both.argmin(axis=1)
+        e = both[rows, best]
+        return JudgedSteps([(e, draws)], e, draws[rows, best])
+    best, near = errors.argmin(axis=1), np.nan_to_num(away, nan=np.inf).argmin(axis=1)
+    e, said = errors[rows, best], away[rows, near]
+    kept = np.isfinite(said)
+    return JudgedSteps([(e, draws), (said[kept], draws[kept])], np.fmax(e, said), draws[rows, best])
 
 
 def saved_corridor(stem: Path, card: ModelCard) -> Corridor | None:

@@ -85,6 +85,11 @@ class ScoreSettings:
     history at de1e87e): 0.1 gave DATI the best pooled lane AUC averaged over Kitimat and NY
     Harbor (0.15 was level; larger fractions dilute a short jump or loiter on the ferry routes,
     smaller ones let a few stray reports decide); docs/results/areas.md."""
+    reported_motion: str = "none"
+    """Step scores: each one-step prediction judged against the next position only ("none"),
+    or also against where the report's own SOG and COG put the vessel (`aisdati.ais.policy.
+    reported_next`), by the larger error of each draw ("max") or both in the tail ("both");
+    `aisdati.ais.card.REPORTED_MOTION`, docs/results/reported-motion.md."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0
@@ -97,6 +102,7 @@ class ScoreSettings:
             lane_traffic=self.lane_traffic,
             rollouts=self.rollouts,
             lane_rollouts=self.lane_rollouts,
+            reported_motion=self.reported_motion,
         )
 
 

@@ -1,7 +1,8 @@
 """Reading the tracks that `aisdati ingest` wrote (data/processed) for training and detection.
 
 A `Track` holds one track's positions (lon, lat degrees) and the real time steps between its
-reports in hours, which is what the AIS environment and the detector work with.
+reports in hours, which is what the AIS environment and the detector work with, and what the
+vessel reported of its motion (SOG, COG) where points.parquet has it.
 
 Tracks are selected by name (`select_cluster`): the paper's direction clusters `up`, `down` and
 `other` (the `cluster` column), a route cluster `route-<n>` (the `route` column, see
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from aisdati.errors import UserError
@@ -40,6 +42,10 @@ class Track:
     cluster: str
     route: str | None = None
     """`route-<n>`, or None when the track fits no route."""
+    sog: np.ndarray | None = None
+    """[n] reported speed over ground (knots), NaN where not given; None: not read."""
+    cog: np.ndarray | None = None
+    """[n] reported course over ground (degrees), NaN where not given; None: not read."""
 
     @property
     def steps(self) -> int:
@@ -177,9 +183,10 @@ def load_tracks(data_dir: Path, track_ids: Sequence[int]) -> list[Track]:
     asked = table[table["track_id"].isin(ids)]
     rows = {int(r.track_id): r for r in asked.itertuples(index=False)}
     try:
+        motion = [c for c in MOTION if c in pq.ParquetDataset(points_path).schema.names]
         points = pq.read_table(
             points_path,
-            columns=["track_id", "time", "lon", "lat"],
+            columns=["track_id", "time", "lon", "lat", *motion],
             filters=[("track_id", "in", ids)],
         )
     except Exception as exc:
@@ -192,9 +199,8 @@ def load_tracks(data_dir: Path, track_ids: Sequence[int]) -> list[Track]:
     track = points.column("track_id").to_numpy()
     order = np.lexsort((ticks, track))
     track, ticks = track[order], ticks[order]
-    lonlat = np.stack(
-        [points.column(c).to_numpy()[order].astype(np.float64) for c in ("lon", "lat")], axis=1
-    )
+    lonlat = np.stack([_floats(points, c)[order] for c in ("lon", "lat")], axis=1)
+    reported = {c: _floats(points, c)[order] for c in motion}
     first = np.flatnonzero(np.r_[True, track[1:] != track[:-1]])
     ends = np.r_[first[1:], len(track)]
     where = {
@@ -217,9 +223,19 @@ def load_tracks(data_dir: Path, track_ids: Sequence[int]) -> list[Track]:
                 np.diff(seconds) / 3600.0,
                 str(row.cluster),
                 None if row.route is None else str(row.route),
+                *(reported[c][lo:hi] if c in reported else None for c in MOTION),
             )
         )
     return out
+
+
+MOTION = ("sog", "cog")
+"""What a `Track` reads of the reported motion, where points.parquet has it."""
+
+
+def _floats(points: pa.Table, name: str) -> np.ndarray:
+    """A column as float64, NaN where null."""
+    return pc.fill_null(points.column(name).cast(pa.float64()), np.nan).to_numpy()
 
 
 _TICKS_PER_SECOND = {"s": 1, "ms": 1_000, "us": 1_000_000, "ns": 1_000_000_000}
