@@ -24,7 +24,8 @@ if TYPE_CHECKING:
 
 # ----------------------------------------------------------------------------------- ingest
 def summary_table(counts: IngestCounts) -> Table:
-    """The per-stage summary: rows read, rejected per stage and reason, kept, tracks per cluster."""
+    """The per-stage summary: rows read, rejected per stage and reason, kept (the tracks' points,
+    and every report judged), tracks per cluster."""
     table = Table(title="aisdati ingest", show_lines=False)
     table.add_column("stage")
     table.add_column("reason")
@@ -36,6 +37,12 @@ def summary_table(counts: IngestCounts) -> Table:
         if n:
             table.add_row(stage, reason, f"-{n:,}", description)
     table.add_row("[bold]kept", "points", f"[bold]{counts.kept_points:,}", "in tracks")
+    table.add_row(
+        "[bold]kept",
+        "reports",
+        f"[bold]{counts.reports_kept:,}",
+        "judged, slow or not (reports.parquet)",
+    )
     total = sum(counts.tracks.values())
     table.add_row(
         "[bold]cluster",
@@ -299,14 +306,14 @@ def detection_table(
     several = scores["model"].nunique() > 1
     ashore = bool((scores["ashore_reports"] > 0).any())
     cols = [
-        "rank", "track", "mmsi", *(["model"] if several else []),
+        "rank", "track", "vessel", *(["model"] if several else []),
         f"score ({kind.readable_unit})", "threshold", "max km", "at (lat, lon)",
         *(["ashore"] if ashore else []), "events",
     ]  # fmt: skip
     rows = [(detection_row(r, kind, several, ashore), bool(r.flagged))
             for r in shown.head(limit).itertuples()]  # fmt: skip
     # every figure whole at 80 columns (a log, a pipe): only the place and the model wrap
-    wraps = ("model", "at (lat, lon)", "events")
+    wraps = ("model", "at (lat, lon)", "events", "vessel")
     for k, col in enumerate(cols):
         whole = max([len(col), *(len(row[k]) for row, _ in rows)])
         table.add_column(
@@ -330,7 +337,7 @@ def detection_table(
 def detection_row(r: Any, kind: Score, several: bool, ashore: bool) -> list[str]:
     """One track's cells of `detection_table`, the model's where several judged."""
     return [
-        str(r.rank), str(r.track_id), str(r.mmsi), *([str(r.model)] if several else []),
+        str(r.rank), str(r.track_id), _vessel(r.mmsi, r.name), *([str(r.model)] if several else []),
         f"{kind.readable(r.score):,.2f}", f"{kind.readable(r.threshold):,.2f}",
         f"{r.max_dev_m / 1000:,.2f}", f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
         *([str(r.ashore_reports)] if ashore else []), r.event_kinds or "-",
@@ -345,14 +352,19 @@ def events_table(events: pd.DataFrame, limit: int = 20) -> Table:
     for col in ("kind", "vessel", "start (UTC)", "for", "at (lat, lon)", "x thr", "evidence"):
         table.add_column(col, overflow="fold", justify="right" if col == "x thr" else "left")
     for e in events.head(limit).itertuples():
-        vessel = f"{e.mmsi}" + (f" {e.name}" if isinstance(e.name, str) and e.name else "")
         table.add_row(
-            e.kind, escape(vessel), f"{e.start:%Y-%m-%d %H:%M:%S}", _duration(e.duration_s),
-            f"{e.lat:.4f}, {e.lon:.4f}", f"{e.strength:.2f}", escape(str(e.evidence)),
+            e.kind, escape(_vessel(e.mmsi, e.name)), f"{e.start:%Y-%m-%d %H:%M:%S}",
+            _duration(e.duration_s), f"{e.lat:.4f}, {e.lon:.4f}", f"{e.strength:.2f}",
+            escape(str(e.evidence)),
         )  # fmt: skip
     if len(events) > limit:
         table.caption = f"... and {len(events) - limit} more in events.parquet"
     return table
+
+
+def _vessel(mmsi: int, name: object) -> str:
+    """A vessel as a table names it: its MMSI, and its name where known."""
+    return f"{mmsi}" + (f" {name}" if isinstance(name, str) and name else "")
 
 
 def _duration(seconds: float) -> str:

@@ -126,6 +126,15 @@ def empty_events() -> pd.DataFrame:
     return pd.DataFrame(columns=list(EVENT_COLUMNS))
 
 
+def with_identity(scores: pd.DataFrame, identity: pd.DataFrame) -> pd.DataFrame:
+    """`scores` with each track's vessel name and type (vessels.parquet; null where unknown)."""
+    out = scores.copy()
+    for key in ("name", "ship_type"):
+        known = identity[key] if key in identity.columns else pd.Series(dtype=object)
+        out[key] = out["mmsi"].map(known).astype(object).where(lambda v: v.notna(), None)
+    return out
+
+
 def with_events(scores: pd.DataFrame, events: pd.DataFrame) -> pd.DataFrame:
     """`scores` with each track's number of events and kinds, flagged where it has one."""
     on_track = events.dropna(subset=["track_id"])
@@ -147,4 +156,3 @@ def all_events(parts: Sequence[pd.DataFrame]) -> pd.DataFrame:
     events = pd.concat(parts, ignore_index=True).sort_values(["start", "mmsi", "kind"])
     events.insert(0, "event_id", np.arange(1, len(events) + 1))
     return events.reset_index(drop=True)
-

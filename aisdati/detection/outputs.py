@@ -51,6 +51,8 @@ SCORES_SCHEMA = pa.schema(
         ("ashore_reports", pa.int64()),
         ("events", pa.int64()),
         ("event_kinds", pa.string()),
+        ("name", pa.string()),
+        ("ship_type", pa.string()),
     ]
 )
 """scores.parquet, one row per test track, sorted by rank (1 = most abnormal). score: the
@@ -59,7 +61,9 @@ name; threshold: what flags it, in the same unit (the model's calibrated thresho
 batch-relative one asked for); max_dev_*: the track point with the largest local deviation;
 ashore_reports: reports well inland (`aisdati.tracks.ashore`; 0 with --no-ashore), which flag
 the track from `AshoreCheck.min_reports` on and rank it above every track at sea; events,
-event_kinds: the track's events (events.parquet), any of which flags it."""
+event_kinds: the track's events (events.parquet), any of which flags it; name, ship_type: its
+vessel's, where ingest saw its static messages (vessels.parquet)."""
+
 
 def write_outputs(result: Detection, out: Path, runner: Runner | None = None) -> list[Path]:
     """Every output of a detection in `out` (the command's staging folder: `OutputSet`), each
@@ -144,6 +148,9 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
         props = {
             "track_id": int(row.track_id),
             "mmsi": int(row.mmsi),
+            "name": row.name,
+            "ship_type": row.ship_type,
+            "event_kinds": row.event_kinds,
             "model": row.model,
             "rank": int(row.rank),
             "score": float(row.score),

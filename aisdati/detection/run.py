@@ -44,6 +44,7 @@ from aisdati.detection.events import (
     off_traffic_events,
     uncalibrated_note,
     with_events,
+    with_identity,
 )
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detection.routing import Coverage, check_region, route_test_tracks
@@ -282,7 +283,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     scores = score_table(tracks, names, raw, threshold, profiles, ashore)
     t2 = time.perf_counter()
     events, judged = _events(settings, models, tracks, scores, profiles, coverage)
-    scores = with_events(scores, events)
+    scores = with_identity(with_events(scores, events), read_vessels(settings.data_dir))
     timings["events_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     judging = [m for m in models if m.name in set(scores["model"])]
@@ -358,7 +359,7 @@ def judged_tracks(
 SCORE_COLUMNS = (
     "track_id", "mmsi", "model", "n_points", "score", "threshold", "flagged", "rank",
     "max_dev_m", "max_dev_lon", "max_dev_lat", "max_dev_index", "ashore_reports", "events",
-    "event_kinds",
+    "event_kinds", "name", "ship_type",
 )  # fmt: skip
 """scores.parquet's columns (`aisdati.detection.outputs.SCORES_SCHEMA`)."""
 
