@@ -15,9 +15,12 @@ from pathlib import Path
 import pytest
 
 from aisdati.live.loop import Watch
-from aisdati.live.sources import PACED_LINES, replay
+from aisdati.live.sources import replay
 from aisdati.live.store import open_store
 from tests.helpers.live import FRIO, free_port
+
+CHUNK_LINES = 200
+"""Lines per step: about two minutes of FRIO, so the watch can stop in the middle of the drift."""
 
 
 def pg_tool(name: str) -> str | None:
@@ -86,7 +89,7 @@ def _text(x: object) -> str | None:
 
 
 def test_a_stopped_watch_resumes_its_open_drift(db, tmp_path):
-    chunks = replay([FRIO], PACED_LINES)
+    chunks = replay([FRIO], CHUNK_LINES)
     first = Watch(open_store(db))
     while not first.ledger.open_events():
         first.step(next(chunks))
@@ -102,7 +105,7 @@ def test_a_stopped_watch_resumes_its_open_drift(db, tmp_path):
     second.store.close()
     once = str(tmp_path / "once.sqlite")  # the same replay, never stopped
     whole = Watch(open_store(once))
-    for chunk in replay([FRIO], PACED_LINES):
+    for chunk in replay([FRIO], CHUNK_LINES):
         whole.step(chunk)
     whole.store.close()
     resumed = rows(db)
