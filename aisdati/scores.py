@@ -73,7 +73,9 @@ SCORES: dict[str, Score] = {
         ),
         Score(
             "step", "m", "steps", "one-step predictions", STEP_ERRORS,
-            f"teacher-forced: {TAIL} the best-of-K one-step prediction errors (m)",
+            f"teacher-forced: {TAIL} the best-of-K one-step prediction errors (m); where the "
+            "model reads the reported motion, each draw's error is the larger of its distances "
+            "to the next report and to where the report's SOG and COG put the vessel",
         ),
         Score(
             "stepspread", "x spread", "steps", "one-step predictions", STEP_ERRORS,

@@ -252,15 +252,9 @@ class CalibratedWith:
     """K: rollouts and one-step draws per track (cards before it: the CLI's 10)."""
     lane_rollouts: int = 30
     """Rollouts that make up a track's lane (cards before it: the CLI's 30)."""
-    reported_motion: str = "none"
-    """How the step scores read the reported motion (`REPORTED_MOTION`; cards before it:
-    "none", the positions only)."""
-
-
-REPORTED_MOTION = ("none", "max", "both")
-"""`ScoreSettings.reported_motion`: each one-step prediction judged against the next position
-only ("none"), or also against where the report's own SOG and COG put the vessel, by the larger
-of the two errors of each draw ("max") or both errors in the track's tail ("both")."""
+    reported_motion: bool = False
+    """Whether the step scores also judged where the reported motion puts the vessel (cards
+    before it: the positions only)."""
 
 
 @dataclass(kw_only=True)
@@ -578,7 +572,7 @@ def _read_calibrated_with(f: CardFields) -> CalibratedWith | None:
         if recorded.get(key) is not None:
             settings[key] = f.integer(f"calibrated_with.{key}", 1, MAX_DRAWS)
     if recorded.get("reported_motion") is not None:  # older cards: positions only
-        settings["reported_motion"] = f.choice("calibrated_with.reported_motion", REPORTED_MOTION)
+        settings["reported_motion"] = f.boolean("calibrated_with.reported_motion")
     return CalibratedWith(**settings)
 
 

@@ -15,7 +15,8 @@ scores are the same whatever other tracks are judged with it (`aisdati.model.noi
   are drawn at (s_t, t), moved by the rule over the track's *real* time step, and the error is the
   great-circle distance from the predicted position to the real s_{t+1}; the best of the K is the
   step error (the model as a one-step predictive density, as likelihood-based AIS detectors do).
-  Each draw takes its own latent noise.
+  Each draw takes its own latent noise. The area's BC also judges each draw against where the
+  report's own SOG and COG put the vessel (`reported_next`, `ScoreSettings.reported_motion`).
 - **lane** (a departure from the paper): each report's distance to the nearest point of any of
   the K free rollouts, whatever its timing: whether the track stays where the traffic the model
   generates from its start goes. Best-of-K DTW judges a track against one rollout; a lane of

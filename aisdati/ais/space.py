@@ -177,6 +177,20 @@ uncertain, so its errors over their spread (`stepspread`) ranked and flagged bes
 score measured on three areas (the same page)."""
 
 
+READS_REPORTED_MOTION = {(AREA_PRESET, "bc")}
+"""The presets and methods whose step scores also judge where each report's own SOG and COG
+put the vessel (`ScoreSettings.reported_motion`): the area's default model, where it raised the
+ROC AUC of shifted stretches and noised reported course and speed on Kitimat by 0.070 (95 %:
+0.044-0.091) and changed detours, jumps and loiters by -0.002 (docs/results/
+reported-motion.md). The paper's presets judge positions, as the paper does."""
+
+
+def reads_reported_motion(preset: str | None, method: str) -> bool:
+    """Whether a card's preset (with its overrides, "area + members=5") and method calibrate
+    their step scores with the reported motion (`READS_REPORTED_MOTION`)."""
+    return ((preset or "").split(" + ")[0], method) in READS_REPORTED_MOTION
+
+
 def preset_score(preset: str | None, method: str) -> str:
     """`PRESET_SCORES`' score of a card's preset name, which carries its overrides ("area +
     members=5"): the preset's own, whatever was overridden."""
@@ -335,7 +349,6 @@ class AISSpace:
             ],
             axis=-1,
         )
-
 
 
 def _on_land():

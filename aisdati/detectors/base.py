@@ -218,8 +218,7 @@ class Detector(ABC):
         names = {"lane": self.lane_settings, "step": STEP_SETTINGS}.get(kind or "", ())
         for name in names:
             was, now = getattr(recorded, name), getattr(how, name)
-            same = was == now if isinstance(was, str) else math.isclose(float(was), float(now))
-            if not same:
+            if not math.isclose(float(was), float(now)):
                 raise UserError(
                     f"model {self.name}'s {kind} scores were calibrated with {name}={was}, not "
                     f"{now}: score with its card's settings (`calibrated_with`) or retrain it"

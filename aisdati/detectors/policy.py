@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +17,7 @@ import numpy as np
 from aisdati.ais.card import ModelCard
 from aisdati.ais.corridor import Corridor
 from aisdati.ais.policy import Act, AISPolicy, Draws, reported_next, track_keys
+from aisdati.ais.space import reads_reported_motion
 from aisdati.detectors.base import Detector
 from aisdati.detectors.scoring import Scores, ScoreSettings, error_surprises, tail_mean
 from aisdati.dtw import matched_distances
@@ -99,23 +100,19 @@ class PolicyDetector(Detector):
             errors, draws = policy.step_draws(
                 positions, [t.dts for t in tracks], how.rollouts, how.seed
             )
-            judged = [
-                judged_steps(e, q, reported_target(t, how), how.reported_motion)
+            best = [
+                judged_steps(e, q, reported_target(t, how))
                 for e, q, t in zip(errors, draws, tracks, strict=True)
             ]
-            parts["step"] = np.array(
-                [tail_mean(np.concatenate([e for e, _ in j.errors]), how.tail) for j in judged]
-            )
+            parts["step"] = np.array([tail_mean(e, how.tail) for e, _ in best])
             parts["stepspread"] = np.array(
                 [
-                    tail_mean(
-                        np.concatenate([error_surprises(e, q) for e, q in j.errors]), how.tail
-                    )
-                    for j in judged
+                    tail_mean(error_surprises(e, q), how.tail)
+                    for (e, _), q in zip(best, draws, strict=True)
                 ]
             )
-            profile = [np.concatenate([[0.0], j.profile]) for j in judged]
-            shown = [np.vstack([p[:1], j.shown]) for p, j in zip(positions, judged, strict=True)]
+            profile = [np.concatenate([[0.0], e]) for e, _ in best]
+            shown = [np.vstack([p[:1], q]) for p, (_, q) in zip(positions, best, strict=True)]
             for name in scores_from("steps"):
                 profiles[name], evidence[name] = profile, shown
         return Scores(
@@ -145,7 +142,9 @@ class PolicyDetector(Detector):
         """Score the training tracks every way; `threshold` reads these. With `folds`
         (cross-fitting), the tracks of fold m are scored by member m alone, which did not train
         on them; without, by the whole model that did."""
-        how = replace(how or self.how, score="rollout")
+        reads = reads_reported_motion(self.card.preset, self.method)
+        how = replace(how or self.how, score="rollout", reported_motion=reads)
+        self.how = replace(self.how, reported_motion=reads)  # judges as it is calibrated
         kinds = tuple(SCORES)
         if folds is None:
             parts = self.score_with(self.policy(), tracks, how, kinds[1:]).parts
@@ -161,50 +160,29 @@ class PolicyDetector(Detector):
         self.card.calibrated_with = how.calibrated_with()
 
 
-@dataclass(frozen=True)
-class JudgedSteps:
-    """What the step scores judge of one track's one-step draws (`judged_steps`)."""
-
-    errors: list[tuple[np.ndarray, np.ndarray]]
-    """The best-of-K errors (m) that enter the track's tail, each with the K draws of its
-    reports ([m], [m, K, 2]: what `error_surprises` divides by)."""
-    profile: np.ndarray
-    """[n - 1] each report's error (m): the larger of the two where both are judged."""
-    shown: np.ndarray
-    """[n - 1, 2] the predicted position shown at each report."""
-
-
 def reported_target(track: Track, how: ScoreSettings) -> np.ndarray | None:
     """Where the track's reported motion puts each next report (`reported_next`), when the
     step scores read it and the track has it."""
-    if how.reported_motion == "none" or track.sog is None or track.cog is None:
+    if not how.reported_motion or track.sog is None or track.cog is None:
         return None
     return reported_next(track.positions, track.dts, track.sog, track.cog)
 
 
 def judged_steps(
-    errors: np.ndarray, draws: np.ndarray, target: np.ndarray | None, mode: str
-) -> JudgedSteps:
-    """One track's K one-step errors ([n - 1, K] m) and draws ([n - 1, K, 2]) as the step
-    scores judge them: the best draw's error (`mode` "none", or no `target`); the best draw by
-    the larger of its distances to the next position and to the `target` ("max"); or the best
-    draw to each, both in the tail ("both"; reports without a target leave the second out)."""
+    errors: np.ndarray, draws: np.ndarray, target: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Of a track's K one-step draws at each report ([n - 1, K] errors in metres, [n - 1, K, 2]
+    positions), the best draw's error and position: the draw nearest the next report, or with
+    a `target` (`reported_target`) the draw whose larger distance to the two is smallest, so a
+    report is as surprising as the farther of where the vessel went and where it said it goes
+    (a report without SOG or COG: its position alone)."""
+    if target is not None:
+        with np.errstate(invalid="ignore"):
+            said = haversine_m(draws[..., 0], draws[..., 1], target[:, None, 0], target[:, None, 1])
+        errors = np.fmax(errors, said)
     rows = np.arange(len(errors))
-    if mode == "none" or target is None:
-        best = errors.argmin(axis=1)
-        e = errors[rows, best]
-        return JudgedSteps([(e, draws)], e, draws[rows, best])
-    with np.errstate(invalid="ignore"):
-        away = haversine_m(draws[..., 0], draws[..., 1], target[:, None, 0], target[:, None, 1])
-    if mode == "max":
-        both = np.fmax(errors, away)
-        best = both.argmin(axis=1)
-        e = both[rows, best]
-        return JudgedSteps([(e, draws)], e, draws[rows, best])
-    best, near = errors.argmin(axis=1), np.nan_to_num(away, nan=np.inf).argmin(axis=1)
-    e, said = errors[rows, best], away[rows, near]
-    kept = np.isfinite(said)
-    return JudgedSteps([(e, draws), (said[kept], draws[kept])], np.fmax(e, said), draws[rows, best])
+    best = errors.argmin(axis=1)
+    return errors[rows, best], draws[rows, best]
 
 
 def saved_corridor(stem: Path, card: ModelCard) -> Corridor | None:

@@ -85,11 +85,13 @@ class ScoreSettings:
     history at de1e87e): 0.1 gave DATI the best pooled lane AUC averaged over Kitimat and NY
     Harbor (0.15 was level; larger fractions dilute a short jump or loiter on the ferry routes,
     smaller ones let a few stray reports decide); docs/results/areas.md."""
-    reported_motion: str = "none"
-    """Step scores: each one-step prediction judged against the next position only ("none"),
-    or also against where the report's own SOG and COG put the vessel (`aisdati.ais.policy.
-    reported_next`), by the larger error of each draw ("max") or both in the tail ("both");
-    `aisdati.ais.card.REPORTED_MOTION`, docs/results/reported-motion.md."""
+    reported_motion: bool = False
+    """Step scores: each draw judged by the larger of its distances to the next position and
+    to where the report's own SOG and COG put the vessel (`aisdati.ais.policy.reported_next`),
+    not by the first alone. A model's calibration decides it (`calibrated_with`): the area
+    preset's BC reads the reported motion (`aisdati.ais.space.reads_reported_motion`; on
+    Kitimat +0.070 ROC AUC over shifts, course and speed noise, docs/results/
+    reported-motion.md)."""
     near_km: float = 10.0
     """`nearest`: compare with training tracks that start within this distance."""
     seed: int = 0

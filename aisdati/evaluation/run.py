@@ -275,7 +275,6 @@ def _score(
 ) -> Evaluation:
     """Score the held-out tracks with every detector and tabulate (see the module docstring)."""
     settings, split = prepared.settings, prepared.split
-    how = HOW
     heldout = load_tracks(prepared.data, split.heldout_ids)
     labels = split.labels.set_index("track_id").loc[split.heldout_ids]
     rule = AshoreCheck()
@@ -286,6 +285,7 @@ def _score(
     result = Evaluation(settings, split, pd.DataFrame(), pd.DataFrame(), timings, detectors)
     for method in settings.detectors:
         det = detectors[method]
+        how = replace(HOW, reported_motion=det.how.reported_motion)  # as its card calibrated
         t1 = time.perf_counter()
         say(f"scoring {settings.cluster} with {method}")
         kinds = scored_kinds(det)

@@ -130,6 +130,20 @@ def test_a_card_reads_back_from_the_json_it_writes():
     assert written["score"] == "lane"
 
 
+def test_a_card_records_whether_its_step_scores_read_the_reported_motion():
+    """Issue 59, item 3: `calibrated_with.reported_motion` reads back; a card from before it
+    judged positions only; anything but true or false is one line."""
+    doc = {**_card(), "calibrated_with": {"lane_course_km": 2.0}}
+    assert ModelCard.from_dict(doc, Path("up.json")).calibrated_with.reported_motion is False
+    doc["calibrated_with"]["reported_motion"] = True
+    card = ModelCard.from_dict(json.loads(json.dumps(doc)), Path("up.json"))
+    assert card.calibrated_with.reported_motion is True
+    assert card.to_dict()["calibrated_with"]["reported_motion"] is True
+    doc["calibrated_with"]["reported_motion"] = "max"
+    with pytest.raises(UserError, match=r"calibrated_with\.reported_motion must be true or false"):
+        ModelCard.from_dict(doc, Path("up.json"))
+
+
 def test_an_unfinished_card_warns_and_a_bad_lane_configuration_is_one_line():
     doc = _card()
     doc["training"]["finished"] = False

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aisdati.ais.policy import AISPolicy, draw_rows
+from aisdati.ais.policy import AISPolicy, draw_rows, reported_next
 from aisdati.ais.source import build_source
 from aisdati.ais.space import PRESETS, LaneConfig
 from aisdati.ais.training import TrainSettings
@@ -22,6 +22,7 @@ from aisdati.detectors import ScoreSettings, load_detector
 from aisdati.detectors.bc import BCDetector
 from aisdati.detectors.dati import DATIDetector
 from aisdati.evaluation.inject import inject
+from aisdati.geo import spherical_step
 from aisdati.model.noise import keyed_normal
 from aisdati.tracks.store import load_tracks, read_track_table
 
@@ -61,9 +62,7 @@ def test_keyed_noise_is_a_function_of_the_key_alone():
     assert sorted(np.bincount(rows[:3].members(3))) == [1, 1, 1]  # a track's draws take turns
 
 
-def test_the_default_detector_scores_a_track_the_same_alone_and_in_a_batch_of_50(
-    area_bc, split
-):
+def test_the_default_detector_scores_a_track_the_same_alone_and_in_a_batch_of_50(area_bc, split):
     batch = split[1]
     assert len(batch) == 50
     how = area_bc.how
@@ -77,9 +76,7 @@ def test_the_default_detector_scores_a_track_the_same_alone_and_in_a_batch_of_50
         assert alone == pytest.approx(together[k], rel=1e-6)
         assert (alone > threshold) == (together[k] > threshold)
     order = {t.track_id: i for i, t in enumerate(shuffled)}
-    np.testing.assert_allclose(
-        [again[order[t.track_id]] for t in batch], together, rtol=1e-6
-    )
+    np.testing.assert_allclose([again[order[t.track_id]] for t in batch], together, rtol=1e-6)
 
 
 def test_rollouts_and_the_lane_are_the_same_alone_and_in_a_batch(split):
@@ -129,8 +126,10 @@ def tracks(kitimat):
 def _perfect_policy(space, tracks, draws):
     """A policy that takes every track's own perfect decisions: it reproduces them exactly."""
     scaled = np.concatenate(
-        [space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
-         for t in tracks]
+        [
+            space.rule.decision_scaler.scale(space.rule.perfect_decisions(t.positions, t.dts))
+            for t in tracks
+        ]
     ).repeat(draws, axis=0)
 
     def make(rows, temporal):
@@ -149,6 +148,25 @@ def test_step_errors_of_a_model_that_reproduces_the_tracks_are_zero(tracks):
         assert len(e) == len(t.positions) - 1
         assert e.max() < 1e-3  # metres
         np.testing.assert_allclose(p, t.positions[1:], atol=1e-9)
+
+
+def test_the_reported_motion_puts_a_steady_vessel_on_its_next_report():
+    """Issue 59, item 3: `reported_next` moves each report by the kinematic rule at the mean of
+    its and the next report's reported velocity: a vessel that sails as it reports lands on its
+    next report; a report without SOG leaves its target unknown."""
+    dts = np.full(5, 0.1)
+    sog, cog = np.full(6, 12.0), np.full(6, 70.0)
+    lon, lat = [-128.7], [53.5]
+    for dt in dts:
+        x, y = spherical_step(lon[-1], lat[-1], 12.0, 70.0, dt)
+        lon.append(float(x))
+        lat.append(float(y))
+    positions = np.column_stack([lon, lat])
+    np.testing.assert_allclose(reported_next(positions, dts, sog, cog), positions[1:], atol=1e-12)
+    speeding = reported_next(positions, dts, np.tile([10.0, 14.0], 3), cog)  # 12 kn between
+    np.testing.assert_allclose(speeding, positions[1:], atol=1e-12)
+    sog[2] = np.nan
+    assert np.isnan(reported_next(positions, dts, sog, cog)[1:3]).all()
 
 
 def _dead_reckoning(space):

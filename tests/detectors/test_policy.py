@@ -82,7 +82,7 @@ def test_cross_fitted_bc_calibrates_each_track_with_the_member_that_did_not_fit_
     bc = BCDetector(settings, HOW).fit(july)
     assert len(bc.trained().seeds) == lane.members == 2
     folds = crossfit_folds(july, 2, settings.seed)
-    how = replace(HOW, score="rollout")
+    how = replace(bc.how, score="rollout")  # as calibrated: with the reported motion
     for m in range(2):
         rows = np.nonzero(folds == m)[0]
         got = bc.score_with(bc.policy(m), [july[i] for i in rows], how, ("step",)).parts
@@ -98,6 +98,31 @@ def test_cross_fitted_bc_calibrates_each_track_with_the_member_that_did_not_fit_
     )
     single = replace(settings, lane=replace(lane, crossfit=False))
     assert len(BCDetector(single, HOW).fit(july).trained().seeds) == 1
+
+
+def test_the_area_bc_judges_where_the_vessel_says_it_goes(area_dati, lane_tracks, months, tmp_path):
+    """Issue 59, item 3: the area preset's BC calibrates and judges its step scores with the
+    reported motion (each draw by the larger of its distances to the next report and to where
+    the report's SOG and COG put the vessel): a track that reports ten times its speed scores
+    higher than itself, which positions alone cannot tell; its card records it, a threshold asked
+    with positions only is refused in one line; a track without reported motion is judged by
+    its positions. The area DATI model keeps positions (not measured)."""
+    settings = TrainSettings(cluster="all", episodes=4, lane=area_lane(), preset="area")
+    bc = BCDetector(settings, HOW).fit(list(lane_tracks))
+    assert bc.how.reported_motion and bc.card.calibrated_with.reported_motion
+    assert not area_dati.card.calibrated_with.reported_motion
+    august = months[1][:4]
+    noised = [replace(t, sog=t.sog * 10.0) for t in august]  # kilometres from its next report
+    how = replace(bc.how, score="stepspread")
+    assert (bc.score(noised, how).score > bc.score(august, how).score).all()
+    positions = replace(how, reported_motion=False)
+    np.testing.assert_allclose(bc.score(noised, positions).score, bc.score(august, positions).score)
+    bare = [replace(t, sog=None, cog=None) for t in august]
+    np.testing.assert_allclose(bc.score(bare, how).score, bc.score(august, positions).score)
+    with pytest.raises(UserError, match="calibrated with reported_motion=True, not False"):
+        bc.threshold(positions)
+    bc.save(tmp_path / "all")
+    assert load_detector(tmp_path / "all").how.reported_motion
 
 
 def test_an_area_model_judges_by_its_one_step_score_unless_told(area_dati, tmp_path):

@@ -35,3 +35,20 @@ def test_tracks_load_in_time_order_from_points_in_any_order(processed, tmp_path)
     pq.write_table(pa.Table.from_pandas(shuffled, preserve_index=False), data / "points.parquet")
     with pytest.raises(UserError, match="not a timestamp"):
         load_tracks(data, ids)
+
+
+def test_tracks_carry_the_reported_motion_where_the_points_have_it(processed, tmp_path):
+    """Issue 59, item 3: each track's reported SOG and COG, report by report, as the step
+    scores read them; points without them (an older ingest) give None."""
+    points = pq.read_table(processed / "points.parquet").to_pandas()
+    ids = read_track_table(processed)["track_id"].tolist()[:3]
+    for tid, track in zip(ids, load_tracks(processed, ids), strict=True):
+        mine = points[points["track_id"] == tid].sort_values("time")
+        np.testing.assert_allclose(track.sog, mine["sog"].to_numpy(np.float64))
+        np.testing.assert_allclose(track.cog, mine["cog"].to_numpy(np.float64))
+    data = tmp_path / "data"
+    data.mkdir()
+    shutil.copy(processed / "tracks.parquet", data / "tracks.parquet")
+    bare = pa.Table.from_pandas(points.drop(columns=["sog", "cog"]), preserve_index=False)
+    pq.write_table(bare, data / "points.parquet")
+    assert all(t.sog is None and t.cog is None for t in load_tracks(data, ids))
