@@ -150,9 +150,7 @@ def with_events(scores: pd.DataFrame, events: pd.DataFrame) -> pd.DataFrame:
 
 def all_events(parts: Sequence[pd.DataFrame]) -> pd.DataFrame:
     """The events of a detection together, strongest first within each vessel's time order."""
-    parts = [p for p in parts if len(p)]
-    if not parts:
-        return empty_events()
+    parts = [p for p in parts if len(p)] or [empty_events()]
     events = pd.concat(parts, ignore_index=True).sort_values(["start", "mmsi", "kind"])
     events.insert(0, "event_id", np.arange(1, len(events) + 1))
     return events.reset_index(drop=True)
