@@ -43,15 +43,17 @@ KINDS: dict[str, EventKind] = {
             "speed-inconsistent",
             "reported speed inconsistent",
             False,
-            "a stretch where the reported speed jumps report to report far beyond the track's "
-            "own report-to-report variation (accumulated by a CUSUM): a faulty speed log",
+            "a stretch where the reported speed jumps report to report (from its neighbours' "
+            "mean) far beyond the vessel's own jumps, accumulated by a CUSUM: a faulty speed log",
             "ours",
         ),
         EventKind(
             "course-inconsistent",
             "reported course inconsistent",
             False,
-            "as speed-inconsistent, on the reported course of a vessel under way (over 2 kn)",
+            "a stretch where the reported course departs from the course the positions show (the "
+            "bearing from the report before to the report after) far beyond the vessel's own "
+            "departures, under way (over 2 kn), accumulated by a CUSUM",
             "ours",
         ),
         EventKind(
