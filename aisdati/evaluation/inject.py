@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aisdati.errors import UserError
-from aisdati.geo import courses_deg, haversine_m, initial_bearing_deg, legs_m, moved_m
+from aisdati.geo import courses_deg, initial_bearing_deg, legs_m, moved_m
 from aisdati.options import parse_names
 from aisdati.tracks.schema import KNOT_MPS
 
@@ -140,12 +140,20 @@ def _move(positions: np.ndarray, bearing_deg: np.ndarray, metres: np.ndarray) ->
     return np.column_stack(moved_m(positions[:, 0], positions[:, 1], bearing_deg, metres))
 
 
+SPEED_REPORTS = 3
+"""Reports either side over which a path's local speed is measured: its length along the path
+over the time, so that the ratio of two paths' speeds carries no position noise of one step
+(over one step, the ratio of two noisy speeds made a detour's reported speeds jump)."""
+
+
 def _local(p: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each report's path bearing (deg) and speed (m/s), from its previous to its next report."""
+    """Each report's path bearing (deg) and speed (m/s) along the path over `SPEED_REPORTS`
+    reports either side."""
     k = np.arange(len(p))
-    prv, nxt = np.maximum(k - 1, 0), np.minimum(k + 1, len(p) - 1)
-    metres = haversine_m(p[prv, 0], p[prv, 1], p[nxt, 0], p[nxt, 1])
-    return courses_deg(p), metres / np.maximum(t[nxt] - t[prv], 1e-3)
+    prv = np.maximum(k - SPEED_REPORTS, 0)
+    nxt = np.minimum(k + SPEED_REPORTS, len(p) - 1)
+    along = np.r_[0.0, np.cumsum(legs_m(p))] if len(p) > 1 else np.zeros(len(p))
+    return courses_deg(p), (along[nxt] - along[prv]) / np.maximum(t[nxt] - t[prv], 1e-3)
 
 
 def _follow(p, t, m, new_p, new_t, rows) -> np.ndarray:

@@ -73,7 +73,11 @@ def speed_inconsistent(v: VesselReports, s: EventSettings) -> list[Found]:
     if len(v) < 5:
         return []
     rough = v.sog[1:-1] - (v.sog[:-2] + v.sog[2:]) / 2
-    return _noisy("speed-inconsistent", rough, s.sog_floor_kn, "kn", s.speed_limit, s)
+    said = (
+        "reported speed jumps {size:.1f} kn (rms) from its neighbours', where this vessel's "
+        "jump {scale:.1f}"
+    )
+    return _noisy("speed-inconsistent", rough, s.sog_floor_kn, said, s.speed_limit, s)
 
 
 def course_inconsistent(v: VesselReports, s: EventSettings) -> list[Found]:
@@ -89,7 +93,11 @@ def course_inconsistent(v: VesselReports, s: EventSettings) -> list[Found]:
     apart = (v.cog[1:-1] - bearing + 180.0) % 360.0 - 180.0
     read = (v.sog[1:-1] >= s.under_way_kn) & (chord_m >= CHORD_GPS * s.gps_m)
     apart = np.where(read, apart, np.nan)
-    return _noisy("course-inconsistent", apart, s.cog_floor_deg, "deg", s.course_limit, s)
+    said = (
+        "reported course {size:.0f} deg (rms) off the course its positions show, where this "
+        "vessel's is {scale:.0f} off"
+    )
+    return _noisy("course-inconsistent", apart, s.cog_floor_deg, said, s.course_limit, s)
 
 
 def _chords(v: VesselReports) -> np.ndarray:
@@ -98,10 +106,11 @@ def _chords(v: VesselReports) -> np.ndarray:
 
 
 def _noisy(
-    kind: str, rough: np.ndarray, floor: float, unit: str, limit: float, s: EventSettings
+    kind: str, rough: np.ndarray, floor: float, said: str, limit: float, s: EventSettings
 ) -> list[Found]:
     """The CUSUM stretches (over `limit`) of squared departures over the vessel's robust
-    spread (at least `floor`; NaN: not read); indices of report i + 1 for departure i."""
+    spread (at least `floor`; NaN: not read); indices of report i + 1 for departure i; `said`:
+    the evidence's words, with the stretch's rms departure (`size`) and the spread (`scale`)."""
     ok = np.isfinite(rough)
     spread = MAD_TO_SIGMA * np.median(np.abs(rough[ok] - np.median(rough[ok]))) if ok.any() else 0
     scale = max(float(spread), floor)
@@ -113,8 +122,7 @@ def _noisy(
         out.append(
             Found(
                 kind, a + 1, b + 1, a + 1 + int(np.argmax(x[a : b + 1])), peak / limit,
-                f"reported {unit} {size:.1f} (rms) off what its positions show, where this "
-                f"vessel's are {scale:.1f} off",
+                said.format(size=size, scale=scale),
             )
         )  # fmt: skip
     return out
