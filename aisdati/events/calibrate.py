@@ -32,6 +32,8 @@ CALIBRATED: dict[str, tuple[str, float, Finder]] = {
 """Kind -> (the setting that is its threshold, the lowest it may be calibrated to, its
 finder). The floors keep a model of very regular traffic from raising events on noise no
 analyst would look at."""
+
+
 def largest(kind: str, v: VesselReports, s: EventSettings = EventSettings()) -> float:
     """The largest statistic of `kind` on these reports, in the unit of its threshold; 0 where
     none reaches the kind's floor (below it, no threshold is set anyway)."""
