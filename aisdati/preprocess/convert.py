@@ -1,7 +1,8 @@
 """Conversion: one record batch of source columns (any layout, as the source typed them) into the
 canonical frame the later stages read (`PARTITION_SCHEMA`), with a rejection code per row for
 values that are blank, not numbers, not MMSIs or not times, so one bad value costs one counted
-row, not the file."""
+row, not the file. The optional heading and navigational status reject nothing: a value that is
+none becomes NaN or null."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from aisdati.errors import UserError
+from aisdati.preprocess.layouts import normalise_name
 from aisdati.preprocess.report import CODE
 
 MAX_MMSI_DIGITS = 18
@@ -34,10 +36,46 @@ PARTITION_SCHEMA = pa.schema(
         ("lat", pa.float64()),
         ("sog", pa.float64()),
         ("cog", pa.float64()),
+        ("heading", pa.float32()),
+        ("status", pa.int16()),
         ("src", pa.int32()),
     ]
 )
-"""Rows between the stages: canonical names and types; NaN SOG/COG means 'derive it'."""
+"""Rows between the stages: canonical names and types; NaN SOG/COG means 'derive it'; heading
+and status as in points.parquet (`aisdati.tracks.schema.POINTS_SCHEMA`)."""
+ROW_NUMBERS = ("lat", "lon", "sog", "cog")
+"""The number columns a row needs (where the file has them): blank or bad, the row is rejected."""
+HEADING_RANGE = (0.0, 360.0)
+"""A heading is in [0, 360) degrees; anything else (AIS's 511: not available) is none."""
+STATUS_RANGE = (0, 14)
+"""Navigational status codes (ITU-R M.1371); 15 is 'not defined', read as none."""
+STATUS_NAMES = {
+    normalise_name(text): code
+    for code, texts in {
+        0: ("Under way using engine", "Underway using engine"),
+        1: ("At anchor",),
+        2: ("Not under command",),
+        3: (
+            "Restricted maneuverability",
+            "Restricted manoeuvrability",
+            "Restricted manoeuverability",
+        ),
+        4: ("Constrained by her draught", "Constrained by draught"),
+        5: ("Moored",),
+        6: ("Aground",),
+        7: ("Engaged in fishing",),
+        8: ("Under way sailing", "Underway sailing"),
+        9: ("Reserved for future amendment [HSC]",),
+        10: ("Reserved for future amendment [WIG]",),
+        11: ("Power-driven vessel towing astern",),
+        12: ("Power-driven vessel pushing ahead or towing alongside",),
+        14: ("AIS-SART", "AIS-SART is active", "AIS-SART (active)"),
+    }.items()
+    for text in texts
+}
+"""The status names the Danish Maritime Authority writes (`Navigational status`), by their
+normalised spelling (`layouts.normalise_name`). 'Unknown value', 'Not defined' and 'Reserved for
+future use' (which of 11-13?) are none."""
 
 
 def _to_float(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
@@ -217,20 +255,66 @@ def _null_mask(arr: pa.Array) -> np.ndarray:
     return arr.is_null().to_numpy(zero_copy_only=False)
 
 
+def heading_of(arr: pa.Array) -> np.ndarray:
+    """Headings as float32 degrees, NaN where there is none (511, blank, no number, outside
+    `HEADING_RANGE`)."""
+    values, _ = _to_float(arr)
+    with np.errstate(invalid="ignore"):
+        ok = (values >= HEADING_RANGE[0]) & (values < HEADING_RANGE[1])
+    return np.where(ok, values, np.nan).astype(np.float32)
+
+
+def status_of(arr: pa.Array) -> pa.Array:
+    """Navigational status codes as int16, null where there is none: a number outside
+    `STATUS_RANGE` or not whole, or text that is neither such a number nor a name of
+    `STATUS_NAMES`."""
+    if pa.types.is_dictionary(arr.type):
+        arr = arr.dictionary_decode()
+    if pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type):
+        encoded = pc.dictionary_encode(arr)  # a file holds a few distinct texts: each read once
+        known = np.array([_status_text(t) for t in encoded.dictionary.to_pylist()], np.float64)
+        index = pc.fill_null(encoded.indices, -1).to_numpy(zero_copy_only=False)
+        values = np.where(index >= 0, np.r_[known, np.nan][index], np.nan)
+    else:
+        values = pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False)
+    with np.errstate(invalid="ignore"):
+        ok = (values == np.floor(values)) & (values >= STATUS_RANGE[0])
+        ok &= values <= STATUS_RANGE[1]
+    return pa.array(np.where(ok, values, 0).astype(np.int16), mask=~ok)
+
+
+def _status_text(text: str) -> float:
+    """One status text's code (NaN: none), as `status_of` reads it."""
+    try:
+        return float(text)
+    except ValueError:
+        return float(STATUS_NAMES.get(normalise_name(text), np.nan))
+
+
+def _optional(batch: pa.RecordBatch, columns: dict[str, str], key: str) -> pa.Array | None:
+    """The batch's column of an optional canonical column, None where the file (or this stretch
+    of it) has none."""
+    name = columns.get(key)
+    return batch.column(name) if name in batch.schema.names else None
+
+
 def to_canonical(
     batch: pa.RecordBatch, columns: dict[str, str], src: int, time_format: str | None = None
 ) -> tuple[pa.Table, np.ndarray]:
     """Convert one batch to `PARTITION_SCHEMA`, with a rejection code per row for blanks,
-    non-numbers, bad MMSIs and unparsable times (0 where the row is fine). `columns` maps
-    canonical names to the batch's (`resolve_columns`); `time_format` is the layout's."""
+    non-numbers, bad MMSIs and unparsable times (0 where the row is fine); the optional heading
+    and status reject nothing. `columns` maps canonical names to the batch's
+    (`resolve_columns`; the vessel's own columns are not read here); `time_format` is the
+    layout's."""
     n = batch.num_rows
     codes = np.zeros(n, dtype=np.uint8)
-    raw = {key: batch.column(name) for key, name in columns.items()}
+    needed = ("mmsi", "time", *ROW_NUMBERS)
+    raw = {key: batch.column(columns[key]) for key in needed if key in columns}
     missing = np.zeros(n, dtype=bool)
     for arr in raw.values():
         missing |= _null_mask(arr)
     numbers, bad_number = {}, np.zeros(n, dtype=bool)
-    for key in ("lat", "lon", "sog", "cog"):
+    for key in ROW_NUMBERS:
         if key in raw:
             numbers[key], bad = _to_float(raw[key])
             bad_number |= bad
@@ -246,6 +330,7 @@ def to_canonical(
         (bad_time, "bad_time"),
     ):
         codes[(codes == 0) & mask] = CODE[reason]
+    heading, status = _optional(batch, columns, "heading"), _optional(batch, columns, "status")
     table = pa.table(
         [
             mmsi,
@@ -254,6 +339,8 @@ def to_canonical(
             numbers["lat"],
             numbers["sog"],
             numbers["cog"],
+            np.full(n, np.nan, np.float32) if heading is None else heading_of(heading),
+            pa.nulls(n, pa.int16()) if status is None else status_of(status),
             np.full(n, src, dtype=np.int32),
         ],
         schema=PARTITION_SCHEMA,

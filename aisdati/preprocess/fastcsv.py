@@ -26,11 +26,21 @@ import numpy as np
 import pyarrow as pa
 
 from aisdati.preprocess.bytewords import HIGH, below_first, count, each, equal, word_at
+from aisdati.preprocess.layouts import STATIC
 
 MMSI, TIME, FIRST_NUMBER = 0, 1, 2
-"""Output slots of the MMSI and time columns; slots from `FIRST_NUMBER` on are the number
-columns."""
-NUMBERS = ("lat", "lon", "sog", "cog")
+"""Output slots of the MMSI and time columns (and their rows of `ints`); slots from
+`FIRST_NUMBER` on are the number columns."""
+KEY = 2
+"""The row of `ints` that holds each row's static hash (`ParsedBlock.keys`)."""
+NOT_READ, STATIC_SLOT = -1, -2
+"""Slots of a field that is not read, and of one that is hashed (`STATIC`)."""
+NUMBERS = ("lat", "lon", "sog", "cog", "heading", "status")
+OPTIONAL_NUMBERS = frozenset({"heading", "status"})
+"""Number columns whose blank is a value (none), not an odd row."""
+HASH_SEED = np.int64(0x1F2E3D4C5B6A7988)
+HASH_PRIME = np.int64(1099511628211)
+"""FNV-1a's prime, in wrapping int64 arithmetic (the hash of `KEY`)."""
 MAX_DIGITS = 18
 """Digits of a number read here (an int64 holds them); its digits as an integer must also be at
 most `EXACT` (below 2**53: exact as a float64), or it goes the usual way."""
@@ -56,6 +66,8 @@ class ColumnSlots:
     slots: np.ndarray
     numbers: tuple[str, ...]
     """The number columns present (canonical names), in slot order from 2."""
+    optional: np.ndarray
+    """Per number column, whether a blank is none (`OPTIONAL_NUMBERS`)."""
 
     @classmethod
     def of(cls, names: list[str], columns: dict[str, str]) -> ColumnSlots | None:
@@ -63,13 +75,14 @@ class ColumnSlots:
         usual way decides which)."""
         numbers = tuple(c for c in NUMBERS if c in columns)
         wanted = {"mmsi": MMSI, "time": TIME} | {c: FIRST_NUMBER + i for i, c in enumerate(numbers)}
-        slots = np.full(len(names), -1, np.int64)
+        wanted |= {c: STATIC_SLOT for c in STATIC if c in columns}
+        slots = np.full(len(names), NOT_READ, np.int64)
         for canonical, slot in wanted.items():
             at = [i for i, name in enumerate(names) if name == columns[canonical]]
             if len(at) != 1:
                 return None
             slots[at[0]] = slot
-        return cls(slots, numbers)
+        return cls(slots, numbers, np.array([c in OPTIONAL_NUMBERS for c in numbers]))
 
 
 @dataclass(frozen=True)
@@ -81,6 +94,8 @@ class ParsedBlock:
     time_us: np.ndarray
     numbers: np.ndarray
     """[len(ColumnSlots.numbers), rows] float64."""
+    keys: np.ndarray
+    """A hash of each row's MMSI and static fields, 0 where those are all blank."""
     slow: np.ndarray
     line_start: np.ndarray
     line_end: np.ndarray
@@ -88,6 +103,24 @@ class ParsedBlock:
     @property
     def rows(self) -> int:
         return len(self.slow)
+
+    def static_tally(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The distinct static hashes of the plain rows (0 aside), sorted (the tally looks them
+        up among those it knows in one sweep), how many rows have each, and the last of them."""
+        keys, counts, last = tally_keys(self.keys, self.slow)
+        order = np.argsort(keys)
+        return keys[order], counts[order], last[order]
+
+    def lines(self, block: bytes | memoryview, rows: np.ndarray) -> bytes:
+        """The text of these rows of `block` (parsed into this), each ended by a line end."""
+        starts, ends = self.line_start[rows], self.line_end[rows]
+        sizes = ends - starts + 1
+        at = np.r_[0, np.cumsum(sizes)]
+        index = np.arange(at[-1]) - np.repeat(at[:-1] - starts, sizes)
+        index[at[1:] - 1] = 0  # where each line end goes
+        text = np.frombuffer(block, np.uint8)[index]
+        text[at[1:] - 1] = 10
+        return text.tobytes()
 
 
 def parse_block(block: bytes | memoryview, slots: ColumnSlots) -> ParsedBlock:
@@ -97,45 +130,46 @@ def parse_block(block: bytes | memoryview, slots: ColumnSlots) -> ParsedBlock:
     buf = np.frombuffer(block, np.uint8)
     buf.flags.writeable = False  # (a chunk read into a bytearray: one compiled kernel, not two)
     for cap in (len(buf) // TYPICAL_ROW_BYTES + 1, len(buf) // 2 + 1):  # every row takes 2 or more
-        ints = np.empty((2, cap), np.int64)
+        ints = np.empty((3, cap), np.int64)
         numbers = np.empty((len(slots.numbers), cap), np.float64)
         slow = np.empty(cap, np.bool_)
         spans = np.empty((2, cap), np.int64)
-        rows = scan_block(buf, slots.slots, ints, numbers, slow, spans)
+        rows = scan_block(buf, slots.slots, slots.optional, ints, numbers, slow, spans)
         if rows >= 0:
             break
     return ParsedBlock(
         ints[MMSI, :rows],
         ints[TIME, :rows],
         numbers[:, :rows],
+        ints[KEY, :rows],
         slow[:rows],
         spans[0, :rows],
         spans[1, :rows],
     )
 
 
-def typed_batch(parsed: ParsedBlock, names: dict[str, str]) -> pa.RecordBatch:
-    """The block's rows as a record batch of typed columns under the source's names (`names`:
-    canonical -> name), which `convert.to_canonical` reads like a typed parquet's."""
+def typed_batch(parsed: ParsedBlock, slots: ColumnSlots, names: dict[str, str]) -> pa.RecordBatch:
+    """The block's rows (parsed with `slots`) as a record batch of typed columns under the
+    source's names (`names`: canonical -> name), which `convert.to_canonical` reads like a typed
+    parquet's."""
     columns = {
         names["mmsi"]: pa.array(parsed.mmsi),
         names["time"]: pa.array(parsed.time_us).view(pa.timestamp("us")),
     }
-    for i, canonical in enumerate(c for c in NUMBERS if c in names):
+    for i, canonical in enumerate(slots.numbers):
         columns[names[canonical]] = pa.array(parsed.numbers[i])
     return pa.record_batch(list(columns.values()), names=list(columns))
 
 
 @numba.njit(nogil=True, cache=True)
-def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - compiled
+def scan_block(buf, slots, optional, ints, numbers, slow, spans):  # pragma: no cover - compiled
     """Rows of `buf` into the outputs (see `parse_block`); returns how many rows there were, or
     -1 where there were more than the outputs hold."""
     n = buf.shape[0]
     n_fields = slots.shape[0]
     words = buf[: n - n % 8].view(np.uint64)
     needed_until = _needed_until(slots)  # fields from here on are not read: `_skip_fields`
-    row = 0
-    i = 0
+    row, i = 0, 0
     date_at, date_days = -1, np.int64(0)  # the last date parsed: most rows share it
     cap = slow.shape[0]
     while i < n:
@@ -144,10 +178,10 @@ def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - co
             continue
         if row == cap:
             return -1  # more rows than the outputs hold: the caller sizes them for more
-        line = i
-        field = 0
-        bad = False
+        line, field, bad = i, 0, False
+        static, any_static = HASH_SEED, False
         while True:
+            # (a static field is hashed as written: its doubled quotes need no unquoting here)
             needed = field < n_fields and slots[field] >= 0
             start, end, i, kind, odd = _field_at(buf, i, needed)
             bad |= odd
@@ -165,8 +199,12 @@ def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - co
                     ints[TIME, row] = value
                 elif slot >= FIRST_NUMBER:
                     number = _number(buf, start, end)
-                    bad |= np.isnan(number)
-                    numbers[slot - FIRST_NUMBER, row] = number
+                    k = slot - FIRST_NUMBER
+                    bad |= np.isnan(number) and not (optional[k] and end == start)
+                    numbers[k, row] = number
+                elif slot == STATIC_SLOT:
+                    static = _hashed(buf, start, end, static)
+                    any_static |= end > start
             field += 1
             if kind == 2:
                 break
@@ -178,8 +216,8 @@ def scan_block(buf, slots, ints, numbers, slow, spans):  # pragma: no cover - co
                     field += 1
                     break
         slow[row] = bad or field != n_fields
-        spans[0, row] = line
-        spans[1, row] = i
+        ints[KEY, row] = _row_key(static, ints[MMSI, row]) if any_static else 0
+        spans[0, row], spans[1, row] = line, i
         row += 1
         i += 1
     return row
@@ -194,9 +232,55 @@ def _needed_until(slots):  # pragma: no cover - compiled
     the fields from there on (`_skip_fields`)."""
     needed_until = 0
     for k in range(slots.shape[0]):
-        if slots[k] >= 0:
+        if slots[k] != NOT_READ:
             needed_until = k + 1
     return needed_until
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _hashed(buf, start, end, h):  # pragma: no cover - compiled
+    """The hash `h` of the fields so far, with the field [start, end) and its end mixed in."""
+    for k in range(start, end):
+        h = (h ^ np.int64(buf[k])) * HASH_PRIME
+    return (h ^ np.int64(256)) * HASH_PRIME  # (a field's end is no byte)
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _row_key(static, mmsi):  # pragma: no cover - compiled
+    """A row's `KEY`: its static fields' hash with its MMSI mixed in, never 0."""
+    h = (static ^ mmsi) * HASH_PRIME
+    h ^= h >> 29
+    return h if h != 0 else np.int64(1)
+
+
+@numba.njit(nogil=True, cache=True)
+def tally_keys(keys, slow):  # pragma: no cover - compiled
+    """The distinct nonzero `keys` of the rows that are not `slow`, in the order first met,
+    with the rows that have each and the last such row: one pass over an open-addressing
+    table (a sort of the block's keys took 5 times as long)."""
+    n = keys.shape[0]
+    size = 16
+    while size < 2 * n:
+        size *= 2
+    where = np.full(size, -1, np.int64)
+    found = np.empty(n, np.int64)
+    counts = np.zeros(n, np.int64)
+    last = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        key = keys[i]
+        if slow[i] or key == 0:
+            continue
+        h = (key ^ (key >> 31)) & (size - 1)
+        while where[h] >= 0 and found[where[h]] != key:
+            h = (h + 1) & (size - 1)
+        if where[h] < 0:
+            where[h] = m
+            found[m] = key
+            m += 1
+        counts[where[h]] += 1
+        last[where[h]] = i
+    return found[:m], counts[:m], last[:m]
 
 
 @numba.njit(nogil=True, cache=True, inline="always")

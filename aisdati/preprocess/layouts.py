@@ -21,9 +21,20 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "lon": ("lon", "long", "lng", "longitude", "longtitude"),
     "sog": ("sog", "speedoverground"),
     "cog": ("cog", "courseoverground"),
+    "heading": ("heading", "trueheading"),
+    "status": ("status", "navigationalstatus", "navstatus"),
+    "name": ("vesselname", "name", "shipname"),
+    "ship_type": ("vesseltype", "shiptype"),
+    "length": ("length", "vessellength"),
 }
 """Canonical column -> normalised spellings (lower case, letters and digits only)."""
 REQUIRED = ("mmsi", "time", "lat", "lon")
+OPTIONAL = ("heading", "status", "name", "ship_type", "length")
+"""Columns read where a file has them, never needed: a blank or bad value rejects no row, and
+where two columns look like one of them the first is read."""
+STATIC = ("name", "ship_type", "length")
+"""The optional columns that tell who the vessel is (`aisdati.preprocess.vessels`), not where it
+is: they go into vessels.parquet, not into the rows."""
 
 
 @dataclass(frozen=True)
@@ -62,12 +73,15 @@ def layout_of(names: list[str]) -> Layout:
 
 def resolve_columns(names: list[str], label: str) -> dict[str, str]:
     """Canonical column -> the source's own column name. Raises a `UserError` naming a missing
-    required column; SOG and COG may be absent (they are then derived from the positions)."""
+    required column; SOG and COG may be absent (they are then derived from the positions), and
+    so may the `OPTIONAL` ones."""
     found: dict[str, str] = {}
     for name in names:
         key = normalise_name(name)
         for canonical, spellings in ALIASES.items():
             if key in spellings:
+                if canonical in found and canonical in OPTIONAL:
+                    continue
                 if canonical in found:
                     raise UserError(
                         f"{label}: columns {found[canonical][:40]!r} and {name[:40]!r} both look "

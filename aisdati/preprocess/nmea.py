@@ -1,8 +1,11 @@
 """NMEA 0183 logs of AIS receivers (`!AIVDM` / `!AIVDO` sentences), read as the frame a
-MarineCadastre CSV gives: `MMSI, BaseDateTime, LAT, LON, SOG, COG, Heading`.
+MarineCadastre CSV gives: `MMSI, BaseDateTime, LAT, LON, SOG, COG, Heading, Status`.
 
 Sentences are parsed and decoded with pyais; messages of several sentences are reassembled. Only
-position reports become rows (types 1-3 class A, 18-19 class B, 27 long range). Each message needs
+position reports become rows (types 1-3 class A, 18-19 class B, 27 long range; the navigational
+status of types 1-3 and 27, the heading of all but 27). Static messages (types 5 and 24, and the
+class B extended report 19) tell who a vessel is: their name, ship type and length go into the
+reader's vessel tally (`vessels.VesselTally`), joined to the rows by MMSI. Each message needs
 a time, which receivers log in one of four ways:
 
 * an NMEA 4.0 tag block before the sentence, `\\c:1606780800,s:r1*hh\\!AIVDM,...` (seconds, or
@@ -33,6 +36,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -51,6 +55,7 @@ from aisdati.preprocess.inputs import (
 )
 from aisdati.preprocess.lineguard import shorten
 from aisdati.preprocess.streams import READ_ERRORS, ByteStream, CountingReader
+from aisdati.preprocess.vessels import VesselTally
 
 COLUMNS = {
     "mmsi": "MMSI",
@@ -59,6 +64,8 @@ COLUMNS = {
     "lon": "LON",
     "sog": "SOG",
     "cog": "COG",
+    "heading": "Heading",
+    "status": "Status",
 }
 """Canonical column -> the frame's (MarineCadastre's) name."""
 FRAME_SCHEMA = pa.schema(
@@ -70,9 +77,12 @@ FRAME_SCHEMA = pa.schema(
         ("SOG", pa.float64()),
         ("COG", pa.float64()),
         ("Heading", pa.int16()),
+        ("Status", pa.int16()),
     ]
 )
 POSITION_TYPES = frozenset({1, 2, 3, 18, 19, 27})
+STATIC_TYPES = frozenset({5, 19, 24})
+"""Messages that give a vessel's name, ship type or dimensions."""
 REASONS = ("not_ais", "bad_checksum", "truncated", "not_position", "no_time")
 """Why a line gives no row (`report.REASONS` describes them)."""
 DUPLICATE_RECEPTION = "duplicate_reception"
@@ -200,6 +210,9 @@ class NmeaDecoder:
     ) -> None:
         self.skip = skip
         self.recent = recent
+        self.statics: list[tuple[int, str | None, int | None, int | None]] = []
+        """(MMSI, name, ship-type code, length) of each static message decoded since the last
+        `take_statics`."""
         self._rows: list[tuple] = []
         self._gatehouse: str | None = None  # the time of the last $PGHP, for the next sentence
         self._parts: dict[tuple, list[Part]] = {}  # unfinished messages by their stream
@@ -236,7 +249,7 @@ class NmeaDecoder:
 
     def take(self) -> pa.RecordBatch:
         """The rows decoded since the last call, as one record batch."""
-        columns = list(zip(*self._rows, strict=True)) if self._rows else [[]] * 7
+        columns = list(zip(*self._rows, strict=True)) if self._rows else [[]] * len(FRAME_SCHEMA)
         self._rows = []
         return pa.record_batch(
             [pa.array(c, f.type) for c, f in zip(columns, FRAME_SCHEMA, strict=True)],
@@ -291,6 +304,8 @@ class NmeaDecoder:
             self.skip("truncated", text)
             return
         if message.ais_id not in POSITION_TYPES:
+            if message.ais_id in STATIC_TYPES:
+                self._static(message)
             self.skip("not_position", text)
             return
         try:
@@ -313,7 +328,33 @@ class NmeaDecoder:
             cog = SENTINEL_COG if cog == LONG_RANGE_COG_NOT_AVAILABLE else cog
         heading = getattr(report, "heading", None)
         heading = None if heading == HEADING_NOT_AVAILABLE else heading
-        self._rows.append((report.mmsi, time, report.lat, report.lon, sog, cog, heading))
+        status = getattr(report, "status", None)
+        status = None if status is None else int(status)
+        self._rows.append((report.mmsi, time, report.lat, report.lon, sog, cog, heading, status))
+        if report.msg_type in STATIC_TYPES:
+            self._add_static(report)
+
+    def _static(self, message: AISSentence) -> None:
+        """The vessel a static message names (none where it does not decode)."""
+        try:
+            report = message.decode()
+        except AISBaseException:
+            return
+        self._add_static(report)
+
+    def _add_static(self, report: Any) -> None:
+        """Name, ship type and length (bow to stern, 0: not available) of a decoded message of
+        `STATIC_TYPES` (type 24's part A gives the name only, part B the rest)."""
+        kind = getattr(report, "ship_type", None)
+        bow, stern = getattr(report, "to_bow", None), getattr(report, "to_stern", None)
+        length = None if bow is None or stern is None else bow + stern
+        name = getattr(report, "shipname", None)
+        self.statics.append((report.mmsi, name, None if kind is None else int(kind), length))
+
+    def take_statics(self) -> list[tuple[int, str | None, int | None, int | None]]:
+        """The static messages decoded since the last call."""
+        statics, self.statics = self.statics, []
+        return statics
 
 
 def _split_trailing_stamp(raw: bytes) -> tuple[bytes, str]:
@@ -363,6 +404,8 @@ class NmeaReader:
         self.source = source
         self.columns = dict(COLUMNS)
         self.time_format: str | None = None
+        self.vessels = VesselTally()
+        self._statics_seen = 0
         self._skipped = SkippedLines()
         self._counter: CountingReader | None = None
         try:
@@ -397,10 +440,26 @@ class NmeaReader:
         try:
             for line in read_lines(stream):
                 decoder.feed(line)
-                if decoder.pending_rows >= BATCH_MESSAGES:
+                if decoder.pending_rows >= BATCH_MESSAGES or len(decoder.statics) >= BATCH_MESSAGES:
+                    self._tally(decoder.take_statics())
                     yield decoder.take()
             decoder.finish()
+            self._tally(decoder.take_statics())
             if decoder.pending_rows:
                 yield decoder.take()
         finally:
             stream.close()
+
+    def _tally(self, statics: list[tuple[int, str | None, int | None, int | None]]) -> None:
+        """Static messages into `vessels`, in the order read."""
+        if not statics:
+            return
+        mmsi, names, kinds, lengths = zip(*statics, strict=True)
+        order = np.arange(self._statics_seen, self._statics_seen + len(statics))
+        self._statics_seen += len(statics)
+        columns = {
+            "name": pa.array(names, pa.string()),
+            "ship_type": pa.array(kinds, pa.int64()),
+            "length": pa.array(lengths, pa.int64()),
+        }
+        self.vessels.add(np.array(mmsi, np.int64), columns, order)

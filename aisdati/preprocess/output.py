@@ -4,8 +4,8 @@ its name there once the run succeeded (`commit_all`); the staging folder then la
 one set (`aisdati.outdir.staged_outputs`). An interrupted or failed run never leaves a
 half-written `points.parquet`, nor a new `points.parquet` beside an earlier run's tracks.
 
-`points.parquet` and `rejects.parquet` are Parquet datasets: folders of part files
-(`part-00000.parquet`, ...), one per task that wrote rows, so that tasks on several workers
+`points.parquet`, `reports.parquet` and `rejects.parquet` are Parquet datasets: folders of part
+files (`part-00000.parquet`, ...), one per task that wrote rows, so that tasks on several workers
 write them side by side (`StagedDataset`, `PartWriter`). Each part is renamed into its folder
 once whole, and the folder, under a temporary name until the run succeeded, lands whole.
 
@@ -40,6 +40,8 @@ from aisdati.tracks.schema import (
     ROUTES_SCHEMA,
     TRACKS_SCHEMA,
     UTC_US,
+    VESSEL_COLUMNS,
+    VESSEL_SCHEMA,
 )
 
 
@@ -62,7 +64,9 @@ def build_tracks(
             lon,
             lat,
             points.column("sog").cast(pa.float32()),
-            _cog32(cog),
+            cog32(cog),
+            points.column("heading"),
+            points.column("status"),
         ],
         schema=POINTS_SCHEMA,
     )
@@ -85,6 +89,7 @@ def build_tracks(
             lat[first],
             pa.nulls(n_tracks, pa.string()),  # route: set once all tracks are known
             pa.array(["cluster"] * n_tracks, pa.string()),
+            *(pa.nulls(n_tracks, VESSEL_SCHEMA.field(f).type) for f in VESSEL_COLUMNS),  # later
             pa.array(shapely.to_wkb(lines), pa.binary()),
         ],
         schema=TRACKS_SCHEMA,
@@ -92,7 +97,7 @@ def build_tracks(
     return out_points, out_tracks
 
 
-def _cog32(cog: np.ndarray) -> np.ndarray:
+def cog32(cog: np.ndarray) -> np.ndarray:
     """COG as float32, still in [0, 360): 359.99999 would round up to 360."""
     out = cog.astype(np.float32)
     out[out >= 360.0] = 0.0
@@ -104,6 +109,8 @@ ROUTE_FILES = ("routes.parquet", "routes.geojson", "routes.png")
 OUTPUT_NAMES = (
     "points.parquet",
     "tracks.parquet",
+    "reports.parquet",
+    "vessels.parquet",
     "ingest_report.json",
     "rejects.parquet",
     *ROUTE_FILES,
@@ -112,7 +119,7 @@ OUTPUT_NAMES = (
 removes those of an earlier run it does not write (no `--keep-rejects`, `--clusters direction`)."""
 REPORT_NAME = "ingest_report.json"
 """The report of the set, written last."""
-DATASET_NAMES = ("points.parquet", "rejects.parquet")
+DATASET_NAMES = ("points.parquet", "reports.parquet", "rejects.parquet")
 """The outputs that are folders of part files (Parquet datasets), each landing whole."""
 
 
@@ -218,6 +225,13 @@ def write_tracks(final: Path, tables: Iterable[pa.Table]) -> StagedFile:
         writer.write_table(schema.empty_table())  # the schema, were there no tables
         for table in tables:
             writer.write_table(table.cast(schema))
+    return staged
+
+
+def write_table(final: Path, table: pa.Table) -> StagedFile:
+    """A small table (vessels.parquet) as one Parquet file, staged."""
+    staged = StagedFile(final)
+    pq.write_table(table, staged.tmp, compression="zstd")
     return staged
 
 

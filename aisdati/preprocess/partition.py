@@ -57,9 +57,9 @@ def partition_of(mmsi: np.ndarray, n: int) -> np.ndarray:
 
 
 class VesselPartitions:
-    """`n` spill files under `folder`; `write` splits a table between them, iterating reads each
-    back as one table (and deletes it), splitting those of more than `max_rows` rows into
-    pieces in (MMSI, time) order (see the module docstring)."""
+    """`n` spill files under `folder` (named `prefix-0000.arrow`, ...); `write` splits a table
+    between them, iterating reads each back as one table (and deletes it), splitting those of
+    more than `max_rows` rows into pieces in (MMSI, time) order (see the module docstring)."""
 
     def __init__(
         self,
@@ -68,8 +68,9 @@ class VesselPartitions:
         schema: pa.Schema,
         max_rows: int | None = None,
         gap_s: float = math.inf,
+        prefix: str = "part",
     ) -> None:
-        self.paths = [folder / f"part-{i:04d}.arrow" for i in range(n)]
+        self.paths = [folder / f"{prefix}-{i:04d}.arrow" for i in range(n)]
         self.schema = schema
         self.max_rows = max_rows
         self.gap_s = gap_s
@@ -124,17 +125,21 @@ def partition_tables(
     max_rows: int | None = None,
     gap_s: float = math.inf,
     dropped: Dropped | None = None,
+    pieces_as: str = "piece",
 ) -> Iterator[pa.Table]:
     """One partition, spilled to `paths` (in writing order; `rows` in all): as one table, or,
     holding more than `max_rows`, as pieces in (MMSI, time) order (see the module docstring),
-    the reports of a flood at one time beyond a piece's worth handed to `dropped`.
-    The files are left in place, so that a task run again can read them again."""
+    the reports of a flood at one time beyond a piece's worth handed to `dropped`, the pieces
+    spilled as `<first path>-<pieces_as>-00000.arrow`, ... (two readers of one partition at
+    once name them apart). The files are left in place, so that a task run again can read
+    them again."""
     if not paths:
         yield schema.empty_table()
     elif max_rows is not None and rows > max_rows:
         gap_us = math.ceil(gap_s * 1e6) if math.isfinite(gap_s) else None
         piece_rows = max(max_rows // PIECES_PER_BOUND, 1)
-        yield from _pieces(paths, schema, piece_rows, gap_us, dropped or (lambda _: None))
+        drop = dropped or (lambda _: None)
+        yield from _pieces(paths, schema, piece_rows, gap_us, drop, pieces_as)
     else:
         tables = []
         for path in paths:
@@ -149,12 +154,13 @@ def _pieces(
     piece_rows: int,
     gap_us: int | None,
     dropped: Dropped,
+    pieces_as: str,
 ) -> Iterator[pa.Table]:
     """A large partition's pieces, spilled beside its first file, each read whole (and
     deleted) in turn; the reports of a flood at one time beyond a piece's worth to `dropped`."""
     plan = plan_pieces(paths, piece_rows, gap_us)
     first = paths[0]
-    pieces = [first.with_name(f"{first.stem}-piece-{k:05d}.arrow") for k in range(plan.count)]
+    pieces = [first.with_name(f"{first.stem}-{pieces_as}-{k:05d}.arrow") for k in range(plan.count)]
     writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
     cap = FloodCap(plan, piece_rows)
     for batch in _batches(paths):
@@ -178,8 +184,12 @@ def _pieces(
 
 def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int, pa.Table]]:
     """The rows of `table` by their part number (0 .. n - 1), each part in the table's order."""
+    sizes = np.bincount(part, minlength=n)
+    if len(part) and sizes.max() == len(part):  # one part (a small input's only one): as is
+        yield int(part[0]), table
+        return
     order = np.argsort(part, kind="stable")
-    bounds = np.r_[0, np.cumsum(np.bincount(part, minlength=n))]
+    bounds = np.r_[0, np.cumsum(sizes)]
     table = table.take(pa.array(order))
     for i in np.flatnonzero(np.diff(bounds)):
         yield int(i), table.slice(bounds[i], bounds[i + 1] - bounds[i])

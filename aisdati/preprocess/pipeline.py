@@ -6,15 +6,19 @@ in this process, or on Dask workers. Tasks are cut by the input alone, never by 
 workers, so the outputs are the same wherever they ran:
 
 1. one task per input source reads, checks and filters it, spilling its survivors into its own
-   files of the vessel partitions (their number set by the input's size: `_partition_count`);
-2. one task per vessel partition reads that partition's files of every source and makes its
-   tracks, numbered from 0, with its points spilled beside them;
-3. here, each partition's track ids are shifted past those of the partitions before it (the
+   files of the vessel partitions (their number set by the input's size: `_partition_count`),
+   its slow reports into files of their own, and tallies who its vessels are;
+2. here, the tallies merged: each vessel's name, type and length (`vessels.winners`);
+3. one task per vessel partition reads that partition's files of every source and makes its
+   tracks from the moving reports, numbered from 0, with its points spilled beside them, then
+   its rows of reports.parquet from all its reports (`aisdati.preprocess.reports`);
+4. here, each partition's track ids are shifted past those of the partitions before it (the
    ids of one process numbering them in partition order), and one task per partition writes
-   its points as a part of points.parquet with the ids shifted the same;
-4. here, the route clusters, from the tracks' shapes the tasks returned (`TrackShapes`: the
-   ends and 32 points per track, not its reports), and tracks.parquet, written partition by
-   partition from the tasks' spill files.
+   its points as a part of points.parquet, and one its reports as a part of reports.parquet,
+   with the ids shifted the same;
+5. here, the route clusters, from the tracks' shapes the tasks returned (`TrackShapes`: the
+   ends and 32 points per track, not its reports), vessels.parquet, and tracks.parquet (with
+   its vessels' columns), written partition by partition from the tasks' spill files.
 
 Memory is bounded twice over: the row-wise stages see one record batch at a time, and the
 per-vessel stages one partition (or piece of one) at a time, each holding at most about
@@ -55,6 +59,7 @@ from aisdati.preprocess.output import (
     with_routes,
     write_json,
     write_routes,
+    write_table,
     write_tracks,
 )
 from aisdati.preprocess.read import open_reader
@@ -63,17 +68,20 @@ from aisdati.preprocess.routes import TrackShapes, cluster_shapes, lines_from_wk
 from aisdati.preprocess.routes import settings_of as route_settings
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.preprocess.tasks import (
-    PointsTask,
+    PartTask,
     ReadResult,
     ReadTask,
+    ReportsResult,
+    ReportsTask,
     VesselResult,
     VesselTask,
+    partition_stage,
     read_source,
     shift_track_ids,
-    vessel_stages,
-    write_points,
+    write_part,
 )
-from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA
+from aisdati.preprocess.vessels import vessels_table, winners, with_vessels
+from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, REPORTS_SCHEMA
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -118,7 +126,8 @@ def ingest(
     execution: Execution = Execution(),
 ) -> IngestResult:
     """Run the whole pipeline on local files and write points.parquet, tracks.parquet,
-    ingest_report.json (and rejects.parquet, the route files) into `out_dir`, as one set
+    reports.parquet, vessels.parquet, ingest_report.json (and rejects.parquet, the route
+    files) into `out_dir`, as one set
     (`aisdati.outdir.staged_outputs`), its tasks run where `execution` says. Raises `UserError`
     for bad input; `out_dir` is left as it was unless the run succeeded."""
     started = time.perf_counter()
@@ -162,12 +171,14 @@ def _run(
         rejects = _staged_rejects(stage, staged, settings)
         reads = _read_stage(runner, sources, spill, settings, area[0], rejects, progress)
         counts = _read_counts(reads, sources)
+        found = winners([read.vessels for read in reads])
         stage_seconds = {"read_clean_filter": time.perf_counter() - started}
-        points = StagedDataset(stage / "points.parquet", POINTS_SCHEMA)
-        staged.append(points)
+        datasets = _staged_datasets(stage, staged)
         labels = tuple(s.label for s in sources)
         tasks = _vessel_tasks(reads, spill, settings, labels, rejects)
-        parts, shapes = _vessel_stage(runner, tasks, reads, counts, points.tmp, settings, progress)
+        parts, shapes, mmsi = _vessel_stage(
+            runner, tasks, reads, counts, datasets, settings, progress
+        )
         # the reading and per-vessel stages' freed memory (`aisdati.memory`): route clustering's
         # peak comes next, so hand it back first
         hand_back()
@@ -182,7 +193,12 @@ def _run(
         )
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)
-        rows = (with_routes(shift_track_ids(p.spilled(), p.offset), labels_of(p)) for p in parts)
+        vessels = vessels_table(found, mmsi)
+        staged.append(write_table(stage / "vessels.parquet", vessels))
+        rows = (
+            with_vessels(with_routes(shift_track_ids(p.spilled(), p.offset), labels_of(p)), vessels)
+            for p in parts
+        )
         staged.append(write_tracks(stage / "tracks.parquet", rows))
     if not counts.balanced():
         raise RuntimeError(f"row accounting does not balance: {counts.as_dict()}")
@@ -207,6 +223,15 @@ def _spill_folder(out: Path) -> Iterator[Path]:
         hold_lock(Path(tmp)),  # tells the sweep of a later run that this folder is in use
     ):
         yield Path(tmp).absolute()
+
+
+def _staged_datasets(stage: Path, staged: list[StagedFile]) -> tuple[Path, Path]:
+    """points.parquet and reports.parquet staged (and added to `staged`): the folders the
+    tasks write their parts into."""
+    points = StagedDataset(stage / "points.parquet", POINTS_SCHEMA)
+    reports = StagedDataset(stage / "reports.parquet", REPORTS_SCHEMA)
+    staged.extend([points, reports])
+    return points.tmp.absolute(), reports.tmp.absolute()
 
 
 def _staged_rejects(stage: Path, staged: list[StagedFile], settings: IngestSettings) -> Path | None:
@@ -234,24 +259,30 @@ def _read_counts(reads: list[ReadResult], sources: list[Source]) -> IngestCounts
 
 def _vessel_stage(
     runner: Runner,
-    tasks: list[VesselTask],
+    tasks: list[tuple[VesselTask, ReportsTask]],
     reads: list[ReadResult],
     counts: IngestCounts,
-    points: Path,
+    folders: tuple[Path, Path],
     settings: IngestSettings,
     progress: Progress | None,
-) -> tuple[list[PartTracks], TrackShapes | None]:
-    """The vessel partitions' tasks run (their counts added to `counts`), the read stage's
-    spill files deleted, and their points written into the dataset folder `points`: what
-    `_write_points` returns. The tasks' results are dropped on return: their shapes are joined,
-    one copy, not two, through route clustering."""
+) -> tuple[list[PartTracks], TrackShapes | None, np.ndarray]:
+    """The vessel partitions' tasks run, each partition's tracks and reports side by side
+    (their counts added to `counts`), the read stage's spill files deleted, and their points
+    and reports written into the dataset folders `folders`: what `_write_parts` returns, and
+    the MMSIs (sorted) of every report and point. The tasks' results are dropped on return:
+    their shapes are joined, one copy, not two, through route clustering."""
     on = _vessel_runner(runner)
-    vessels = _map(on, vessel_stages, tasks, progress, "clean, segment, cluster")
+    both = [task for pair in tasks for task in pair[::-1]]  # a partition's reports take longer
+    results = _map(on, partition_stage, both, progress, "clean, segment, cluster")
     for read in reads:  # every vessel task's result is here: its inputs are not needed again
         shutil.rmtree(read.folder)
+    vessels = [r for r in results if isinstance(r, VesselResult)]
+    reports = [r for r in results if isinstance(r, ReportsResult)]
     for vessel in vessels:
         counts.merge(vessel.counts)
-    return _write_points(on, tasks, vessels, points.absolute(), settings, progress)
+    counts.reports_kept = sum(r.rows for r in reports)
+    mmsi = np.unique(np.concatenate([np.zeros(0, np.int64), *(r.vessels for r in results)]))
+    return (*_write_parts(on, tasks, (vessels, reports), folders, settings, progress), mmsi)
 
 
 def _inputs_named(labels: tuple[str, ...]) -> str:
@@ -310,23 +341,24 @@ def _vessel_tasks(
     settings: IngestSettings,
     labels: tuple[str, ...],
     rejects: Path | None,
-) -> list[VesselTask]:
-    """One task per vessel partition, reading the partition's file of every source that has
-    rows there; its rejects come after the sources' in rejects.parquet."""
+) -> list[tuple[VesselTask, ReportsTask]]:
+    """Two tasks per vessel partition, reading the partition's file of every source that has
+    rows there: its tracks' (its rejects after the sources' in rejects.parquet), and its
+    reports' (its slow reports' files too)."""
     rows = np.stack([read.rows for read in reads])
-    return [
-        VesselTask(
-            part,
-            tuple(read.spills[part] for read in reads if read.rows[part]),
-            int(rows[:, part].sum()),
-            spill / f"points-{part:05d}.arrow",
-            settings,
-            labels,
-            rejects,
-            len(reads) + part,
-        )
-        for part in range(rows.shape[1])
-    ]
+    slow = np.stack([read.slow_rows for read in reads])
+    tasks = []
+    for part in range(rows.shape[1]):
+        moving = tuple(read.spills[part] for read in reads if read.rows[part])
+        tracks = VesselTask(
+            part, moving, int(rows[:, part].sum()), spill / f"points-{part:05d}.arrow",
+            settings, labels, rejects, len(reads) + part,
+        )  # fmt: skip
+        every = moving + tuple(read.slow_spills[part] for read in reads if read.slow_rows[part])
+        total = int(rows[:, part].sum() + slow[:, part].sum())
+        out = spill / f"reports-{part:05d}.arrow"
+        tasks.append((tracks, ReportsTask(part, every, total, out, settings)))
+    return tasks
 
 
 @dataclass(frozen=True)
@@ -344,29 +376,38 @@ class PartTracks:
             return pa.ipc.open_stream(f).read_all()
 
 
-def _write_points(
+def _write_parts(
     runner: Runner,
-    tasks: list[VesselTask],
-    vessels: list[VesselResult],
-    folder: Path,
+    tasks: list[tuple[VesselTask, ReportsTask]],
+    results: tuple[list[VesselResult], list[ReportsResult]],
+    folders: tuple[Path, Path],
     settings: IngestSettings,
     progress: Progress | None,
 ) -> tuple[list[PartTracks], TrackShapes | None]:
     """Each partition's track ids shifted past the tracks of the partitions before it, in
-    its track table and (one `write_points` task per partition with tracks, into the dataset
-    folder `folder`) its points: the partitions with tracks, in partition order, and all
-    their tracks' shapes in that order (None with `--clusters direction`)."""
+    its track table and (one `write_part` task per partition with tracks, and one per partition
+    with reports, into the dataset folders `folders`) its points and reports: the partitions
+    with tracks, in partition order, and all their tracks' shapes in that order (None with
+    `--clusters direction`)."""
+    vessels, reports = results
     parts, writes, offset = [], [], 0
-    for task, vessel in zip(tasks, vessels, strict=True):
+    for (task, report_task), vessel, report in zip(tasks, vessels, reports, strict=True):
         if vessel.tracks.num_rows:
             table = shift_track_ids(vessel.tracks, offset)
             parts.append(PartTracks(offset, table, task.tracks))
-            writes.append(PointsTask(task.points, folder, task.part, offset))
-            offset += vessel.tracks.num_rows
-    written = sum(_map(runner, write_points, writes, progress, "write points"))
-    kept = sum(vessel.counts.kept_points for vessel in vessels)
-    if written != kept:
-        raise RuntimeError(f"wrote {written} points of the {kept} kept")
+            writes.append(PartTask(task.points, folders[0], task.part, offset))
+        if report.rows:
+            out = report_task.out
+            writes.append(PartTask(out, folders[1], task.part, offset, REPORTS_SCHEMA, task.points))
+        offset += vessel.tracks.num_rows
+    written = _map(runner, write_part, writes, progress, "write points and reports")
+    for schema, kept in (
+        (POINTS_SCHEMA, sum(vessel.counts.kept_points for vessel in vessels)),
+        (REPORTS_SCHEMA, sum(report.rows for report in reports)),
+    ):
+        rows = sum(n for n, w in zip(written, writes, strict=True) if w.schema is schema)
+        if rows != kept:
+            raise RuntimeError(f"wrote {rows} rows of the {kept} kept")
     if settings.clusters != "routes":
         return parts, None
     shapes = [v.shapes for v in vessels if v.tracks.num_rows and v.shapes is not None]

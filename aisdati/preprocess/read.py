@@ -3,10 +3,12 @@
 `open_reader` picks the reader of a source's kind (`inputs.Source.kind`): `SourceReader` for CSV
 (any MarineCadastre layout, or the DMA's) and parquet, `nmea.NmeaReader` for NMEA logs. Every
 reader offers the same few things to the pipeline (`TableReader`): the resolved columns, the
-layout's time format, record batches, progress, and the lines it had to skip, by reason. Only the
-six columns the pipeline needs are read, as strings for CSV, so one bad value costs one counted
-row, not the file (`convert.to_canonical` does the typing). `TableReader.tables` gives the rows
-typed: a CSV's plain rows parsed by the fast path (`fastcsv`), the rest the usual way.
+layout's time format, record batches, progress, the lines it had to skip, by reason, and the
+tally of who the vessels are (`vessels.VesselTally`). Only the columns the pipeline needs are
+read (the six of a position, the optional heading, status and the vessel's own columns), as
+strings for CSV, so one bad value costs one counted row, not the file (`convert.to_canonical`
+does the typing). `TableReader.tables` gives the rows typed: a CSV's plain rows parsed by the
+fast path (`fastcsv`), the rest the usual way.
 """
 
 from __future__ import annotations
@@ -24,10 +26,10 @@ import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
 from aisdati.errors import UserError
-from aisdati.preprocess.convert import canonical_tables, is_time_type, to_canonical
+from aisdati.preprocess.convert import is_time_type, to_canonical
 from aisdati.preprocess.fastcsv import ColumnSlots, ParsedBlock, parse_block, typed_batch
 from aisdati.preprocess.inputs import Source, describe_read_error
-from aisdati.preprocess.layouts import layout_of, resolve_columns
+from aisdati.preprocess.layouts import OPTIONAL, STATIC, layout_of, resolve_columns
 from aisdati.preprocess.lineguard import BLOCK_SIZE, HeaderLine, LineGuard, shorten
 from aisdati.preprocess.nmea import NmeaReader
 from aisdati.preprocess.streams import (
@@ -38,6 +40,7 @@ from aisdati.preprocess.streams import (
     bom_encoding,
     looks_like_utf16,
 )
+from aisdati.preprocess.vessels import VesselTally
 
 MAX_HEADER_BYTES = 1 << 20
 """The header line must end within this many bytes."""
@@ -54,11 +57,13 @@ ROW_KEY = "\x00row"
 
 
 class PlainRows(NamedTuple):
-    """A block as the fast path parsed it, and its rows made canonical."""
+    """A block as the fast path parsed it, its rows made canonical, and its plain rows' static
+    hashes counted (`ParsedBlock.static_tally`)."""
 
     parsed: ParsedBlock
     table: pa.Table
     codes: np.ndarray
+    tally: tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 class TableReader(Protocol):
@@ -69,6 +74,8 @@ class TableReader(Protocol):
     """Canonical column -> the batches' column name (`layouts.resolve_columns`)."""
     time_format: str | None
     """`strptime` format of the time column (`layouts.Layout.time_format`)."""
+    vessels: VesselTally
+    """Who the vessels are, from the rows read so far (complete once `tables` is exhausted)."""
 
     @property
     def total(self) -> int: ...
@@ -115,11 +122,15 @@ class SourceReader:
         """The text encoding its byte-order mark gives (None: UTF-8)."""
         self._header_lines = 1
         """Lines before the first row: blank lines, then the header."""
+        self.vessels = VesselTally()
+        self._position = 0
+        """Rows of the source read so far (where each is, for `vessels`)."""
         schema = self._parquet_schema() if source.kind == "parquet" else None
         self.names = schema.names if schema else self._header()
         self.columns = resolve_columns(self.names, source.label)
         self.time_format = layout_of(self.names).time_format
         if schema:
+            self.columns = usable_columns(schema, self.columns)
             check_parquet_types(schema, self.columns, source.label)
 
     @property
@@ -209,15 +220,34 @@ class SourceReader:
 
     def tables(self, src: int) -> Iterator[tuple[pa.Table, np.ndarray]]:
         if self.source.kind == "parquet" or self.time_format is not None:
-            yield from canonical_tables(self.batches(), self.columns, src, self.time_format)
+            yield from self.usual_tables(src)
             return
         for guard, names, columns in self._segments():
             slots = ColumnSlots.of(names, columns)
             if slots is None:
-                batches = self._csv_batches(guard, names, columns)
-                yield from canonical_tables(batches, self.columns, src, None)
+                yield from self._tallied(self._csv_batches(guard, names, columns), src)
             else:
                 yield from self._fast_tables(guard, names, columns, slots, src)
+
+    def usual_tables(self, src: int) -> Iterator[tuple[pa.Table, np.ndarray]]:
+        """Every row the usual way (`batches`, then `convert.to_canonical`), the vessels
+        tallied: what `tables` gives where the fast path does not apply."""
+        yield from self._tallied(self.batches(), src)
+
+    def _tallied(
+        self, batches: Iterator[pa.RecordBatch], src: int
+    ) -> Iterator[tuple[pa.Table, np.ndarray]]:
+        for batch in batches:
+            table, codes = to_canonical(batch, self.columns, src, self.time_format)
+            self._tally(batch, table, np.arange(batch.num_rows))
+            self._position += batch.num_rows
+            yield table, codes
+
+    def _tally(self, batch: pa.RecordBatch, table: pa.Table, rows: np.ndarray) -> None:
+        """The vessels of a batch's rows read the usual way (`table`: them made canonical), at
+        `rows` from `_position` on."""
+        statics = {key: batch.column(self.columns[key]) for key in STATIC if key in self.columns}
+        self.vessels.add(table.column("mmsi").to_numpy(), statics, self._position + rows)
 
     def _segments(self) -> Iterator[tuple[LineGuard, list[str], dict[str, str]]]:
         """The CSV's stretches under each header line: the guarded stream, positioned at the
@@ -238,14 +268,15 @@ class SourceReader:
 
     def _columns_of(self, header: HeaderLine) -> dict[str, str]:
         """The columns of a header met mid-file, once it is known to name the same ones as the
-        first header, in the same layout."""
+        first header (but the optional ones: those it lacks read as none), in the same layout."""
         columns = resolve_columns(header.names, self.source.label)
-        if set(columns) != set(self.columns):
+        needed = [c for c in columns if c not in OPTIONAL]
+        first = [c for c in self.columns if c not in OPTIONAL]
+        if set(needed) != set(first):
             raise UserError(
                 f"{self.source.label}: a second header line mid-file names other columns "
-                f"({', '.join(c.upper() for c in columns)}) than the first "
-                f"({', '.join(c.upper() for c in self.columns)}): give the files as separate "
-                "--input"
+                f"({', '.join(c.upper() for c in needed)}) than the first "
+                f"({', '.join(c.upper() for c in first)}): give the files as separate --input"
             )
         layouts = layout_of(header.names).name, layout_of(self.names).name
         if layouts[0] != layouts[1]:
@@ -260,7 +291,7 @@ class SourceReader:
     ) -> Iterator[pa.RecordBatch]:
         """The rows up to the next header line (or the end), read under `names` (`columns`: the
         needed ones), as batches whose columns carry the first header's names."""
-        wanted = [columns[c] for c in self.columns]
+        wanted = [columns[c] for c in self.columns if c in columns]
         try:
             reader = pcsv.open_csv(
                 pa.PythonFile(guard, mode="r"),
@@ -274,9 +305,20 @@ class SourceReader:
             if "Empty CSV file" in str(exc):
                 return  # a header and no rows: nothing to read
             raise
-        first = list(self.columns.values())
         for batch in reader:
-            yield pa.record_batch([batch.column(name) for name in wanted], names=first)
+            yield self._first_names(batch, columns)
+
+    def _first_names(
+        self, table: pa.RecordBatch | pa.Table, columns: dict[str, str], key: tuple[str, ...] = ()
+    ) -> pa.RecordBatch:
+        """The `key` columns, then the needed ones (`columns`: their names in `table`) under the
+        first header's names; an optional one that this stretch of the file lacks, null."""
+        arrays = [table.column(name) for name in key]
+        for canonical in self.columns:
+            at = columns.get(canonical)
+            arrays.append(table.column(at) if at else pa.nulls(table.num_rows, pa.string()))
+        arrays = [a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a for a in arrays]
+        return pa.record_batch(arrays, names=[*key, *self.columns.values()])
 
     def _on_malformed(self, row: pcsv.InvalidRow) -> str:
         self.malformed.append(shorten(row.text))
@@ -316,8 +358,9 @@ class SourceReader:
         """A block parsed by the fast path, its rows canonical (those it could not parse are
         placeholders, `ParsedBlock.slow`)."""
         parsed = parse_block(block, slots)
-        table, codes = to_canonical(typed_batch(parsed, self.columns), self.columns, src)
-        return PlainRows(parsed, table, codes)
+        batch = typed_batch(parsed, slots, self.columns)
+        table, codes = to_canonical(batch, self.columns, src)
+        return PlainRows(parsed, table, codes, parsed.static_tally())
 
     def _block_table(
         self,
@@ -329,24 +372,54 @@ class SourceReader:
     ) -> tuple[pa.Table, np.ndarray]:
         """One block's canonical rows in the block's order: its plain rows from the fast path,
         the others (`ParsedBlock.slow`) read the usual way, each numbered by its row; a block
-        of mostly other rows read the usual way whole."""
-        parsed, table, codes = plain.result()
+        of mostly other rows read the usual way whole. The vessels of every row tallied."""
+        parsed, table, codes, tally = plain.result()
         slow = np.flatnonzero(parsed.slow)
-        if not len(slow):
-            return table, codes
         if len(slow) * MOSTLY_SLOW > parsed.rows:
             usual = self._read_usual(pa.py_buffer(block), names, columns, numbered=False)
-            return to_canonical(usual, self.columns, src)
+            table, codes = to_canonical(usual, self.columns, src)
+            self._tally(usual, table, np.arange(usual.num_rows))
+            self._position += parsed.rows
+            return table, codes
+        self._tally_plain(block, parsed, tally, names, columns)
+        if not len(slow):
+            self._position += parsed.rows
+            return table, codes
         view = memoryview(block)
         text = b"".join(
             b"%d,%b\n" % (k, view[parsed.line_start[k] : parsed.line_end[k]]) for k in slow
         )
         usual = self._read_usual(pa.py_buffer(text), names, columns, numbered=True)
         slow_table, slow_codes = to_canonical(usual, self.columns, src)
+        self._tally(usual, slow_table, usual.column(ROW_KEY).to_numpy())
+        self._position += parsed.rows
         kept = np.flatnonzero(~parsed.slow)
         order = np.argsort(np.concatenate([kept, usual.column(ROW_KEY).to_numpy()]), kind="stable")
         merged = pa.concat_tables([table.take(kept), slow_table]).take(order)
         return merged, np.concatenate([codes[kept], slow_codes])[order]
+
+    def _tally_plain(
+        self,
+        block: bytes | memoryview,
+        parsed: ParsedBlock,
+        tally: tuple[np.ndarray, np.ndarray, np.ndarray],
+        names: list[str],
+        columns: dict[str, str],
+    ) -> None:
+        """The vessels of a block's plain rows, from their static hashes (`tally`): the text of
+        one row of each hash not met before read the usual way, then the counts."""
+        keys, counts, last = tally
+        if not len(keys):
+            return
+        numbers = self.vessels.numbers(keys)
+        new = numbers < 0
+        if new.any():
+            rows = last[new]
+            text = parsed.lines(block, rows)
+            usual = self._read_usual(pa.py_buffer(text), names, columns, numbered=False)
+            statics = {k: usual.column(self.columns[k]) for k in STATIC if k in self.columns}
+            numbers[new] = self.vessels.know(keys[new], parsed.mmsi[rows], statics)
+        self.vessels.add_counts(numbers, counts, self._position + last)
 
     def _read_usual(
         self, text: pa.Buffer, names: list[str], columns: dict[str, str], numbered: bool
@@ -354,18 +427,17 @@ class SourceReader:
         """Whole lines read by pyarrow's parser as `_csv_batches` reads them, the needed columns
         under the first header's names; `numbered`: each line starts with its row in the block
         (`ROW_KEY`, kept as a column), which a malformed line's reported text leaves out."""
-        wanted = [columns[c] for c in self.columns]
-        key = [ROW_KEY] if numbered else []
+        wanted = [columns[c] for c in self.columns if c in columns]
+        key = (ROW_KEY,) if numbered else ()
         table = pcsv.read_csv(
             text,
             read_options=pcsv.ReadOptions(column_names=[*key, *names], use_threads=False),
             parse_options=pcsv.ParseOptions(
                 invalid_row_handler=self._on_numbered_malformed if numbered else self._on_malformed
             ),
-            convert_options=text_columns(wanted, key),
-        ).combine_chunks()
-        arrays = [table.column(name).combine_chunks() for name in [*key, *wanted]]
-        return pa.record_batch(arrays, names=[*key, *self.columns.values()])
+            convert_options=text_columns(wanted, list(key)),
+        )
+        return self._first_names(table, columns, key)
 
     def _on_numbered_malformed(self, row: pcsv.InvalidRow) -> str:
         """A malformed row read the usual way on the fast path: its text without its number."""
@@ -406,17 +478,31 @@ NUMERIC_TYPES = (
 """Parquet column types that can hold MMSIs, positions, SOG and COG (text is parsed per row)."""
 
 
+def usable_columns(schema: pa.Schema, columns: dict[str, str]) -> dict[str, str]:
+    """The columns of a parquet file to read: an optional one (`layouts.OPTIONAL`) of a type
+    that holds no such values (a struct, a list, booleans, ...) is left out, not refused."""
+    return {
+        canonical: name
+        for canonical, name in columns.items()
+        if canonical not in OPTIONAL or _holds_numbers(schema.field(name).type)
+    }
+
+
+def _holds_numbers(kind: pa.DataType) -> bool:
+    value_kind = kind.value_type if pa.types.is_dictionary(kind) else kind
+    return any(test(value_kind) for test in NUMERIC_TYPES)
+
+
 def check_parquet_types(schema: pa.Schema, columns: dict[str, str], label: str) -> None:
     """A one-line error for a needed parquet column of a type that holds no such values (a
     struct, a list, booleans, ...), before any row is read."""
     for canonical, name in columns.items():
         kind = schema.field(name).type
-        value_kind = kind.value_type if pa.types.is_dictionary(kind) else kind
         if canonical == "time":
             if not is_time_type(kind):
                 raise UserError(
                     f"{label}: column {name!r} holds {kind} values; expected times "
                     "(a timestamp, text, or numbers of seconds since 1970)"
                 )
-        elif not any(test(value_kind) for test in NUMERIC_TYPES):
+        elif not _holds_numbers(kind):
             raise UserError(f"{label}: column {name} has type {kind}, expected numbers")

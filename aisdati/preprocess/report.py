@@ -3,6 +3,10 @@
 Every stage marks each row it looks at with a reason code (0 = kept). Counting those codes is
 cheap (one `bincount` per batch) and gives the invariant the tests check:
 rows read == sum of rejected rows + kept points.
+
+The counts are those of the tracks (what a model learns from). reports.parquet keeps more: the
+`slow` reports, and the others that fell out of a track after the vessel's own cleaning
+(`short_segment`, `dwell`); `reports_kept` counts its rows, outside the balance.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ REASONS: dict[int, tuple[str, str, str]] = {
     16: ("clean", "sentinel_cog", "COG 360 (not available)"),
     17: ("clean", "out_of_range", "LAT/LON/SOG/COG outside their valid ranges"),
     18: ("filter", "outside_roi", "outside the region of interest"),
-    19: ("filter", "slow", "SOG at or below --min-sog"),
+    19: ("filter", "slow", "SOG at or below --min-sog (not learned from; in reports.parquet)"),
     20: ("vessel", "duplicate", "exact duplicate of another report"),
     21: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
     22: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
@@ -55,6 +59,8 @@ class IngestCounts:
     rejected: np.ndarray = field(default_factory=lambda: np.zeros(N_CODES, dtype=np.int64))
     files: list[dict[str, Any]] = field(default_factory=list)
     kept_points: int = 0
+    reports_kept: int = 0
+    """Rows of reports.parquet: every report judged, whatever its speed (not in the balance)."""
     short_segments: int = 0
     tracks: dict[str, int] = field(default_factory=lambda: {"up": 0, "down": 0, "other": 0})
 
@@ -73,6 +79,7 @@ class IngestCounts:
         self.rejected += other.rejected
         self.files.extend(other.files)
         self.kept_points += other.kept_points
+        self.reports_kept += other.reports_kept
         self.short_segments += other.short_segments
         for name, n in other.tracks.items():
             self.tracks[name] = self.tracks.get(name, 0) + n
@@ -94,6 +101,7 @@ class IngestCounts:
             "rejected": self.rejected_by_reason(),
             "rejected_total": self.total_rejected,
             "kept_points": self.kept_points,
+            "reports_kept": self.reports_kept,
             "short_segments_dropped": self.short_segments,
             "tracks": {**self.tracks, "total": sum(self.tracks.values())},
             "files": self.files,

@@ -2,19 +2,23 @@
 that a Dask worker runs it as well as this process does (`aisdati.execution.runner`).
 
 * `read_source` (`ReadTask`): one input source read, checked and filtered batch by batch, its
-  survivors spilled into vessel partitions of its own, its rejects into a part of its own.
+  survivors spilled into vessel partitions of its own (its slow reports into partitions of
+  their own beside them), its rejects into a part of its own; who its vessels are tallied.
 * `vessel_stages` (`VesselTask`): one vessel partition, from the spill files of every source:
-  cleaned per vessel, segmented and made tracks; its points and its rows of tracks.parquet
-  spilled with the partition's own track numbers (0, 1, ...), the rows but their geometry
-  returned, with each track's shape for route clustering (`TrackShapes`).
-* `write_points` (`PointsTask`): a partition's points as one part of points.parquet, its track
-  numbers shifted past the tracks of the partitions before it: the ids one process numbering
-  the tracks in partition order would give.
+  its moving reports cleaned per vessel, segmented and made tracks; its points and its rows of
+  tracks.parquet spilled with the partition's own track numbers (0, 1, ...), the rows but their
+  geometry returned, with each track's shape for route clustering (`TrackShapes`).
+* `report_stages` (`ReportsTask`), beside it: all the partition's reports, slow ones too,
+  cleaned per vessel and spilled as rows of reports.parquet (`aisdati.preprocess.reports`).
+* `write_part` (`PartTask`): a partition's points, or its reports (each given the track whose
+  point it is), as one part of points.parquet or reports.parquet, its track numbers shifted past
+  the tracks of the partitions before it: the ids one process numbering the tracks in partition
+  order would give.
 
 They share files in folders every worker sees (the spill folder and the staging folder, both
-in --out) and return small things only: counts, track summaries, 32-point shapes. A task never
-deletes its inputs: one lost with its worker (even after it ended, before its result was
-fetched) is run again on the same files and writes the same outputs.
+in --out) and return small things only: counts, track summaries, 32-point shapes, vessel
+tallies. A task never deletes its inputs: one lost with its worker (even after it ended, before
+its result was fetched) is run again on the same files and writes the same outputs.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from __future__ import annotations
 import contextlib
 import shutil
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,16 +41,17 @@ from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.output import PartWriter, build_tracks
 from aisdati.preprocess.partition import VesselPartitions, partition_tables
-from aisdati.preprocess.read import open_reader
+from aisdati.preprocess.read import TableReader, open_reader
 from aisdati.preprocess.rejects import malformed_rows, reject_rows
 from aisdati.preprocess.report import CODE, IngestCounts
+from aisdati.preprocess.reports import point_keys, report_rows, with_track_ids
 from aisdati.preprocess.routes import TrackShapes
 from aisdati.preprocess.routes import settings_of as route_settings
 from aisdati.preprocess.segment import antimeridian_crossing, antimeridian_message, segment
 from aisdati.preprocess.settings import IngestSettings
 from aisdati.preprocess.stops import Splitter, dwell_rules
 from aisdati.preprocess.streams import READ_ERRORS
-from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, TRACKS_SCHEMA
+from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, REPORTS_SCHEMA, TRACKS_SCHEMA
 
 
 @dataclass(frozen=True)
@@ -73,6 +78,12 @@ class ReadResult:
     """The source's file of each partition (written where `rows` is not 0)."""
     rows: np.ndarray
     """Rows spilled into each partition."""
+    slow_spills: tuple[Path, ...]
+    """The source's file of each partition's slow reports (written where `slow_rows` is not 0):
+    not in the tracks, but in reports.parquet."""
+    slow_rows: np.ndarray
+    vessels: pa.Table
+    """Who the source's vessels are (`vessels.VesselTally.table`)."""
 
 
 def read_source(task: ReadTask, progress: Progress | None = None) -> ReadResult:
@@ -83,24 +94,17 @@ def read_source(task: ReadTask, progress: Progress | None = None) -> ReadResult:
     shutil.rmtree(task.spill, ignore_errors=True)  # what an earlier try of this task left
     task.spill.mkdir()
     parts = VesselPartitions(task.spill, task.n_parts, PARTITION_SCHEMA)
-    counts, rows = IngestCounts(), 0
+    slow = VesselPartitions(task.spill, task.n_parts, PARTITION_SCHEMA, prefix="slow")
+    counts = IngestCounts()
     with contextlib.ExitStack() as stack:
         rejects = _rejects_part(stack, task.rejects, task.src)
         try:
-            for table, codes in reader.tables(task.src):
-                table = check_values(table, codes)
-                filter_area_speed(table, codes, task.roi, task.settings)
-                rows += len(codes)
-                counts.add_codes(codes)
-                parts.write(table.filter(pa.array(codes == 0)))
-                if rejects:
-                    rejects.write(reject_rows(table, codes, label))
-                if bar is not None:
-                    progress.update(bar, completed=reader.done)
+            rows = _spill_rows(reader, task, (parts, slow), rejects, counts, progress, bar)
         except READ_ERRORS as exc:
             raise describe_read_error(task.source, exc) from None
         finally:
             parts.close()
+            slow.close()
         skipped = reader.skipped  # lines that gave no row (malformed CSV, bad NMEA), by reason
         for reason, texts in skipped.items():
             counts.add(reason, len(texts))
@@ -117,7 +121,36 @@ def read_source(task: ReadTask, progress: Progress | None = None) -> ReadResult:
     )
     if bar is not None:
         progress.update(bar, completed=reader.total)
-    return ReadResult(counts, task.spill, tuple(parts.paths), parts.rows)
+    vessels = reader.vessels.table(task.src)
+    return ReadResult(
+        counts, task.spill, tuple(parts.paths), parts.rows, tuple(slow.paths), slow.rows, vessels
+    )
+
+
+def _spill_rows(
+    reader: TableReader,
+    task: ReadTask,
+    spills: tuple[VesselPartitions, VesselPartitions],
+    rejects: PartWriter | None,
+    counts: IngestCounts,
+    progress: Progress | None,
+    bar: Any,
+) -> int:
+    """The source's rows checked and filtered, the kept ones spilled into the first partitions,
+    the slow ones into the second, the others counted (and written to `rejects`); the rows."""
+    rows = 0
+    for table, codes in reader.tables(task.src):
+        table = check_values(table, codes)
+        filter_area_speed(table, codes, task.roi, task.settings)
+        rows += len(codes)
+        counts.add_codes(codes)
+        spills[0].write(table.filter(pa.array(codes == 0)))
+        spills[1].write(table.filter(pa.array(codes == CODE["slow"])))
+        if rejects:
+            rejects.write(reject_rows(table, codes, task.source.label))
+        if bar is not None:
+            progress.update(bar, completed=reader.done)
+    return rows
 
 
 def _rejects_part(
@@ -156,6 +189,8 @@ class VesselResult:
     file `VesselTask.tracks`), numbered from 0 in the partition."""
     shapes: TrackShapes | None
     """The tracks' shapes for route clustering (None with `--clusters direction`)."""
+    vessels: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """The MMSIs (sorted) of the partition's points."""
 
 
 def vessel_stages(task: VesselTask) -> VesselResult:
@@ -163,21 +198,34 @@ def vessel_stages(task: VesselTask) -> VesselResult:
     piece: `partition_tables`), its points spilled as they come."""
     settings = task.settings
     counts = IngestCounts()
+    with contextlib.ExitStack() as stack:
+        rejects = _rejects_part(stack, task.rejects, task.reject_part)
+        tracks, shapes, vessels = _make_tracks(task, counts, rejects)
+    empty = TRACKS_SCHEMA.empty_table().drop_columns(["geometry"])
+    table = pa.concat_tables(tracks) if tracks else empty
+    samples = route_settings(settings).samples
+    joined = TrackShapes.joined(shapes, samples) if settings.clusters == "routes" else None
+    return VesselResult(counts, table, joined, vessels)
+
+
+def _make_tracks(
+    task: VesselTask, counts: IngestCounts, rejects: PartWriter | None
+) -> tuple[list[pa.Table], list[TrackShapes], np.ndarray]:
+    """The partition's reports made tracks: their points and rows spilled; the rows but their
+    geometry, the tracks' shapes (with `--clusters routes`) and the points' MMSIs returned."""
+    settings = task.settings
     tracks: list[pa.Table] = []
     shapes: list[TrackShapes] = []
+    vessels = [np.zeros(0, np.int64)]
     samples = route_settings(settings).samples
     stops = dwell_rules(settings.dwell_radius_m, settings.dwell_time_s, settings.min_sog_kn)
-    # reports further apart than both the stop gap and the dwell time are independent
-    independent_s = max(settings.stop_gap_s, settings.dwell_time_s)
     with (
-        contextlib.ExitStack() as stack,
         pa.ipc.new_stream(str(task.points), POINTS_SCHEMA) as points,
         pa.ipc.new_stream(str(task.tracks), TRACKS_SCHEMA) as spilled,
     ):
-        rejects = _rejects_part(stack, task.rejects, task.reject_part)
         pieces = partition_tables(
-            task.spills, PARTITION_SCHEMA, task.rows, settings.rows_per_bucket, independent_s,
-            _flooded(counts, rejects, task.labels),
+            task.spills, PARTITION_SCHEMA, task.rows, settings.rows_per_bucket,
+            _independent_s(settings), _flooded(counts, rejects, task.labels),
         )  # fmt: skip
         for table in pieces:
             table, codes = clean_vessels(table, settings)
@@ -192,15 +240,68 @@ def vessel_stages(task: VesselTask) -> VesselResult:
                 points.write_table(out_points)
                 spilled.write_table(out_tracks)
                 tracks.append(out_tracks.drop_columns(["geometry"]))
+                vessels.append(out_tracks.column("mmsi").to_numpy())
                 if settings.clusters == "routes":
                     shapes.append(TrackShapes.of(_lines(out_points), samples))
                 counts.kept_points += out_points.num_rows
                 for name in out_tracks.column("cluster").to_pylist():
                     counts.tracks[name] += 1
-    empty = TRACKS_SCHEMA.empty_table().drop_columns(["geometry"])
-    table = pa.concat_tables(tracks) if tracks else empty
-    joined = TrackShapes.joined(shapes, samples) if settings.clusters == "routes" else None
-    return VesselResult(counts, table, joined)
+    return tracks, shapes, np.unique(np.concatenate(vessels))
+
+
+def _independent_s(settings: IngestSettings) -> float:
+    """Reports further apart than both the stop gap and the dwell time are independent."""
+    return max(settings.stop_gap_s, settings.dwell_time_s)
+
+
+@dataclass(frozen=True)
+class ReportsTask:
+    """Partition `part`'s reports, spilled to `spills` (its moving reports' files, then its slow
+    reports', each in source order; `rows` in all), as rows of reports.parquet spilled to `out`
+    (their tracks given when written: `write_part`)."""
+
+    part: int
+    spills: tuple[Path, ...]
+    rows: int
+    out: Path
+    settings: IngestSettings
+
+
+@dataclass(frozen=True)
+class ReportsResult:
+    rows: int
+    """Rows of reports.parquet spilled to `ReportsTask.out`."""
+    vessels: np.ndarray
+    """Their MMSIs, sorted."""
+
+
+def report_stages(task: ReportsTask) -> ReportsResult:
+    """Every report of the partition, moving and slow, cleaned per vessel (duplicates, repeated
+    times and position outliers rejected; the reports of a flood at one time beyond a piece's
+    worth dropped, as the tracks drop them) and spilled as rows of reports.parquet. A moving
+    report comes before a slow one of its vessel at its time, so that the report kept there is
+    the one a track may hold."""
+    settings = task.settings
+    kept = (0, CODE["slow"])  # slow: a SOG derived at or below --min-sog, still a report
+    written, vessels = 0, [np.zeros(0, np.int64)]
+    with pa.ipc.new_stream(str(task.out), REPORTS_SCHEMA) as out:
+        pieces = partition_tables(
+            task.spills, PARTITION_SCHEMA, task.rows, settings.rows_per_bucket,
+            _independent_s(settings), pieces_as="reports",
+        )  # fmt: skip
+        for table in pieces:
+            table, codes = clean_vessels(table, settings)
+            rows = table.filter(pa.array(np.isin(codes, kept)))
+            out.write_table(report_rows(rows))
+            written += rows.num_rows
+            vessels.append(np.unique(rows.column("mmsi").to_numpy()))
+    return ReportsResult(written, np.unique(np.concatenate(vessels)))
+
+
+def partition_stage(task: VesselTask | ReportsTask) -> VesselResult | ReportsResult:
+    """A vessel partition's task, whichever it is: its tracks, or its reports (the two run side
+    by side)."""
+    return vessel_stages(task) if isinstance(task, VesselTask) else report_stages(task)
 
 
 def _flooded(
@@ -253,26 +354,36 @@ def _segment(
 
 
 @dataclass(frozen=True)
-class PointsTask:
-    """A partition's points, spilled to `spill`, as part `part` of the dataset folder `folder`,
-    their track numbers shifted by `offset`."""
+class PartTask:
+    """A partition's points or reports, spilled to `spill`, as part `part` of the dataset
+    folder `folder` (of that `schema`), their track numbers shifted by `offset`; reports take
+    their tracks from the partition's points, spilled to `points`."""
 
     spill: Path
     folder: Path
     part: int
     offset: int
+    schema: pa.Schema = POINTS_SCHEMA
+    points: Path | None = None
 
 
-def write_points(task: PointsTask) -> int:
-    """Write one part of points.parquet, batch by batch; the rows written."""
-    with PartWriter(task.folder, task.part, POINTS_SCHEMA) as part, pa.OSFile(str(task.spill)) as f:
+def write_part(task: PartTask) -> int:
+    """Write one part of points.parquet or reports.parquet, batch by batch; the rows written."""
+    keys = None
+    if task.points is not None:
+        with pa.OSFile(str(task.points)) as f:
+            keys = point_keys(pa.ipc.open_stream(f).read_all())
+    with PartWriter(task.folder, task.part, task.schema) as part, pa.OSFile(str(task.spill)) as f:
         for batch in pa.ipc.open_stream(f):
-            part.write(shift_track_ids(pa.Table.from_batches([batch]), task.offset))
+            table = pa.Table.from_batches([batch])
+            if keys is not None:
+                table = with_track_ids(table, keys)
+            part.write(shift_track_ids(table, task.offset))
     return part.rows
 
 
 def shift_track_ids(table: pa.Table, offset: int) -> pa.Table:
-    """`table` with `offset` added to its track ids."""
+    """`table` with `offset` added to its track ids (null stays null)."""
     at = table.schema.get_field_index("track_id")
     ids = pc.add(table.column(at), pa.scalar(offset, pa.int64()))
     return table.set_column(at, table.schema.field(at), ids)

@@ -1,6 +1,7 @@
 """The data contracts of an ingest output (DESIGN.md), defined once: the columns and types of
-points.parquet, tracks.parquet, rejects.parquet and routes.parquet, the names of the track sets
-(clusters and routes), and the unit of the speeds they hold.
+points.parquet, tracks.parquet, reports.parquet, vessels.parquet, rejects.parquet and
+routes.parquet, the names of the track sets (clusters and routes), and the unit of the speeds
+they hold.
 
 `aisdati.preprocess` writes these files and `aisdati.tracks.store` (training, detection) and
 `aisdati.evaluation.dataset` (the evaluation's injected copy) read or write them, all through
@@ -32,8 +33,26 @@ POINTS_SCHEMA = pa.schema(
         ("lat", pa.float64()),
         ("sog", pa.float32()),
         ("cog", pa.float32()),
+        ("heading", pa.float32()),
+        ("status", pa.int16()),
     ]
 )
+"""A report a track is made of. `heading` (degrees, [0, 360)) is NaN where the report gave none
+(AIS's 511, a blank); `status` is the navigational status (ITU-R M.1371: 0 under way using
+engine, 1 at anchor, 5 moored, ...; 0-14), null where it is not defined (15) or not given."""
+VESSEL_SCHEMA = pa.schema(
+    [
+        ("mmsi", pa.int64()),
+        ("name", pa.string()),
+        ("ship_type", pa.string()),
+        ("length_m", pa.float64()),
+    ]
+)
+"""vessels.parquet: who each vessel is, its most frequent value over the input (null or NaN where
+none was given); `ship_type` is the ITU ship-type group of a numeric code (Fishing, Tug, Cargo,
+...) or the source's own text."""
+VESSEL_COLUMNS = VESSEL_SCHEMA.names[1:]
+"""What tracks.parquet repeats of its vessel."""
 TRACKS_SCHEMA = pa.schema(
     [
         ("track_id", pa.int64()),
@@ -47,6 +66,9 @@ TRACKS_SCHEMA = pa.schema(
         ("lat0", pa.float64()),
         ("route", pa.string()),
         ("stage", pa.string()),
+        ("name", pa.string()),  # the vessel's, as in vessels.parquet (`VESSEL_COLUMNS`)
+        ("ship_type", pa.string()),
+        ("length_m", pa.float64()),
         ("geometry", pa.binary()),
     ]
 )
@@ -65,6 +87,24 @@ REJECTS_SCHEMA = pa.schema(
         ("raw", pa.string()),
     ]
 )
+REPORTS_SCHEMA = pa.schema(
+    [
+        ("mmsi", pa.int64()),
+        ("time", UTC_US),
+        ("lon", pa.float64()),
+        ("lat", pa.float64()),
+        ("sog", pa.float32()),
+        ("cog", pa.float32()),
+        ("heading", pa.float32()),
+        ("status", pa.int16()),
+        ("track_id", pa.int64()),
+    ]
+)
+"""reports.parquet: every report that passed the value checks, the region of interest and the
+vessel's own cleaning (duplicates, repeated times, position outliers), whatever its speed; its
+`track_id` where it is a point of that track, null otherwise. The SOG filter (`--min-sog`) shapes
+what a model learns from (points.parquet); what is judged keeps every report, so a vessel that
+drifts, loiters or stops is judged on those reports too."""
 ROUTES_SCHEMA = pa.schema(
     [
         ("route", pa.string()),

@@ -134,15 +134,18 @@ def test_ingesting_twice_gives_identical_outputs(cli, data, tmp_path):
     for out in (first, second, first):
         result, _ = ingest(cli, out, data / HEAD_ZIP, data / "NYHarbor_2020_06_30_first_hour.csv")
         assert result.exit_code == 0, result.output
-    for name in ("points.parquet", "tracks.parquet", "routes.parquet", "routes.geojson"):
+    names = ("points.parquet", "tracks.parquet", "reports.parquet", "vessels.parquet")
+    for name in (*names, "routes.parquet", "routes.geojson"):
         assert contents(first / name) == contents(second / name), name
     assert sorted(p.name for p in first.iterdir()) == [
         "ingest_report.json",
         "points.parquet",
+        "reports.parquet",
         "routes.geojson",
         "routes.parquet",
         "routes.png",
         "tracks.parquet",
+        "vessels.parquet",
     ]
 
 

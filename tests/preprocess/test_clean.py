@@ -28,6 +28,8 @@ def _table(mmsi, t_s, lon, lat, sog=None, cog=None):
             np.asarray(lat, float),
             sog,
             cog,
+            np.full(n, np.nan, np.float32),
+            pa.nulls(n, pa.int16()),
             np.zeros(n, np.int32),
         ],
         schema=PARTITION_SCHEMA,

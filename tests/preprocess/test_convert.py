@@ -1,6 +1,7 @@
 """Conversion to the canonical frame (`aisdati.preprocess.convert`): times in every unit and
 outside the AIS era, MMSIs as integers whatever their text, through the real command line where
-a user meets them (issues 13 and 27) and piece by piece."""
+a user meets them (issues 13 and 27) and piece by piece; the optional heading and navigational
+status, which reject no row."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from aisdati.preprocess.convert import time_us, to_canonical
+from aisdati.preprocess.convert import STATUS_NAMES, heading_of, status_of, time_us, to_canonical
 from aisdati.preprocess.report import CODE
 from tests.helpers.ingest import NY_HOUR, NY_ROWS, ingest, ingest_ny_hour, ny_lines, points
 
@@ -118,3 +119,79 @@ def test_a_60_digit_time_is_a_bad_time_without_warnings(cli, data, tmp_path, bas
     assert result.exit_code == 0, result.output
     assert report["rejected"]["bad_time"] == baseline["rejected"]["bad_time"] + 1
     assert [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)] == []
+
+
+# ------------------------------------------------------------- the optional heading and status
+def test_a_heading_is_degrees_in_0_360_and_else_none():
+    texts = ["246.0", "0", "359.9", "511", "360", "-1", "", None, "north", "nan"]
+    got = heading_of(pa.array(texts, pa.string()))
+    assert got.dtype == "float32"
+    assert got[:3].tolist() == pytest.approx([246.0, 0.0, 359.9])
+    assert pd.isna(got[3:]).all()
+    assert heading_of(pa.array([511, 12, None], pa.int16())).tolist()[1] == 12.0
+
+
+def test_a_status_is_a_code_of_0_to_14_as_number_or_dma_name():
+    """MarineCadastre writes codes (`0.0`), the DMA names (`Under way using engine`); 15 (not
+    defined), 'Unknown value', other numbers and text are none."""
+    texts = ["0.0", "5", "14", "15", "2.5", "-1", "", None, "Moored", "At anchor", "Unknown value"]
+    got = status_of(pa.array(texts, pa.string()))
+    assert got.type == pa.int16()
+    assert got.to_pylist() == [0, 5, 14, None, None, None, None, None, 5, 1, None]
+    numbers = status_of(pa.array([0.0, 8.0, 15.0, float("nan"), None]))
+    assert numbers.to_pylist() == [0, 8, None, None, None]
+
+
+@pytest.mark.parametrize(
+    ("text", "code"),
+    [
+        ("Under way using engine", 0),
+        ("At anchor", 1),
+        ("Not under command", 2),
+        ("Restricted maneuverability", 3),
+        ("Restricted manoeuvrability", 3),
+        ("Constrained by her draught", 4),
+        ("Moored", 5),
+        ("Aground", 6),
+        ("Engaged in fishing", 7),
+        ("Under way sailing", 8),
+        ("Reserved for future amendment [HSC]", 9),
+        ("Reserved for future amendment [WIG]", 10),
+        ("Power-driven vessel towing astern", 11),
+        ("Power-driven vessel pushing ahead or towing alongside", 12),
+        ("AIS-SART", 14),
+        ("Reserved for future use", None),
+        ("Unknown value", None),
+        ("Not defined", None),
+    ],
+)
+def test_the_dma_status_names_map_to_their_codes(text, code):
+    assert status_of(pa.array([text, text.upper()])).to_pylist() == [code, code]
+    assert len(set(STATUS_NAMES.values())) == 14  # 0-12 and 14: 13 has no name of its own
+
+
+def test_a_blank_or_bad_heading_or_status_rejects_no_row():
+    """Only the required columns reject a row as missing: a row without a heading or status
+    is kept, with none (NaN, null)."""
+    batch = pa.record_batch(
+        {
+            "MMSI": ["367000001", "367000002", "367000003", "367000004"],
+            "BaseDateTime": ["2020-06-30T00:00:00"] * 4,
+            "LAT": ["40.5", "40.5", "40.5", None],  # (a CSV blank)
+            "LON": ["-74.1"] * 4,
+            "SOG": ["10.2"] * 4,
+            "COG": ["90.0"] * 4,
+            "Heading": ["", "x", "511", "246"],
+            "Status": ["", "Moored", "99", "0"],
+        }
+    )
+    columns = {"mmsi": "MMSI", "time": "BaseDateTime", "lat": "LAT", "lon": "LON", "sog": "SOG"}
+    columns |= {"cog": "COG", "heading": "Heading", "status": "Status"}
+    table, codes = to_canonical(batch, columns, 0)
+    assert codes.tolist() == [0, 0, 0, CODE["missing_value"]]  # the blank LAT only
+    assert pd.isna(table.column("heading").to_numpy()[:3]).all()
+    assert table.column("status").to_pylist() == [None, 5, None, 0]
+    del columns["heading"], columns["status"]  # a file without them: none, as before
+    table, codes = to_canonical(batch, columns, 0)
+    assert codes.tolist() == [0, 0, 0, CODE["missing_value"]]
+    assert table.column("status").null_count == 4

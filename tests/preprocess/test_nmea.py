@@ -1,6 +1,7 @@
 """NMEA 0183 input: real receiver sentences (pyais's test data, tests/data/nmea) decoded and
-counted per reason, real Kitimat tracks through `aisdati ingest` as !AIVDM sentences, and
-non-finite times in a log bad times (issue 27, item 6)."""
+counted per reason, real Kitimat tracks through `aisdati ingest` as !AIVDM sentences (with their
+static messages naming the vessels), heading and status per message type, and non-finite times
+in a log bad times (issue 27, item 6)."""
 
 from __future__ import annotations
 
@@ -173,6 +174,35 @@ def test_not_available_values_are_the_cleaners_sentinels():
     assert list(codes) == [CODE["sentinel_lat"]] * 2
 
 
+def test_heading_and_status_of_each_position_type():
+    """Types 1-3 give heading and navigational status (15, not defined: none), 18 and 19 a
+    heading and no status, 27 a status and no heading; a static message (type 5) is counted as
+    no position, its vessel kept for vessels.parquet."""
+    at = {"lat": 55.0, "lon": 12.0, "speed": 10, "course": 90}
+    messages = [
+        {"type": 1, "mmsi": 257000001, "status": 5, "heading": 123, **at},
+        {"type": 3, "mmsi": 257000002, "status": 15, "heading": 511, **at},
+        {"type": 18, "mmsi": 257000003, "heading": 200, **at},
+        {"type": 27, "mmsi": 257000004, "status": 1, **at},
+    ]
+    lines = [f"1606780800,{encode_dict(m, sentence_type='VDM')[0]}" for m in messages]
+    static = {"type": 5, "mmsi": 257000001, "shipname": "ANNA@@@", "ship_type": 70}
+    static |= {"to_bow": 100, "to_stern": 20}
+    lines += [f"1606780800,{part}" for part in encode_dict(static, sentence_type="VDM", seq_id=1)]
+    skipped = SkippedLines()
+    decoder = NmeaDecoder(skipped.add)
+    for line in lines:
+        decoder.feed(line.encode())
+    decoder.finish()
+    frame = decoder.take().to_pandas()
+    assert frame["Heading"].tolist()[:1] + frame["Heading"].tolist()[2:3] == [123, 200]
+    assert frame["Heading"].isna().tolist() == [False, True, False, True]
+    table, codes = to_canonical(pa.RecordBatch.from_pandas(frame), COLUMNS, 0)
+    assert not codes.any() and table.column("status").to_pylist() == [5, None, None, 1]
+    assert len(skipped.by_reason["not_position"]) == 1
+    assert decoder.take_statics() == [(257000001, "ANNA", 70, 120)]
+
+
 def test_cut_corrupt_and_foreign_lines_are_counted_never_raised():
     good = POSITION + "09"
     flipped = good.replace("15NBj", "15NBk")
@@ -234,7 +264,11 @@ def test_a_gzipped_log_reads_as_the_plain_one(tmp_path):
     log.write_bytes(gzip.compress((NMEA / "mixed.txt").read_bytes()))
     plain, _, plain_counts = read(NMEA / "mixed.txt")
     packed, _, packed_counts = read(log)
-    assert packed.equals(plain) and packed_counts == plain_counts
+    assert packed.to_pandas().equals(plain.to_pandas()) and packed_counts == plain_counts
+
+
+def read_vessels(out: Path) -> pd.DataFrame:
+    return pq.read_table(out / "vessels.parquet").to_pandas()
 
 
 def kitimat_log(rows: pd.DataFrame) -> tuple[list[str], dict[str, int]]:
@@ -311,6 +345,11 @@ def test_kitimat_tracks_come_back_through_nmea(cli, tmp_path):
     for name in ("lon", "lat"):
         error = np.abs(got.column(name).to_numpy() - want.column(name).to_numpy())
         assert error.max() <= AIS_RESOLUTION_DEG, name
+    assert set(got.column("status").to_pylist()) <= {0, None}  # type 1: 0, type 18: none
+    # each vessel named by its type 5 message: in the log, not in the CSV
+    named, plain = (read_vessels(tmp_path / run) for run in ("nmea", "csv"))
+    assert (named["name"] == "KITIMAT SAMPLE").all() and (named["ship_type"] == "Tug").all()
+    assert named["mmsi"].tolist() == plain["mmsi"].tolist() and plain["name"].isna().all()
 
 
 def test_non_finite_times_in_an_nmea_log_are_bad_times(tmp_path):

@@ -25,7 +25,7 @@ KITIMAT = "AIS_2018_07-08_Kitimat.csv.gz"
 # ----------------------------------------- 18: one vessel's partition split by time, bounded
 def test_a_large_partition_split_by_time_gives_the_same_outputs(data, tmp_path, monkeypatch):
     """Kitimat in one partition, read whole and split into pieces of 3,000 rows (one vessel
-    cut at a time, in a gap): the points, tracks and counts are the same."""
+    cut at a time, in a gap): the points, tracks, reports and counts are the same."""
     monkeypatch.setattr(pipeline, "MAX_PARTITIONS", 1)
     plans, plan_pieces = [], partition.plan_pieces
 
@@ -41,11 +41,13 @@ def test_a_large_partition_split_by_time_gives_the_same_outputs(data, tmp_path, 
         result = pipeline.ingest([data / KITIMAT], out, settings, None, "none")
         outs[rows] = (out, result.counts.as_dict())
     (whole, counts), (split, split_counts) = outs.values()
-    (plan,) = plans
-    assert plan.count > 10 and plan.cuts  # vessels packed into pieces, and one cut at times
+    assert len(plans) == 2  # the tracks' (moving reports) and reports.parquet's (all reports)
+    # vessels packed into pieces, and one cut at times
+    assert all(plan.count > 10 for plan in plans) and any(plan.cuts for plan in plans)
     assert split_counts == counts
-    for name in ("points.parquet", "tracks.parquet"):
-        assert pq.read_table(split / name).equals(pq.read_table(whole / name)), name
+    for name in ("points.parquet", "tracks.parquet", "reports.parquet"):
+        got, want = (pq.read_table(out / name).to_pandas() for out in (split, whole))
+        assert got.equals(want), name  # (pandas: a NaN heading equals NaN)
 
 
 def _kitimat_rows(data: Path) -> pa.Table:

@@ -2,7 +2,8 @@
 bad values. Through the real command line, on the New York Harbor hour made hostile the way a
 careless or unlucky analyst would (issue 13; issue 27, items 5, 6 and 20): joined exports and
 repeated headers, NaN and infinity in any spelling, long headers, blank lines, UTF-16 and UTF-32,
-binary files and Parquet columns of the wrong type."""
+binary files and Parquet columns of the wrong type. The optional heading and status read where
+a file has them, rejecting no row, and who each vessel is tallied as the rows are read."""
 
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from aisdati.preprocess.layouts import resolve_columns
 from aisdati.preprocess.lineguard import LineGuard
 from aisdati.preprocess.read import SourceReader
 from aisdati.preprocess.report import CODE
+from aisdati.preprocess.vessels import winners
 from tests.helpers.cli import one_line_error
 from tests.helpers.ingest import (
     NY_HOUR,
@@ -344,3 +346,78 @@ def test_a_parquet_mmsi_of_booleans_is_one_line(cli, data, tmp_path):
     table.to_parquet(src, index=False)
     result, _ = ingest(cli, tmp_path / "out", src)
     one_line_error(result, "bool.parquet: column MMSI has type bool, expected numbers")
+
+
+# ------------------------------------------------ the optional heading and status, the vessels
+def read_rows(path: Path, member: str | None = None) -> tuple[pa.Table, np.ndarray, pa.Table]:
+    """A file's canonical rows, their codes, and its vessels' values (`vessels.winners`)."""
+    reader = SourceReader(Source(path, member))
+    pieces = list(reader.tables(0))
+    codes = np.concatenate([c for _, c in pieces])
+    return pa.concat_tables([t for t, _ in pieces]), codes, winners([reader.vessels.table(0)])
+
+
+def test_heading_and_status_are_read_where_a_file_has_them(data):
+    """The NY hour writes `246.0` and `0.0`; Kitimat (MarineCadastre 2018) a heading of 511 and
+    a blank status: none, and no row rejected for it."""
+    table, _, _ = read_rows(data / NY_HOUR)
+    text = ny_table(data)
+    heading = pd.to_numeric(text["Heading"], errors="coerce").where(lambda h: h < 360)
+    assert np.allclose(table.column("heading").to_numpy(), heading, equal_nan=True)
+    assert table.column("status").to_pylist() == [
+        None if s in ("", "15.0") else int(float(s)) for s in text["Status"]
+    ]
+    assert table.column("status").null_count < len(text) // 2  # most rows give a status
+    table, codes, _ = read_rows(data / "AIS_2018_07-08_Kitimat.csv.gz")
+    assert np.isnan(table.column("heading").to_numpy()).all()
+    assert table.column("status").null_count == table.num_rows
+    assert not np.isin(codes, [CODE["missing_value"], CODE["bad_number"]]).any()
+
+
+def test_a_damaged_heading_or_status_rejects_no_row(cli, data, tmp_path, baseline):
+    """Every heading and status of the NY hour blank, unreadable or out of range: the same rows
+    kept and the same tracks as the clean hour, with none for those values."""
+    table = ny_table(data)
+    junk = ["", "x", "511", "-5", "360", "NaN", "Moored here", "999"]
+    table["Heading"] = [junk[k % len(junk)] for k in range(len(table))]
+    table["Status"] = [junk[(k + 3) % len(junk)] for k in range(len(table))]
+    src = tmp_path / "junk.csv"
+    table.to_csv(src, index=False)
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    for key in ("rejected", "kept_points", "tracks"):
+        assert report[key] == baseline[key], key
+    got, want = points(tmp_path / "out"), points(Path(baseline["outputs"]["points"]).parent)
+    assert got.drop(columns=["heading", "status"]).equals(want.drop(columns=["heading", "status"]))
+    assert got["heading"].isna().all() and got["status"].isna().all()
+
+
+def test_the_vessels_of_a_csv_are_tallied_as_it_is_read(data):
+    """Name, type and length per MMSI: MarineCadastre's numeric types become their ITU group
+    (60 Passenger, 90 Other, 31 Towing), text types (Kitimat's) stay; a name quoted with a
+    doubled quote inside is read unquoted."""
+    _, _, ny = read_rows(data / NY_HOUR)
+    ny = ny.to_pandas().set_index("mmsi")
+    assert ny.loc[367000140].tolist() == ["SAMUEL I NEWHOUSE", "Passenger", 94.0]
+    assert ny.loc[366999618].tolist() == ["CG SHRIKE", "Other", 26.0]
+    assert 250 < len(ny) < ny_table(data)["MMSI"].nunique() == 295  # 24 give none of them
+    _, _, day = read_rows(data / "AIS_2022_01_03_head.zip", "AIS_2022_01_03.csv")
+    day = day.to_pandas().set_index("mmsi")
+    assert day.loc[367704390].tolist() == ['RAY "CHIEF" TONEY', "Towing", 25.0]
+    _, _, kitimat = read_rows(data / "AIS_2018_07-08_Kitimat.csv.gz")
+    types = set(kitimat.column("ship_type").to_pylist())
+    assert {"Tug", "Fishing"} <= types and kitimat.column("name").null_count == len(kitimat)
+
+
+def test_optional_parquet_columns_of_other_types_are_left_out(data, tmp_path):
+    """A parquet file whose Heading holds booleans and Status structs reads as one without them,
+    not refused as a LAT of structs is."""
+    table = ny_table(data)[NY_COLUMNS].head(50)
+    arrow = pa.Table.from_pandas(table, preserve_index=False)
+    arrow = arrow.append_column("Heading", pa.array([True] * 50))
+    arrow = arrow.append_column("Status", pa.array([{"a": 1}] * 50))
+    pq.write_table(arrow, tmp_path / "odd.parquet")
+    reader = SourceReader(Source(tmp_path / "odd.parquet"))
+    assert "heading" not in reader.columns and "status" not in reader.columns
+    rows, codes, _ = read_rows(tmp_path / "odd.parquet")
+    assert rows.num_rows == 50 and not codes.any() and rows.column("status").null_count == 50
