@@ -282,7 +282,7 @@ def report_stages(task: ReportsTask) -> ReportsResult:
     report comes before a slow one of its vessel at its time, so that the report kept there is
     the one a track may hold."""
     settings = task.settings
-    kept = (0, CODE["slow"])  # slow: a SOG derived at or below --min-sog, still a report
+    slow = CODE["slow"]  # a SOG derived at or below --min-sog: still a report
     written, vessels = 0, [np.zeros(0, np.int64)]
     with pa.ipc.new_stream(str(task.out), REPORTS_SCHEMA) as out:
         pieces = partition_tables(
@@ -291,10 +291,13 @@ def report_stages(task: ReportsTask) -> ReportsResult:
         )  # fmt: skip
         for table in pieces:
             table, codes = clean_vessels(table, settings)
-            rows = table.filter(pa.array(np.isin(codes, kept)))
+            rows = table.filter(pa.array((codes == 0) | (codes == slow)))
             out.write_table(report_rows(rows))
             written += rows.num_rows
-            vessels.append(np.unique(rows.column("mmsi").to_numpy()))
+            mmsi = rows.column("mmsi").to_numpy()  # sorted: each vessel's first row
+            first = np.ones(len(mmsi), bool)
+            first[1:] = mmsi[1:] != mmsi[:-1]
+            vessels.append(mmsi[first])
     return ReportsResult(written, np.unique(np.concatenate(vessels)))
 
 
