@@ -64,6 +64,12 @@ def run(o: IngestOptions) -> None:
         with download_progress(console, shows_progress(o.as_json)) as progress:
             files = fetch_files(remote, o.data_dir, progress=progress) + local
             result = ingest(files, o.out, settings, area, o.roi, progress, execution)
+    if not sum(result.counts.tracks.values()):
+        warn(
+            f"no track kept, so nothing for a model to learn from; reports.parquet holds "
+            f"{result.counts.reports_kept:,} reports to judge (`aisdati detect --models none`); "
+            "for tracks, loosen --min-points, --min-sog, --stop-gap or --dwell-time"
+        )
     if o.as_json:
         print(json.dumps(result.as_dict(), default=str))
     else:

@@ -182,14 +182,14 @@ def _run(
         # the reading and per-vessel stages' freed memory (`aisdati.memory`): route clustering's
         # peak comes next, so hand it back first
         hand_back()
-        if not parts:
+        if not parts and not counts.reports_kept:
             raise UserError(no_tracks_message(counts))
         stage_seconds["vessel_segment_cluster"] = (
             time.perf_counter() - started - stage_seconds["read_clean_filter"]
         )
         routed_at = time.perf_counter()
         labels_of, route_files, routes = _route_stage(
-            parts, shapes, stage, settings, _inputs_named(labels), progress
+            parts, shapes if parts else None, stage, settings, _inputs_named(labels), progress
         )
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)

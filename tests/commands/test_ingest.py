@@ -10,6 +10,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
@@ -85,13 +86,14 @@ def test_2023_sample_with_floats_in_integer_fields(cli, data, tmp_path):
         data / "noaa_2023-01-11_1000rows.csv",
         extra=("--roi", "none", "--min-points", "2"),
     )
-    # one report per vessel: no track of two points, which is an error (exit 2, nothing written)
-    # whose one line accounts for every row, none of them a bad number or MMSI
-    assert result.exit_code == 2, result.output
-    message = " ".join(result.stderr.split())
-    assert "no track kept: 1,000 rows read" in message and "short_segment" in message
-    assert "bad_number" not in message and "bad_mmsi" not in message
-    assert not (tmp_path / "points.parquet").exists()
+    # one report per vessel: no track of two points, but every report kept to judge, none of
+    # them rejected as a bad number or MMSI
+    assert result.exit_code == 0, result.output
+    assert "no track kept" in " ".join(result.stderr.split())
+    report = json.loads(result.stdout)
+    assert report["tracks"]["total"] == 0 and report["rejected"]["short_segment"] > 0
+    assert report["rejected"]["bad_number"] == report["rejected"]["bad_mmsi"] == 0
+    assert report["reports_kept"] == len(pd.read_parquet(tmp_path / "reports.parquet")) > 0
 
 
 def test_ny_harbor_hour_reordered_misspelt_negative_cog(cli, data, tmp_path):
