@@ -1,6 +1,6 @@
 """The Python API as a user writes it (the README's "From Python" example): read ingest's
 tracks, fit `nearest` and a tiny DATI, score held-out tracks, flag them with a contamination
-threshold, save and load."""
+threshold, save and load; the events that need no model."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from aisdati.ais.space import PRESETS
+from aisdati.detection.events import model_free_events
 from aisdati.detectors import (
     DETECTORS,
     DATIDetector,
@@ -22,6 +23,9 @@ from aisdati.detectors import (
 )
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import inject
+from aisdati.events.find import EVENT_COLUMNS
+from aisdati.events.kinds import KINDS
+from aisdati.tracks.reports import read_reports, read_vessels
 from aisdati.tracks.store import load_tracks, read_track_table
 
 
@@ -41,6 +45,7 @@ def test_fit_score_flag_save_and_load(kitimat, tmp_path):
     dati = DATIDetector(tiny, ScoreSettings(rollouts=2, lane_rollouts=4)).fit(train)
     dati_scores, dati_flagged = dati.decision_function(test), dati.predict(test)
     dati.save(out / "route-1")  # route-1.pt and its model card route-1.json
+    events = model_free_events(read_reports(data), read_vessels(data))  # drift, gaps, ...: no model
 
     # ------------------------------------------------------------ what it gives
     assert len(train) == 16 and len(test) == 4
@@ -69,6 +74,9 @@ def test_fit_score_flag_save_and_load(kitimat, tmp_path):
     assert again.threshold(dati.how) == dati.threshold()
     with pytest.raises(UserError, match="route-1 is a dati model, not a NearestDetector"):
         NearestDetector.load(out / "route-1")
+    # the events of every report, each with its vessel, kind, times and strength
+    assert list(events.columns) == list(EVENT_COLUMNS)
+    assert set(events["kind"]) <= set(KINDS) and (events["strength"] >= 1).all()
 
 
 def test_detectors_register_under_their_method():
