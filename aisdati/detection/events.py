@@ -104,7 +104,8 @@ def off_traffic_events(
             continue
         a, b = deviation_stretch(profile)
         who = _who(identity, track.mmsi)
-        times = track.start + pd.to_timedelta(np.r_[0, np.cumsum(track.dts)], unit="h")
+        hours = pd.to_timedelta(np.r_[0, np.cumsum(track.dts)], unit="h")
+        times = (track.start + hours).round("us")  # the reports' own times, not float hours
         peak = int(np.argmax(profile))
         rows.append(
             {
@@ -143,7 +144,7 @@ def with_events(scores: pd.DataFrame, events: pd.DataFrame) -> pd.DataFrame:
     kinds = per.agg(lambda k: ", ".join(sorted(set(k))))
     out = scores.copy()
     out["events"] = out["track_id"].map(counts).fillna(0).astype("int64")
-    out["event_kinds"] = out["track_id"].map(kinds).fillna("")
+    out["event_kinds"] = out["track_id"].map(kinds).astype(object).where(lambda k: k.notna(), "")
     out["flagged"] = out["flagged"] | (out["events"] > 0)
     return out
 

@@ -58,6 +58,8 @@ def events_arrow(events: pd.DataFrame) -> pa.Table:
     geometry = [shapely.to_wkb(_shape(a, b)) for a, b in stretches]
     frame = events.drop(columns=["lons", "lats"]).assign(geometry=geometry)
     frame["track_id"] = frame["track_id"].astype("Int64")
+    for key in ("start", "end"):  # reports' times are microseconds (a learned event's: rounded)
+        frame[key] = pd.to_datetime(frame[key], utc=True).dt.round("us")
     table = pa.Table.from_pandas(frame, schema=EVENTS_SCHEMA, preserve_index=False)
     return table.replace_schema_metadata({b"geo": json.dumps(GEO_METADATA).encode()})
 
