@@ -1,0 +1,62 @@
+"""The real recordings with known outcomes (tests/data/events/: the Danish Maritime
+Authority's raw NMEA, whose outcomes AisAbnormal's tests assert), from the raw files through
+`aisdati ingest` and `aisdati detect --models none`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from aisdati.events.settings import EventSettings
+from tests.helpers.cli import one_line_error, run
+
+EVENTS = Path(__file__).resolve().parents[1] / "data" / "events"
+HOLD = pd.Timedelta(seconds=EventSettings().drift_min_s)
+
+
+def _events(tmp_path: Path, name: str) -> tuple[pd.DataFrame, dict]:
+    data, out = tmp_path / "data", tmp_path / "events"
+    got = run("ingest", "--input", EVENTS / name, "--roi", "none", "--min-points", "5",
+              "--out", data)  # fmt: skip
+    assert got.exit_code == 0, got.output
+    got = run("detect", "--data", data, "--models", "none", "--out", out)
+    assert got.exit_code == 0, got.output
+    report = json.loads((out / "report.json").read_text())
+    geojson = json.loads((out / "events.geojson").read_text())
+    assert len(geojson["features"]) == len(report["events"])
+    return pd.read_parquet(out / "events.parquet"), report
+
+
+def test_frio_drifts_as_aisabnormal_found(tmp_path):
+    events, report = _events(tmp_path, "538004030_drift_1.ais")
+    drift = events[events["kind"] == "drift"]
+    assert len(drift) >= 1
+    # AisAbnormal dates a drift when it has lasted 10 minutes; ours from its first report
+    raised = drift["start"].iloc[0] + HOLD
+    assert abs(raised - pd.Timestamp("2014-09-28 16:50:04.556", tz="UTC")) <= pd.Timedelta("10min")
+    assert drift["mmsi"].iloc[0] == 538004030
+    points = pd.read_parquet(tmp_path / "data" / "points.parquet")
+    assert report["reports_judged"] > len(points)  # the drifting (slow) reports are judged too
+    assert drift["name"].iloc[0] == "FRIO"
+
+
+def test_stoc_marcia_does_not_drift(tmp_path):
+    events, _ = _events(tmp_path, "212123000_drift_1.ais")
+    assert "drift" not in set(events["kind"])
+
+
+def test_lotus_changes_speed_suddenly(tmp_path):
+    events, _ = _events(tmp_path, "219165000_ssc_1.ais")
+    ssc = events[events["kind"] == "sudden-speed-change"]
+    assert len(ssc) == 1
+    at = pd.Timestamp("2014-10-05 16:10:11.424", tz="UTC")
+    assert abs(ssc["start"].iloc[0] - at) <= pd.Timedelta("5min")
+
+
+def test_an_unknown_model_folder_is_one_line(tmp_path):
+    one_line_error(
+        run("detect", "--data", tmp_path, "--models", "none", "--out", tmp_path / "o"),
+        "not found",
+    )
