@@ -13,8 +13,9 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
-from aisdati.events.calibrate import KEY, calibrated
+from aisdati.events.calibrate import EVENT_RATE, KEY, calibrated
 from aisdati.events.find import EVENT_COLUMNS, find_events, placed
 from aisdati.events.reports import vessels
 from aisdati.events.settings import EventSettings
@@ -103,24 +104,78 @@ def off_traffic_events(
         if not s["score"] > s["threshold"]:
             continue
         a, b = deviation_stretch(profile)
-        who = _who(identity, track.mmsi)
-        hours = pd.to_timedelta(np.r_[0, np.cumsum(track.dts)], unit="h")
-        times = (track.start + hours).round("us")  # the reports' own times, not float hours
         peak = int(np.argmax(profile))
+        said = f"strays {profile[peak]:,.0f} m from what {s['model']} generates"
+        strength = float(s["score"] / s["threshold"])
         rows.append(
-            {
-                "mmsi": track.mmsi, "name": who["name"], "ship_type": who["ship_type"],
-                "kind": "off-traffic", "start": times[a], "end": times[b - 1],
-                "duration_s": (times[b - 1] - times[a]).total_seconds(), "n_reports": b - a,
-                "lon": float(track.positions[peak, 0]), "lat": float(track.positions[peak, 1]),
-                "track_id": track.track_id,
-                "strength": round(float(s["score"] / s["threshold"]), 3),
-                "evidence": f"strays {profile[peak]:,.0f} m from what {s['model']} generates",
-                "model": s["model"], "lons": track.positions[a:b, 0].tolist(),
-                "lats": track.positions[a:b, 1].tolist(),
-            }
-        )  # fmt: skip
+            _track_event(
+                track, identity, "off-traffic", (a, b - 1, peak), strength, said, s["model"]
+            )
+        )
     return pd.DataFrame(rows, columns=list(EVENT_COLUMNS))
+
+
+def unseen_route_events(
+    tracks: Sequence[Track],
+    scores: pd.DataFrame,
+    models: Sequence[Detector],
+    identity: pd.DataFrame,
+    near_km: float,
+) -> pd.DataFrame:
+    """Tracks bound where no training track of their judging model went: the origin-destination
+    distance (`aisdati.detection.routing.reach_km`) over the larger of `near_km` and the
+    (1 - `EVENT_RATE`) quantile of the training tracks' own distances to each other; the event
+    spans the track, placed at its end. Cards that do not record ends are left out."""
+    by_name = {m.name: m for m in models}
+    limits = {name: _unseen_limit(m, near_km) for name, m in by_name.items()}
+    rows = []
+    for track, model in zip(tracks, scores["model"], strict=True):
+        card, limit = by_name[model].card, limits[model]
+        if limit is None:
+            continue
+        reach = float(reach_km(card, track.positions[:1], track.positions[-1:])[0])
+        if reach > limit:
+            said = f"its start and end are {reach:.1f} km from every training track's"
+            last = len(track.positions) - 1
+            where = (0, last, last)
+            rows.append(
+                _track_event(track, identity, "unseen-route", where, reach / limit, said, model)
+            )
+    return pd.DataFrame(rows, columns=list(EVENT_COLUMNS))
+
+
+def _unseen_limit(model: Detector, near_km: float) -> float | None:
+    data = model.card.data
+    if data.ends is None or len(data.starts) < 2:
+        return None
+    own = od_distances(data.starts, data.ends, data.starts, data.ends, leave_one_out=True)
+    return max(near_km, float(np.quantile(own, 1.0 - EVENT_RATE)) / 1000.0)
+
+
+def _track_event(
+    track: Track,
+    identity: pd.DataFrame,
+    kind: str,
+    where: tuple[int, int, int],
+    strength: float,
+    evidence: str,
+    model: str,
+) -> dict:
+    """A learned event on a track's points `where` = (first, last, strongest), as a row of
+    `EVENT_COLUMNS`; its times the reports' own (microseconds)."""
+    a, b, peak = where
+    who = _who(identity, track.mmsi)
+    hours = pd.to_timedelta(np.r_[0, np.cumsum(track.dts)], unit="h")
+    times = (track.start + hours).round("us")
+    return {
+        "mmsi": track.mmsi, "name": who["name"], "ship_type": who["ship_type"], "kind": kind,
+        "start": times[a], "end": times[b], "duration_s": (times[b] - times[a]).total_seconds(),
+        "n_reports": b - a + 1, "lon": float(track.positions[peak, 0]),
+        "lat": float(track.positions[peak, 1]), "track_id": track.track_id,
+        "strength": round(strength, 3), "evidence": evidence, "model": model,
+        "lons": track.positions[a : b + 1, 0].tolist(),
+        "lats": track.positions[a : b + 1, 1].tolist(),
+    }  # fmt: skip
 
 
 def empty_events() -> pd.DataFrame:

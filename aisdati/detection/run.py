@@ -43,6 +43,7 @@ from aisdati.detection.events import (
     model_free_events,
     off_traffic_events,
     uncalibrated_note,
+    unseen_route_events,
     with_events,
     with_identity,
 )
@@ -318,7 +319,8 @@ def _events(
     if not settings.ashore:
         free = free[free["kind"] != "ashore"]
     learned = off_traffic_events(tracks, scores, profiles, identity)
-    return all_events([learned, free]), len(reports)
+    unseen = unseen_route_events(tracks, scores, models, identity, settings.near_km)
+    return all_events([learned, unseen, free]), len(reports)
 
 
 def events_only(data_dir: Path) -> Detection:

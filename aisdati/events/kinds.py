@@ -31,6 +31,14 @@ KINDS: dict[str, EventKind] = {
             "ours (DATI's score, section 6.2 of the paper, made local)",
         ),
         EventKind(
+            "unseen-route",
+            "bound where no training track went",
+            True,
+            "a track whose start and end are farther from every training track's start and end "
+            "than --near-km and than 99 % of the training tracks are from each other",
+            "ours (the routing's origin-destination distance)",
+        ),
+        EventKind(
             "position-jump",
             "position inconsistent with reported motion",
             False,
