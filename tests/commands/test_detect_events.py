@@ -11,6 +11,7 @@ import pandas as pd
 
 from aisdati.events.settings import EventSettings
 from tests.helpers.cli import one_line_error, run
+from tests.helpers.models import detect_args, train_ny_nearest
 
 EVENTS = Path(__file__).resolve().parents[1] / "data" / "events"
 HOLD = pd.Timedelta(seconds=EventSettings().drift_min_s)
@@ -60,3 +61,17 @@ def test_an_unknown_model_folder_is_one_line(tmp_path):
         run("detect", "--data", tmp_path, "--models", "none", "--out", tmp_path / "o"),
         "not found",
     )
+
+
+def test_a_model_from_before_event_calibration_loads_and_says_the_defaults_judge(tmp_path):
+    world = train_ny_nearest(tmp_path)
+    card = world["models"] / "down-nearest.json"
+    doc = json.loads(card.read_text())
+    assert any(k.startswith("event:") for k in doc["calibration"])  # train records them
+    doc["calibration"] = {k: v for k, v in doc["calibration"].items() if ":" not in k}
+    card.write_text(json.dumps(doc))  # as a card written before events
+    got = run(*detect_args(world, tmp_path / "out"))
+    assert got.exit_code == 0, got.output
+    assert "predate(s) event calibration" in " ".join(got.output.split())
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert any("event calibration" in w for w in report["warnings"])
