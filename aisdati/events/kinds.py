@@ -111,7 +111,3 @@ KINDS: dict[str, EventKind] = {
 }
 MODEL_FREE = tuple(name for name, kind in KINDS.items() if not kind.needs_model)
 """The kinds found from the reports alone, with no trained model."""
-
-
-def kind(name: str) -> EventKind:
-    return KINDS[name]

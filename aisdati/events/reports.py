@@ -16,9 +16,6 @@ import pandas as pd
 from aisdati.geo import EARTH_RADIUS_M
 from aisdati.tracks.schema import KNOT_MPS
 
-REPORT_COLUMNS = ("mmsi", "time", "lon", "lat", "sog", "cog", "heading", "status", "track_id")
-"""What an event finder reads of a report (reports.parquet's columns); heading, status and
-track_id may be missing (NaN / -1)."""
 M_PER_DEG = EARTH_RADIUS_M * np.pi / 180.0
 
 
@@ -47,7 +44,8 @@ class VesselReports:
 
     @classmethod
     def of(cls, frame: pd.DataFrame) -> VesselReports:
-        """From one vessel's rows (`REPORT_COLUMNS`; the optional ones may be absent), sorted."""
+        """From one vessel's rows (reports.parquet's columns, `aisdati.tracks.schema.
+        REPORTS_SCHEMA`; heading, status and track_id may be absent), sorted by time."""
         frame = frame.sort_values("time", kind="stable")
         n = len(frame)
         time = pd.to_datetime(frame["time"], utc=True)
@@ -112,5 +110,5 @@ def _column(frame: pd.DataFrame, name: str, missing: float, n: int) -> np.ndarra
 
 
 def vessels(frame: pd.DataFrame) -> list[VesselReports]:
-    """Each vessel's reports of a table of many (`REPORT_COLUMNS`)."""
+    """Each vessel's reports of a table of many (reports.parquet's columns)."""
     return [VesselReports.of(group) for _, group in frame.groupby("mmsi", sort=True)]

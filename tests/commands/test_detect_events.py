@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from aisdati.events.kinds import MODEL_FREE
 from aisdati.events.settings import EventSettings
 from tests.helpers.cli import one_line_error, run
 from tests.helpers.models import detect_args, train_ny_nearest
@@ -27,6 +28,7 @@ def _events(tmp_path: Path, name: str) -> tuple[pd.DataFrame, dict]:
     report = json.loads((out / "report.json").read_text())
     geojson = json.loads((out / "events.geojson").read_text())
     assert len(geojson["features"]) == len(report["events"])
+    assert set(report["events_by_kind"]) <= set(MODEL_FREE)  # no model: no learned kind
     return pd.read_parquet(out / "events.parquet"), report
 
 
