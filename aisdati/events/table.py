@@ -14,8 +14,8 @@ import shapely
 
 from aisdati.events.kinds import KINDS
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
+from aisdati.tracks.schema import UTC_US, geo_metadata
 
-UTC_US = pa.timestamp("us", tz="UTC")
 EVENTS_SCHEMA = pa.schema(
     [
         ("event_id", pa.int64()),
@@ -40,11 +40,7 @@ EVENTS_SCHEMA = pa.schema(
 last report; `lon`/`lat` the report where it is strongest; `track_id` that report's track
 (null: a report in no track, e.g. a slow one); `strength` how far over its threshold (1 = at
 it); `model` the model of an off-traffic event; `geometry` the stretch."""
-GEO_METADATA = {
-    "version": "1.1.0",
-    "primary_column": "geometry",
-    "columns": {"geometry": {"encoding": "WKB", "geometry_types": ["LineString", "Point"]}},
-}
+GEO_METADATA = geo_metadata("LineString", "Point")
 
 
 def _shape(lons: list[float], lats: list[float]) -> shapely.Geometry:

@@ -24,19 +24,18 @@ AREA = "all"
 """Every track of the ingest: the tracks an area model learns and judges."""
 
 UTC_US = pa.timestamp("us", tz="UTC")
-POINTS_SCHEMA = pa.schema(
-    [
-        ("track_id", pa.int64()),
-        ("mmsi", pa.int64()),
-        ("time", UTC_US),
-        ("lon", pa.float64()),
-        ("lat", pa.float64()),
-        ("sog", pa.float32()),
-        ("cog", pa.float32()),
-        ("heading", pa.float32()),
-        ("status", pa.int16()),
-    ]
-)
+REPORT_FIELDS = [
+    ("mmsi", pa.int64()),
+    ("time", UTC_US),
+    ("lon", pa.float64()),
+    ("lat", pa.float64()),
+    ("sog", pa.float32()),
+    ("cog", pa.float32()),
+    ("heading", pa.float32()),
+    ("status", pa.int16()),
+]
+"""What one report holds, in points.parquet and reports.parquet alike."""
+POINTS_SCHEMA = pa.schema([("track_id", pa.int64()), *REPORT_FIELDS])
 """A report a track is made of. `heading` (degrees, [0, 360)) is NaN where the report gave none
 (AIS's 511, a blank); `status` is the navigational status (ITU-R M.1371: 0 under way using
 engine, 1 at anchor, 5 moored, ...; 0-14), null where it is not defined (15) or not given."""
@@ -87,19 +86,7 @@ REJECTS_SCHEMA = pa.schema(
         ("raw", pa.string()),
     ]
 )
-REPORTS_SCHEMA = pa.schema(
-    [
-        ("mmsi", pa.int64()),
-        ("time", UTC_US),
-        ("lon", pa.float64()),
-        ("lat", pa.float64()),
-        ("sog", pa.float32()),
-        ("cog", pa.float32()),
-        ("heading", pa.float32()),
-        ("status", pa.int16()),
-        ("track_id", pa.int64()),
-    ]
-)
+REPORTS_SCHEMA = pa.schema([*REPORT_FIELDS, ("track_id", pa.int64())])
 """reports.parquet: every report that passed the value checks, the region of interest and the
 vessel's own cleaning (duplicates, repeated times, position outliers), whatever its speed; its
 `track_id` where it is a point of that track, null otherwise. The SOG filter (`--min-sog`) shapes
@@ -121,10 +108,17 @@ ROUTES_SCHEMA = pa.schema(
 )
 ROUTE_COLUMNS = ROUTES_SCHEMA.names[:-1]
 """A route's facts: routes.parquet's columns but its medoid's geometry."""
-GEO_METADATA = {
-    "version": "1.1.0",
-    "primary_column": "geometry",
-    "columns": {"geometry": {"encoding": "WKB", "geometry_types": ["LineString"]}},
-}
-"""GeoParquet metadata of tracks.parquet and routes.parquet; no `crs` means OGC:CRS84 (WGS84
-lon/lat)."""
+
+
+def geo_metadata(*geometry_types: str) -> dict:
+    """GeoParquet metadata of a file whose `geometry` column holds WKB of these types; no `crs`
+    means OGC:CRS84 (WGS84 lon/lat)."""
+    return {
+        "version": "1.1.0",
+        "primary_column": "geometry",
+        "columns": {"geometry": {"encoding": "WKB", "geometry_types": list(geometry_types)}},
+    }
+
+
+GEO_METADATA = geo_metadata("LineString")
+"""GeoParquet metadata of tracks.parquet and routes.parquet."""
