@@ -4,6 +4,7 @@ events placed (times, where, the track) as the rows of events.parquet."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -47,9 +48,18 @@ def find_events(
 
 
 def placed(v: VesselReports, found: Sequence[Found], identity: dict | None = None) -> pd.DataFrame:
-    """The events of one vessel as rows of `EVENT_COLUMNS`: times, the report where each is
+    """The events of one vessel as rows of `EVENT_COLUMNS` (`placed_rows`), as a table."""
+    return pd.DataFrame(placed_rows(v, found, identity), columns=list(EVENT_COLUMNS))
+
+
+def placed_rows(
+    v: VesselReports, found: Sequence[Found], identity: dict | None = None
+) -> list[dict[str, Any]]:
+    """The events of one vessel as records of `EVENT_COLUMNS`: times, the report where each is
     strongest (its place), the track of that report, the stretch's positions, and the vessel's
-    name and type (`identity`: name, ship_type) when known."""
+    name and type (`identity`: name, ship_type) when known. Records, not a table: the live
+    watch places events thousands of times a second, and a table costs about as much as
+    finding them."""
     identity = identity or {}
     rows = []
     for e in found:
@@ -63,7 +73,7 @@ def placed(v: VesselReports, found: Sequence[Found], identity: dict | None = Non
                 "start": _utc(v.time_s[e.start]),
                 "end": _utc(v.time_s[e.end]),
                 "duration_s": float(v.time_s[e.end] - v.time_s[e.start]),
-                "n_reports": e.end - e.start + 1,
+                "n_reports": int(e.end - e.start + 1),
                 "lon": float(v.lon[e.peak]),
                 "lat": float(v.lat[e.peak]),
                 "track_id": track if track >= 0 else None,
@@ -74,7 +84,7 @@ def placed(v: VesselReports, found: Sequence[Found], identity: dict | None = Non
                 "lats": v.lat[e.start : e.end + 1].tolist(),
             }
         )
-    return pd.DataFrame(rows, columns=list(EVENT_COLUMNS))
+    return rows
 
 
 def _utc(seconds: float) -> pd.Timestamp:

@@ -6,15 +6,16 @@ rows of events.parquet. Nothing here redefines a kind."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 
-from aisdati.events.find import find_events, placed
+from aisdati.events.find import find_events, placed_rows
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
 from aisdati.live.decode import Identity
+from aisdati.live.vessels import FIELDS
 from aisdati.preprocess.clean import clean_vessels
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.report import CODE
@@ -40,21 +41,28 @@ class LastReport:
 
 @dataclass(frozen=True)
 class Judged:
-    """A vessel's events found in its window, and the window's first and last report time."""
+    """A vessel's events found in its window (records of events.parquet's columns), and the
+    window's first and last report time."""
 
-    events: pd.DataFrame
+    events: list[dict[str, Any]]
     first_s: float
     last_s: float
     last: LastReport
 
 
-def cleaned(mmsi: int, cols: dict[str, np.ndarray], ingest: IngestSettings) -> VesselReports:
-    """The window's reports that ingest would keep in reports.parquet, sorted by time."""
-    n = len(cols["time_us"])
-    status = cols["status"]
+def cleaned(
+    windows: dict[int, dict[str, np.ndarray]], ingest: IngestSettings
+) -> dict[int, VesselReports]:
+    """Each window's reports that ingest would keep in reports.parquet, sorted by time; all
+    windows cleaned in one pass, as ingest cleans a partition of whole vessels: the table's and
+    the cleaning's fixed cost is paid once per chunk, not once per vessel."""
+    sizes = [len(w["time_us"]) for w in windows.values()]
+    status = np.concatenate([w["status"] for w in windows.values()])
+    n = len(status)
+    cols = {k: np.concatenate([w[k] for w in windows.values()]) for k in FIELDS}
     table = pa.table(
         [
-            np.full(n, mmsi, np.int64),
+            np.repeat(np.array(list(windows), np.int64), sizes),
             pa.array(cols["time_us"], pa.int64()).view(pa.timestamp("us", tz="UTC")),
             cols["lon"], cols["lat"], cols["sog"], cols["cog"],
             cols["heading"].astype(np.float32),
@@ -66,30 +74,41 @@ def cleaned(mmsi: int, cols: dict[str, np.ndarray], ingest: IngestSettings) -> V
     table, codes = clean_vessels(table, ingest)
     keep = np.isin(codes, KEPT)
     c = {name: np.asarray(table.column(name).to_numpy(zero_copy_only=False))[keep]
-         for name in ("time", "lon", "lat", "sog", "cog", "heading", "status")}  # fmt: skip
-    return VesselReports(
-        mmsi, c["time"].view(np.int64) / 1e6, c["lon"], c["lat"], c["sog"], c["cog"],
-        c["heading"].astype(np.float64), np.nan_to_num(c["status"].astype(np.float64), nan=-1.0),
-        np.full(int(keep.sum()), -1.0),
-    )  # fmt: skip
+         for name in ("mmsi", "time", "lon", "lat", "sog", "cog", "heading", "status")}  # fmt: skip
+    time_s = c["time"].view(np.int64) / 1e6
+    heading = c["heading"].astype(np.float64)
+    status_code = np.nan_to_num(c["status"].astype(np.float64), nan=-1.0)
+    out = {}
+    for mmsi in windows:
+        lo, hi = np.searchsorted(c["mmsi"], [mmsi, mmsi + 1])
+        out[mmsi] = VesselReports(
+            mmsi, time_s[lo:hi], c["lon"][lo:hi], c["lat"][lo:hi], c["sog"][lo:hi],
+            c["cog"][lo:hi], heading[lo:hi], status_code[lo:hi], np.full(hi - lo, -1.0),
+        )  # fmt: skip
+    return out
 
 
 def judge(
-    mmsi: int,
-    cols: dict[str, np.ndarray],
-    identity: Identity,
+    windows: dict[int, tuple[dict[str, np.ndarray], Identity]],
     settings: EventSettings,
     ingest: IngestSettings,
-) -> Judged | None:
-    """The model-free events of a vessel's window (None: no report left to judge)."""
-    if len(cols["time_us"]) == 0:
-        return None
-    v = cleaned(mmsi, cols, ingest)
-    if len(v) == 0:
-        return None
-    who = {"name": identity.name, "ship_type": identity.ship_type}
-    events = placed(v, find_events(v, settings, identity.length_m), who)
-    return Judged(events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, settings))
+) -> dict[int, Judged]:
+    """The model-free events of each vessel's window (MMSI: its window and identity), in the
+    windows' order; a vessel with no report left to judge is left out."""
+    if not windows:
+        return {}
+    reports = cleaned({m: cols for m, (cols, _) in windows.items()}, ingest)
+    out = {}
+    for mmsi, (_, identity) in windows.items():
+        v = reports[mmsi]
+        if len(v) == 0:
+            continue
+        who = {"name": identity.name, "ship_type": identity.ship_type}
+        events = placed_rows(v, find_events(v, settings, identity.length_m), who)
+        out[mmsi] = Judged(
+            events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, settings)
+        )
+    return out
 
 
 def last_report(v: VesselReports, settings: EventSettings) -> LastReport:

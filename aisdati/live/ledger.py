@@ -72,7 +72,7 @@ class Ledger:
         """The changes one judgement of a vessel's window brings."""
         known = self.known.setdefault(mmsi, [])
         changes, matched = [], set()
-        for row in judged.events.to_dict("records") if len(judged.events) else []:
+        for row in judged.events:
             start_s, end_s = row["start"].timestamp(), row["end"].timestamp()
             state = "open" if end_s >= judged.last_s and row["kind"] != "gap" else "closed"
             match = next((e for e in known if e.overlaps(row["kind"], start_s, end_s)), None)

@@ -89,7 +89,7 @@ class Watch:
         dirty = self.vessels.add(reports)
         if self.pacer is not None and reports.num_rows:
             self.pacer.wait(self.vessels.clock_us / 1e6)
-        changes = [c for mmsi in sorted(dirty) for c in self._judge(mmsi)]
+        changes = self._judge(sorted(dirty))
         changes += self._scan()
         self.store.write(changes, [self._position(m) for m in sorted(dirty) if m in self.last])
         self.counters.count(len(lines), reports.num_rows, len(changes))
@@ -97,13 +97,14 @@ class Watch:
             self.emit(changes)
         return changes
 
-    def _judge(self, mmsi: int) -> list[Change]:
-        one = self.vessels.recent[mmsi]
-        judged = judge(mmsi, self.vessels.window(mmsi), one.identity, self.settings, self.ingest)
-        if judged is None:
-            return []
-        self.last[mmsi] = judged.last
-        return self.ledger.update(mmsi, judged)
+    def _judge(self, dirty: list[int]) -> list[Change]:
+        """The vessels with new reports judged together, their changes in MMSI order."""
+        windows = {m: (self.vessels.window(m), self.vessels.recent[m].identity) for m in dirty}
+        changes = []
+        for mmsi, judged in judge(windows, self.settings, self.ingest).items():
+            self.last[mmsi] = judged.last
+            changes += self.ledger.update(mmsi, judged)
+        return changes
 
     def _scan(self) -> list[Change]:
         """Every `SCAN_S` of the feed's clock: gaps opened for vessels silent at sea, and the

@@ -7,8 +7,10 @@ import numpy as np
 import pyarrow as pa
 
 from aisdati.live.decode import Identity
+from aisdati.live.judge import cleaned
 from aisdati.live.vessels import Vessels
 from aisdati.preprocess.convert import PARTITION_SCHEMA
+from aisdati.preprocess.settings import IngestSettings
 
 
 def reports(mmsi: list[int], seconds: list[float]) -> pa.Table:
@@ -48,3 +50,22 @@ def test_identity_fields_not_given_are_kept():
     v.identify({7: Identity("FRIO", None, np.nan)})
     v.identify({7: Identity(None, "Tanker", 274.0)})
     assert v.recent[7].identity == Identity("FRIO", "Tanker", 274.0)
+
+
+def test_windows_cleaned_together_are_each_cleaned_alone():
+    """The chunk's vessels are cleaned in one pass (`judge.cleaned`): each keeps what it keeps
+    alone, a position outlier and a repeated time out, whatever the other vessels hold."""
+    v = Vessels()
+    v.add(reports([7] * 6 + [3] * 5, [0, 60, 120, 120, 180, 240, 0, 30, 60, 90, 120]))
+    windows = {m: v.window(m) for m in (7, 3)}
+    for cols in windows.values():  # ~7 kn east
+        cols["lon"][:] = 10.0 + 0.002 * np.arange(len(cols["lon"]))
+        cols["lat"][:] = 57.0
+    windows[7]["lat"][4] = 0.0  # 57 degrees south of the others: an outlier
+    together = cleaned(windows, IngestSettings())
+    for mmsi, cols in windows.items():
+        alone = cleaned({mmsi: cols}, IngestSettings())[mmsi]
+        assert together[mmsi].mmsi == mmsi
+        for name in ("time_s", "lon", "lat", "sog", "cog", "heading", "status"):
+            assert np.array_equal(getattr(together[mmsi], name), getattr(alone, name))
+    assert len(together[7]) == 4 and len(together[3]) == 5
