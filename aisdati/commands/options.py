@@ -553,3 +553,12 @@ class WatchOptions:
             "--json", help="Print each event change as one JSON line on stdout, and nothing else."
         ),
     ] = False
+    models_dir: Annotated[
+        str | None,
+        typer.Option(
+            "--models",
+            help="Model folder or URL (as `detect --models`): judge with the event thresholds "
+            "its models calibrated on their area's traffic instead of the defaults.",
+            show_default=False,
+        ),
+    ] = None

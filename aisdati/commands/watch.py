@@ -11,8 +11,11 @@ from typing import Any
 
 from aisdati.commands.common import err_console
 from aisdati.commands.options import WatchOptions
+from aisdati.detection.events import event_settings, uncalibrated_note
+from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
 from aisdati.events.kinds import KINDS
+from aisdati.events.settings import EventSettings
 from aisdati.live.ledger import Change
 from aisdati.live.loop import Watch
 from aisdati.live.serve import LiveState, start_server
@@ -21,6 +24,7 @@ from aisdati.live.store import open_store
 from aisdati.live.vessels import Vessels
 from aisdati.options import Range
 from aisdati.preprocess.settings import parse_duration
+from aisdati.storage import fetched_models
 
 PROGRESS_S = 5.0
 """Wall seconds between two progress lines on stderr."""
@@ -69,6 +73,20 @@ def check(o: WatchOptions) -> float:
     return parse_duration(o.window, "--window")
 
 
+def thresholds(models_dir: str | None) -> EventSettings:
+    """The event thresholds the watch judges by: the defaults, or those the models of
+    `models_dir` calibrated on their area's traffic, as `detect` judges with them (a model
+    from before calibration says so and keeps the defaults)."""
+    if models_dir is None:
+        return EventSettings()
+    with fetched_models(models_dir, [], "--models") as local:
+        models = load_detectors(local, [])
+    if note := uncalibrated_note(models):
+        say(note)
+    say(f"event thresholds of {len(models)} model(s) in {models_dir}")
+    return event_settings(models)
+
+
 def summary(w: Watch) -> str:
     return (
         f"{w.counters.lines:,} lines ({w.counters.rate():,.0f}/s), {w.counters.reports:,} "
@@ -79,6 +97,7 @@ def summary(w: Watch) -> str:
 
 def run(o: WatchOptions) -> None:
     window_s = check(o)
+    settings = thresholds(o.models_dir)
     chunks = open_source(o.source, say, paced=o.speed is not None)
     store, state, show = open_store(o.db), LiveState(), printer(o.as_json)
 
@@ -87,7 +106,7 @@ def run(o: WatchOptions) -> None:
         state.record(changes)
 
     watch = Watch(
-        store, Vessels(window_s=window_s, max_vessels=o.max_vessels),
+        store, Vessels(window_s=window_s, max_vessels=o.max_vessels), settings=settings,
         pacer=None if o.speed is None else Pacer(o.speed), emit=emit,
     )  # fmt: skip
     server = start_server(o.serve, state) if o.serve else None

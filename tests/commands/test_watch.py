@@ -14,9 +14,15 @@ import sys
 
 import pandas as pd
 
+from aisdati.commands import watch as watch_command
+from aisdati.detection.events import event_settings
+from aisdati.detectors import load_detectors
+from aisdati.events.settings import EventSettings
 from aisdati.live.decode import Decoder
+from aisdati.live.loop import Watch
 from tests.helpers.cli import one_line_error, run
 from tests.helpers.live import EVENTS, FRIO, ROOT, Feed, events, poll, stopped, watch
+from tests.helpers.models import train_ny_nearest
 
 FIELDS = ["kind", "start", "end", "n_reports", "strength", "evidence"]
 
@@ -129,3 +135,24 @@ def test_option_mistakes_are_one_line(tmp_path):
     one_line_error(run("watch", "--input", tmp_path / "none.ais", "--db", db), "not found")
     one_line_error(run("watch", "--input", FRIO, "--serve", "nope", "--db", db), "HOST:PORT")
     one_line_error(run("watch", "--input", FRIO, "--window", "x", "--db", db), "--window")
+
+
+def test_models_give_the_thresholds_they_calibrated(tmp_path, monkeypatch):
+    """`--models`: the watch judges by the event thresholds the NY hour's nearest model
+    calibrated on its training traffic (as `detect` judges with it), not the defaults; FRIO's
+    drift, a kind no model calibrates, is the same; a folder without models is one line."""
+    world = train_ny_nearest(tmp_path)
+    calibrated = event_settings(load_detectors(world["models"], []))
+    assert calibrated != EventSettings()
+    used = []
+    monkeypatch.setattr(
+        watch_command, "Watch", lambda *a, **k: used.append(k["settings"]) or Watch(*a, **k)
+    )
+    live = replayed(tmp_path / "models", FRIO, "--models", world["models"])
+    assert used == [calibrated]
+    pd.testing.assert_frame_equal(live, replayed(tmp_path / "defaults", FRIO))
+    got = run("watch", "--input", FRIO, "--models", world["models"], "--db", tmp_path / "w.db")
+    assert "event thresholds of 1 model(s)" in " ".join(got.stderr.split())
+    one_line_error(
+        run("watch", "--input", FRIO, "--models", tmp_path, "--db", tmp_path / "x.db"), "no models"
+    )
