@@ -6,14 +6,16 @@ a tag block with its time, as a receiver logs them. Three measurements:
 
 * throughput: the whole feed as fast as possible through `Watch.step` (decode, ingest's
   checks, every vessel judged once per chunk of `sources.REPLAY_LINES` lines by the model-free
-  kinds, events into SQLite), and decoding alone beside it;
+  kinds, with `--models DIR` its area model's judgement every `area.EVERY` reports too, events
+  into SQLite), and decoding alone beside it;
 * latency at rising rates: lines arrive on a schedule of N per second; each pass of the loop
   takes every line arrived by then (as a socket's read does); a line's latency is from its
   arrival to its chunk's changes committed: percentiles over the lines;
 * memory: 20,000 vessels each with a full window of reports (3 hours every 30 s), held by
   `Vessels`; its bytes and the process's peak RSS.
 
-Run: python benchmarks/watch_speed.py [--rates 1000,5000,20000] [--seconds 8] [--json PATH]
+Run: python benchmarks/watch_speed.py [--rates 1000,5000,20000] [--seconds 8] [--models DIR]
+[--json PATH]
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ import pyarrow as pa
 from pyais.encode import encode_dict
 from report import Report, add_json_option  # (this folder: run as a script)
 
+from aisdati.detectors import load_detectors
+from aisdati.live.area import AreaJudge
 from aisdati.live.decode import Decoder
 from aisdati.live.loop import Watch
 from aisdati.live.sources import REPLAY_LINES
@@ -61,8 +65,8 @@ def feed() -> list[bytes]:
     return lines
 
 
-def throughput(lines: list[bytes], folder: Path) -> dict:
-    watch = Watch(open_store(str(folder / "fast.sqlite")))
+def throughput(lines: list[bytes], folder: Path, area: AreaJudge | None = None) -> dict:
+    watch = Watch(open_store(str(folder / "fast.sqlite")), area=area)
     t0 = time.perf_counter()
     for k in range(0, len(lines), REPLAY_LINES):
         watch.step(lines[k : k + REPLAY_LINES])
@@ -122,18 +126,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rates", default="1000,5000,20000")
     ap.add_argument("--seconds", type=float, default=8.0, help="wall seconds of each rate")
+    ap.add_argument("--models", type=Path, help="a folder with an area model: judged with it")
     add_json_option(ap, "watch_speed")
     args = ap.parse_args()
     lines = feed()
     with Report.from_args("watch_speed", args) as report, tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        fast = throughput(lines, folder)
+        area = AreaJudge.of(load_detectors(args.models, [])) if args.models else None
+        fast = throughput(lines, folder, area)
         table = report.table(["measure", "value"], title="watch: throughput (one core)")
         table.row(
             ["messages (vessels held at the end)", f"{fast['messages']:,} ({fast['vessels']})"],
             fast,
         )
-        table.row(["decoded and judged", f"{fast['judged_per_s']:,.0f} msg/s"])
+        judged = "decoded and judged" + (" (area model too)" if area else "")
+        table.row([judged, f"{fast['judged_per_s']:,.0f} msg/s"])
         table.row(["decoded only", f"{fast['decoded_per_s']:,.0f} msg/s"])
         columns = ["rate msg/s", "achieved", "p50 s", "p95 s", "p99 s", "max s"]
         table = report.table(columns, title="watch: latency, arrival to committed")

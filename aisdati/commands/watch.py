@@ -16,6 +16,7 @@ from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
 from aisdati.events.kinds import KINDS
 from aisdati.events.settings import EventSettings
+from aisdati.live.area import AreaJudge
 from aisdati.live.ledger import Change
 from aisdati.live.loop import Watch
 from aisdati.live.serve import LiveState, start_server
@@ -73,18 +74,21 @@ def check(o: WatchOptions) -> float:
     return parse_duration(o.window, "--window")
 
 
-def thresholds(models_dir: str | None) -> EventSettings:
-    """The event thresholds the watch judges by: the defaults, or those the models of
-    `models_dir` calibrated on their area's traffic, as `detect` judges with them (a model
-    from before calibration says so and keeps the defaults)."""
+def judging(models_dir: str | None) -> tuple[EventSettings, AreaJudge | None]:
+    """What the watch judges by: the event thresholds (the defaults, or those the models of
+    `models_dir` calibrated on their area's traffic, as `detect` judges with them; a model from
+    before calibration says so and keeps the defaults), and its area models (`--cluster all`),
+    which judge each vessel's window; route and cluster models give only thresholds."""
     if models_dir is None:
-        return EventSettings()
+        return EventSettings(), None
     with fetched_models(models_dir, [], "--models") as local:
         models = load_detectors(local, [])
     if note := uncalibrated_note(models):
         say(note)
-    say(f"event thresholds of {len(models)} model(s) in {models_dir}")
-    return event_settings(models)
+    area = AreaJudge.of(models)
+    judged = f"; {len(area.models)} area model(s) judge the vessels' windows" if area else ""
+    say(f"event thresholds of {len(models)} model(s) in {models_dir}{judged}")
+    return event_settings(models), area
 
 
 def summary(w: Watch) -> str:
@@ -97,7 +101,7 @@ def summary(w: Watch) -> str:
 
 def run(o: WatchOptions) -> None:
     window_s = check(o)
-    settings = thresholds(o.models_dir)
+    settings, area = judging(o.models_dir)
     chunks = open_source(o.source, say, paced=o.speed is not None)
     store, state, show = open_store(o.db), LiveState(), printer(o.as_json)
 
@@ -107,7 +111,7 @@ def run(o: WatchOptions) -> None:
 
     watch = Watch(
         store, Vessels(window_s=window_s, max_vessels=o.max_vessels), settings=settings,
-        pacer=None if o.speed is None else Pacer(o.speed), emit=emit,
+        pacer=None if o.speed is None else Pacer(o.speed), emit=emit, area=area,
     )  # fmt: skip
     server = start_server(o.serve, state) if o.serve else None
     try:

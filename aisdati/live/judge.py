@@ -41,13 +41,16 @@ class LastReport:
 
 @dataclass(frozen=True)
 class Judged:
-    """A vessel's events found in its window (records of events.parquet's columns), and the
-    window's first and last report time."""
+    """A vessel's events found in its window (records of events.parquet's columns), the
+    window's first and last report time, its cleaned reports (what an area model judges), and
+    the kinds not looked for this time (their open events stay as they are)."""
 
     events: list[dict[str, Any]]
     first_s: float
     last_s: float
     last: LastReport
+    reports: VesselReports
+    unjudged: frozenset[str] = frozenset()
 
 
 def cleaned(
@@ -106,7 +109,7 @@ def judge(
         who = {"name": identity.name, "ship_type": identity.ship_type}
         events = placed_rows(v, find_events(v, settings, identity.length_m), who)
         out[mmsi] = Judged(
-            events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, settings)
+            events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, settings), v
         )
     return out
 

@@ -84,7 +84,11 @@ class Ledger:
                 changes.append(Change.of(change, match))
             matched.add(match.event_id)
         for e in known:
-            if e.state == "open" and e.event_id not in matched:
+            if (
+                e.state == "open"
+                and e.event_id not in matched
+                and e.fields["kind"] not in judged.unjudged
+            ):
                 e.state = "closed"  # its condition ended and nothing in the window says more
                 changes.append(Change.of("closed", e))
         self.known[mmsi] = [e for e in known if e.state == "open" or e.span_s[1] >= judged.first_s]

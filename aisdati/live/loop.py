@@ -7,14 +7,15 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import pandas as pd
 
 from aisdati.events.settings import EventSettings
+from aisdati.live.area import AreaJudge
 from aisdati.live.decode import Decoder
-from aisdati.live.judge import LastReport, judge
+from aisdati.live.judge import Judged, LastReport, judge
 from aisdati.live.ledger import Change, Ledger
 from aisdati.live.sources import Pacer
 from aisdati.live.store import Store
@@ -24,6 +25,8 @@ from aisdati.tracks.ashore import AshoreCheck
 
 SCAN_S = 60.0
 """Feed seconds between two looks for silent vessels and vessels to forget."""
+OFF_TRAFFIC = "off-traffic"
+"""The learned kind: looked for only when the area models judge a vessel's window."""
 RATE_S = 5.0
 """Wall seconds over which messages/s is measured."""
 
@@ -67,6 +70,8 @@ class Watch:
     last: dict[int, LastReport] = field(default_factory=dict)
     scanned_s: float = 0.0
     ashore: AshoreCheck = field(default_factory=AshoreCheck)
+    area: AreaJudge | None = None
+    """The area models judging each vessel's window every `area.EVERY` reports (None: none)."""
 
     def __post_init__(self) -> None:
         self.ledger = Ledger(self.settings)
@@ -99,12 +104,28 @@ class Watch:
 
     def _judge(self, dirty: list[int]) -> list[Change]:
         """The vessels with new reports judged together, their changes in MMSI order."""
+        new = {m: self.vessels.recent[m].new for m in dirty}
         windows = {m: (self.vessels.window(m), self.vessels.recent[m].identity) for m in dirty}
+        judged = judge(windows, self.settings, self.ingest)
+        learned = self._learned(judged, new)
         changes = []
-        for mmsi, judged in judge(windows, self.settings, self.ingest).items():
-            self.last[mmsi] = judged.last
-            changes += self.ledger.update(mmsi, judged)
+        for mmsi, one in judged.items():
+            self.last[mmsi] = one.last
+            if mmsi in learned:
+                one = replace(one, events=one.events + learned[mmsi])
+            else:
+                one = replace(one, unjudged=frozenset({OFF_TRAFFIC}))
+            changes += self.ledger.update(mmsi, one)
         return changes
+
+    def _learned(self, judged: dict[int, Judged], new: dict[int, int]) -> dict[int, list[dict]]:
+        """The off-traffic events of the vessels the area models judge this chunk (all scored
+        together), by MMSI; a vessel left out was not judged by them."""
+        if self.area is None:
+            return {}
+        due = [m for m in self.area.due({m: new[m] for m in judged}) if m in judged]
+        who = {m: self.vessels.recent[m].identity for m in due}
+        return self.area.judge({m: judged[m].reports for m in due}, who)
 
     def _scan(self) -> list[Change]:
         """Every `SCAN_S` of the feed's clock: gaps opened for vessels silent at sea, and the
@@ -121,6 +142,8 @@ class Watch:
                 changes.append(change)
         for mmsi in self.vessels.forget():
             self.last.pop(mmsi, None)
+            if self.area is not None:
+                self.area.forget(mmsi)
             changes += self.ledger.forget(mmsi)
         return changes
 
