@@ -9,6 +9,7 @@ reports.parquet keeps what the paper's SOG filter keeps out of the tracks."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,6 +21,7 @@ from aisdati.events.find import EVENT_COLUMNS, find_events, placed
 from aisdati.events.reports import vessels
 from aisdati.events.settings import EventSettings
 from aisdati.events.stretch import deviation_stretch
+from aisdati.tracks.reports import read_reports
 from aisdati.tracks.store import Track
 
 NO_IDENTITY = {"name": None, "ship_type": None, "length_m": np.nan}
@@ -49,15 +51,15 @@ def uncalibrated_note(models: Sequence[Detector]) -> str | None:
 
 
 def judged_reports(
-    reports: pd.DataFrame, tracks: Sequence[Track], training: Sequence[int], every: bool
+    data_dir: Path, tracks: Sequence[Track], training: Sequence[int], every: bool
 ) -> pd.DataFrame:
-    """The reports to judge of those read (`aisdati.tracks.reports.read_reports`): `every`
-    (no model, or the whole area): all in the judged tracks' span but the training tracks';
-    else only the judged tracks'."""
-    track_id = reports["track_id"].fillna(-1).astype("int64")
+    """The reports to judge of an ingest output (`aisdati.tracks.reports.read_reports`):
+    `every` (the whole area): all in the judged tracks' span but the training tracks'; else
+    only the judged tracks' (read alone)."""
     if not every:
-        return reports[track_id.isin([t.track_id for t in tracks])]
-    keep = ~track_id.isin(list(training))
+        return read_reports(data_dir, [t.track_id for t in tracks])
+    reports = read_reports(data_dir)
+    keep = ~reports["track_id"].fillna(-1).astype("int64").isin(list(training))
     if tracks:
         first = min(t.start for t in tracks)
         last = max(t.start + pd.Timedelta(hours=float(np.sum(t.dts))) for t in tracks)
@@ -73,12 +75,12 @@ def model_free_events(
 ) -> pd.DataFrame:
     """Every model-free event of every vessel of `reports` (`identity`: vessels.parquet by
     MMSI; `seen`: where training traffic reported ashore)."""
-    frames = [
-        placed(v, find_events(v, settings, _who(identity, v.mmsi)["length_m"], seen),
-               _who(identity, v.mmsi))
-        for v in vessels(reports)
-    ]  # fmt: skip
-    frames = [f for f in frames if len(f)]
+    frames = []
+    for v in vessels(reports):
+        who = _who(identity, v.mmsi)
+        found = find_events(v, settings, who["length_m"], seen)
+        if found:
+            frames.append(placed(v, found, who))
     return pd.concat(frames, ignore_index=True) if frames else empty_events()
 
 

@@ -283,8 +283,9 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     names = [models[o].name for o in owner]
     scores = score_table(tracks, names, raw, threshold, profiles, ashore)
     t2 = time.perf_counter()
-    events, judged = _events(settings, models, tracks, scores, profiles, coverage)
-    scores = with_identity(with_events(scores, events), read_vessels(settings.data_dir))
+    identity = read_vessels(settings.data_dir)
+    events, judged = _events(settings, models, tracks, scores, profiles, coverage, identity)
+    scores = with_identity(with_events(scores, events), identity)
     timings["events_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     judging = [m for m in models if m.name in set(scores["model"])]
@@ -305,14 +306,12 @@ def _events(
     scores: pd.DataFrame,
     profiles: Sequence[np.ndarray],
     coverage: Coverage,
+    identity: pd.DataFrame,
 ) -> tuple[pd.DataFrame, int]:
-    """The detection's events (`aisdati.detection.events`) and the reports they judged."""
-    identity = read_vessels(settings.data_dir)
+    """The detection's events (`aisdati.detection.events`) and the reports they judged
+    (`identity`: vessels.parquet)."""
     every = settings.cluster == AREA and not settings.track_ids
-    reports = judged_reports(
-        read_reports(settings.data_dir, None if every else [t.track_id for t in tracks]),
-        tracks, coverage.training, every,
-    )  # fmt: skip
+    reports = judged_reports(settings.data_dir, tracks, coverage.training, every)
     seen = [np.asarray(m.card.data.ashore, np.float64).reshape(-1, 2) for m in models]
     how = event_settings([m for m in models if m.name in set(scores["model"])])
     free = model_free_events(reports, identity, np.concatenate(seen) if seen else None, how)

@@ -11,7 +11,7 @@ import pandas as pd
 from aisdati.detection.events import judged_reports, unseen_route_events
 from aisdati.detectors import load_detector
 from aisdati.geo import moved_m
-from aisdati.tracks.reports import read_reports, read_vessels
+from aisdati.tracks.reports import read_vessels
 from tests.helpers.area import save_nearest
 
 
@@ -34,9 +34,8 @@ def test_a_track_bound_where_no_training_track_went_is_an_event(months, kitimat,
 
 def test_the_judged_reports_leave_the_training_tracks_out(months, kitimat):
     july, august, _ = months
-    reports = read_reports(kitimat)
-    every = judged_reports(reports, august, [t.track_id for t in july], every=True)
+    every = judged_reports(kitimat, august, [t.track_id for t in july], every=True)
     assert not every["track_id"].isin([t.track_id for t in july]).any()
     assert every["time"].min() >= min(t.start for t in august)
-    chosen = judged_reports(reports, august[:3], [], every=False)
+    chosen = judged_reports(kitimat, august[:3], [], every=False)
     assert set(chosen["track_id"]) == {t.track_id for t in august[:3]}
