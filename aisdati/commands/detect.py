@@ -125,6 +125,7 @@ def detect_settings(o: DetectOptions) -> DetectSettings:
         top_percent=o.top_percent,
         contamination=o.contamination,
         near_km=o.near_km,
+        alerts_per_1000=o.alerts_per_1000,
         labels=o.labels,
         device=resolve_device(o.device),
     )

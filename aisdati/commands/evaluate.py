@@ -159,6 +159,8 @@ def evaluate_one(
         return
     console.print(results_table(result, console.width))
     console.print(events_table(result.event_table))
+    if result.alerts is not None:
+        console.print(alerts_line(result.alerts))
     if settings.ashore:
         n = ashore_summary(result.scores)
         console.print(
@@ -241,3 +243,22 @@ def _with_ci(row: dict[str, Any], name: str, fmt: str = "{:.2f}") -> str:
     low, high = row.get(f"{name}_ci") or (None, None)
     interval = f" [{fmt.format(low)}-{fmt.format(high)}]" if low is not None else ""
     return fmt.format(value) + interval
+
+
+def alerts_line(alerts: dict) -> str:
+    """The measure of record in one paragraph: what the analyst would have met on the later
+    period's untouched traffic (`aisdati.evaluation.events.forward_alerts`)."""
+    low, high = alerts["alerts_per_1000_ci"]
+    kinds = ", ".join(
+        f"{kind} {row['per_1000']:.1f}"
+        for kind, row in alerts["by_kind"].items()
+        if row["class"] == "alert"
+    )
+    share = 100 * (alerts["tracks_flagged_share"] or 0.0)
+    return (
+        f"untouched later traffic ({alerts['vessel_days']:,.0f} vessel-days, every report): "
+        f"{alerts['alerts']} alerts, {alerts['alerts_per_1000']:.1f} per 1,000 vessel-days "
+        f"[{low:.1f}, {high:.1f}] ({kinds or 'none'}); {alerts['tracks_flagged']} of "
+        f"{alerts['tracks']} tracks ({share:.1f} %) flagged by an alert; "
+        f"{alerts['activity_per_1000']:.0f} activities per 1,000 vessel-days"
+    )

@@ -15,6 +15,7 @@ from typing import Annotated
 import typer
 
 from aisdati.ais import AREA_PRESET, DEFAULT_PRESET
+from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.tracks.ashore import AshoreCheck
 
 _RULE = AshoreCheck()
@@ -453,6 +454,18 @@ class DetectOptions:
             "other tracks judged with it.",
         ),
     ] = 0.05
+    alerts_per_1000: Annotated[
+        float,
+        typer.Option(
+            "--alerts-per-1000",
+            help="The alert budget: the alerts that need no model (position jumps, inconsistent "
+            "speed or course, drift, sudden speed change, ashore) are raised at the thresholds "
+            "that would have raised this many per 1,000 vessel-days on the models' training "
+            "period, so next month's rate lands near it; tracks are flagged by --contamination "
+            "and by any alert. Models from before the budget, and --models none, use the "
+            "documented defaults. Activity (loitering, gaps) is listed and flags nothing.",
+        ),
+    ] = ALERTS_PER_1000
     threshold: Annotated[
         float | None,
         typer.Option(

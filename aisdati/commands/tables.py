@@ -13,6 +13,8 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
+from aisdati.events.kinds import ALERT
+from aisdati.events.table import ranked
 from aisdati.preprocess.report import REASONS, IngestCounts
 from aisdati.scores import Score
 from aisdati.scores import score as score_named
@@ -345,9 +347,16 @@ def detection_row(r: Any, kind: Score, several: bool, ashore: bool) -> list[str]
 
 
 def events_table(events: pd.DataFrame, limit: int = 20) -> Table:
-    """The events found, in time order: which vessel did what, from when, for how long, where,
-    and how far over its threshold (strength 1 = at it)."""
-    title = f"{len(events)} event(s)" if len(events) else "no events"
+    """The events found, what to look at first (`ranked`: alerts, rarest first, then activity):
+    which vessel did what, from when, for how long, where, and how far over its threshold
+    (strength 1 = at it)."""
+    alerts = int((events["class"] == ALERT).sum()) if len(events) else 0
+    title = (
+        f"{alerts} alert(s), {len(events) - alerts} activity event(s)"
+        if len(events)
+        else "no events"
+    )
+    events = ranked(events) if len(events) else events
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     for col in ("kind", "vessel", "start (UTC)", "for", "at (lat, lon)", "x thr", "evidence"):
         table.add_column(col, overflow="fold", justify="right" if col == "x thr" else "left")

@@ -11,11 +11,11 @@ from typing import Any
 
 from aisdati.commands.common import err_console
 from aisdati.commands.options import WatchOptions
-from aisdati.detection.events import event_settings, uncalibrated_note
+from aisdati.detection.events import event_thresholds, uncalibrated_note
 from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
+from aisdati.events.budget import Thresholds
 from aisdati.events.kinds import KINDS
-from aisdati.events.settings import EventSettings
 from aisdati.live.area import AreaJudge
 from aisdati.live.ledger import Change
 from aisdati.live.loop import Watch
@@ -74,13 +74,14 @@ def check(o: WatchOptions) -> float:
     return parse_duration(o.window, "--window")
 
 
-def judging(models_dir: str | None) -> tuple[EventSettings, AreaJudge | None]:
-    """What the watch judges by: the event thresholds (the defaults, or those the models of
-    `models_dir` calibrated on their area's traffic, as `detect` judges with them; a model from
-    before calibration says so and keeps the defaults), and its area models (`--cluster all`),
-    which judge each vessel's window; route and cluster models give only thresholds."""
+def judging(models_dir: str | None) -> tuple[Thresholds, AreaJudge | None]:
+    """What the watch judges by: the alert thresholds (the defaults, or those of the alert
+    budget the models of `models_dir` calibrated on their training period, as `detect` judges
+    with them; a model from before the budget says so and keeps the defaults), and its area
+    models (`--cluster all`), which judge each vessel's window; route and cluster models give
+    only thresholds."""
     if models_dir is None:
-        return EventSettings(), None
+        return Thresholds(), None
     with fetched_models(models_dir, [], "--models") as local:
         models = load_detectors(local, [])
     if note := uncalibrated_note(models):
@@ -88,7 +89,7 @@ def judging(models_dir: str | None) -> tuple[EventSettings, AreaJudge | None]:
     area = AreaJudge.of(models)
     judged = f"; {len(area.models)} area model(s) judge the vessels' windows" if area else ""
     say(f"event thresholds of {len(models)} model(s) in {models_dir}{judged}")
-    return event_settings(models), area
+    return event_thresholds(models), area
 
 
 def summary(w: Watch) -> str:
@@ -101,7 +102,7 @@ def summary(w: Watch) -> str:
 
 def run(o: WatchOptions) -> None:
     window_s = check(o)
-    settings, area = judging(o.models_dir)
+    thresholds, area = judging(o.models_dir)
     chunks = open_source(o.source, say, paced=o.speed is not None)
     store, state, show = open_store(o.db), LiveState(), printer(o.as_json)
 
@@ -110,7 +111,7 @@ def run(o: WatchOptions) -> None:
         state.record(changes)
 
     watch = Watch(
-        store, Vessels(window_s=window_s, max_vessels=o.max_vessels), settings=settings,
+        store, Vessels(window_s=window_s, max_vessels=o.max_vessels), thresholds=thresholds,
         pacer=None if o.speed is None else Pacer(o.speed), emit=emit, area=area,
     )  # fmt: skip
     server = start_server(o.serve, state) if o.serve else None

@@ -53,11 +53,15 @@ L.geoJSON(L_.deviations, {
 overlays[D.names.flagged] = flagged;
 if (D.optional.stretches) overlays[D.names.stretches] = lines(D.optional.stretches,
   {color: '#ff7f0e', weight: 6, opacity: 0.8}, false);
+// alerts orange and solid, activity (loitering, gaps: listed, flagging nothing) blue and dashed
+const eventStyle = f => f.properties.class === 'alert'
+  ? {color: '#e6550d', weight: 7, opacity: 0.85}
+  : {color: '#3182bd', weight: 4, opacity: 0.7, dashArray: '6'};
 if (D.optional.events) overlays[D.names.events] = L.geoJSON(D.optional.events, {
-  style: {color: '#e6550d', weight: 7, opacity: 0.85},
-  pointToLayer: (f, ll) => L.circleMarker(ll, {radius: 7, color: '#e6550d', weight: 3}),
+  style: eventStyle,
+  pointToLayer: (f, ll) => L.circleMarker(ll, {radius: 7, weight: 3, ...eventStyle(f)}),
   onEachFeature: (f, layer) => {
-    layer.bindTooltip(`${f.properties.label}: ${f.properties.mmsi} from ${f.properties.start}`, {sticky: true});
+    layer.bindTooltip(`${f.properties.class}, ${f.properties.label}: ${f.properties.mmsi} from ${f.properties.start}`, {sticky: true});
     layer.bindPopup(() => table(f.properties));
   },
 });

@@ -1,10 +1,14 @@
-"""A detection's events: the model-free kinds over the judged reports, the learned kind
-(off-traffic) over the tracks the model flags; a track is flagged when it has an event.
+"""A detection's events: the model-free kinds over each judged vessel's reports, the learned
+kinds (off-traffic, unseen-route) over the tracks the models judge; a track is flagged when it
+has an alert (`aisdati.events.kinds`: activity flags nothing).
 
-Which reports are judged: with a model, every report of the judged tracks' time span but the
-models' own training tracks (`--cluster all`), or the reports of the chosen tracks; with no
-model, every report of the ingest output. Slow reports are judged with the rest:
-reports.parquet keeps what the paper's SOG filter keeps out of the tracks."""
+An event is a function of its vessel's reports alone: each judged vessel's reports are read
+whole from the ingest output and its events found over them; those that overlap what is judged
+are kept (with a model: the judged tracks' time span for the whole area, each judged track's
+span for a route or `--track`, never an event on the models' own training tracks; with no
+model, every report). So a track's events are the same alone, in any batch and live. Slow
+reports are judged with the rest: reports.parquet keeps what the paper's SOG filter keeps out
+of the tracks."""
 
 from __future__ import annotations
 
@@ -16,71 +20,92 @@ import pandas as pd
 
 from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
-from aisdati.events.calibrate import EVENT_RATE, KEY, calibrated
+from aisdati.events.budget import ALERTS_PER_1000, Thresholds
+from aisdati.events.calibrate import is_calibrated, thresholds_of
 from aisdati.events.find import EVENT_COLUMNS, find_events, placed
+from aisdati.events.kinds import ALERT, KINDS
 from aisdati.events.reports import vessels
-from aisdati.events.settings import EventSettings
 from aisdati.events.stretch import deviation_stretch
 from aisdati.tracks.reports import read_reports
 from aisdati.tracks.store import Track
 
 NO_IDENTITY = {"name": None, "ship_type": None, "length_m": np.nan}
+UNSEEN_RATE = 0.01
+"""The share of its training tracks' own origin-destination distances an unseen route must
+exceed."""
 
 
-def event_settings(models: Sequence[Detector]) -> EventSettings:
-    """The event thresholds of the judging models' areas (`aisdati.events.calibrate`): their
-    training tracks' statistics pooled; the defaults for a model from before them."""
-    pooled: dict[str, list[float]] = {}
-    for model in models:
-        for key, values in model.card.calibration.items():
-            if key.startswith(KEY):
-                pooled.setdefault(key, []).extend(values)
-    return calibrated(pooled)
+def event_thresholds(models: Sequence[Detector], budget: float = ALERTS_PER_1000) -> Thresholds:
+    """The alert thresholds of `budget` calibrated on the judging models' training periods
+    (`aisdati.events.calibrate`); the defaults for models from before the budget."""
+    return thresholds_of([m.card.calibration for m in models], budget)
 
 
 def uncalibrated_note(models: Sequence[Detector]) -> str | None:
-    """The warning models trained before event calibration earn: their events are judged by
+    """The warning models trained before the alert budget earn: their alerts are judged by
     the defaults, not by their area's traffic."""
-    old = [m.name for m in models if not any(k.startswith(KEY) for k in m.card.calibration)]
+    old = [m.name for m in models if not is_calibrated(m.card.calibration)]
     if not old:
         return None
     return (
-        f"{', '.join(old)} predate(s) event calibration: the events' thresholds are the "
-        "defaults, not the area's; retrain to calibrate them on its training tracks"
+        f"{', '.join(old)} predate(s) the alert budget: the alerts' thresholds are the "
+        "defaults, not the area's; retrain to calibrate them on its training period"
     )
 
 
-def judged_reports(
-    data_dir: Path, tracks: Sequence[Track], training: Sequence[int], every: bool
+def judged_windows(tracks: Sequence[Track], every: bool) -> pd.DataFrame:
+    """What is judged, per vessel (mmsi, start, end): `every` (the whole area): every vessel
+    over the judged tracks' span (mmsi -1: any vessel); else each judged track's span."""
+    ends = [t.start + pd.Timedelta(hours=float(np.sum(t.dts))) for t in tracks]
+    if every:
+        first = min((t.start for t in tracks), default=pd.Timestamp.min.tz_localize("UTC"))
+        last = max(ends, default=pd.Timestamp.max.tz_localize("UTC"))
+        return pd.DataFrame({"mmsi": [-1], "start": [first], "end": [last]})
+    return pd.DataFrame(
+        {"mmsi": [t.mmsi for t in tracks], "start": [t.start for t in tracks], "end": ends}
+    )
+
+
+def judged_reports(data_dir: Path, windows: pd.DataFrame) -> pd.DataFrame:
+    """The whole reports of every vessel `windows` judge (all vessels where one window is for
+    any vessel), so that each vessel's events are found over its own reports."""
+    wanted = None if (windows["mmsi"] == -1).any() else sorted(set(windows["mmsi"]))
+    return read_reports(data_dir, mmsis=wanted)
+
+
+def within(
+    events: pd.DataFrame, windows: pd.DataFrame, training: Sequence[int] = ()
 ) -> pd.DataFrame:
-    """The reports to judge of an ingest output (`aisdati.tracks.reports.read_reports`):
-    `every` (the whole area): all in the judged tracks' span but the training tracks'; else
-    only the judged tracks' (read alone)."""
-    if not every:
-        return read_reports(data_dir, [t.track_id for t in tracks])
-    reports = read_reports(data_dir)
-    keep = ~reports["track_id"].fillna(-1).astype("int64").isin(list(training))
-    if tracks:
-        first = min(t.start for t in tracks)
-        last = max(t.start + pd.Timedelta(hours=float(np.sum(t.dts))) for t in tracks)
-        keep &= (reports["time"] >= first) & (reports["time"] <= last)
-    return reports[keep]
+    """The events that overlap a window of their vessel (`judged_windows`) and are not placed
+    on a training track."""
+    if not len(events):
+        return events
+    keep = np.zeros(len(events), bool)
+    start, end = pd.to_datetime(events["start"], utc=True), pd.to_datetime(events["end"], utc=True)
+    for w in windows.itertuples():
+        mine = (events["mmsi"] == w.mmsi) if w.mmsi != -1 else True
+        keep |= np.asarray(mine & (start <= w.end) & (end >= w.start), bool)
+    on_training = events["track_id"].isin(list(training)).to_numpy()
+    return events[keep & ~on_training].reset_index(drop=True)
 
 
 def model_free_events(
     reports: pd.DataFrame,
     identity: pd.DataFrame,
     seen: np.ndarray | None = None,
-    settings: EventSettings = EventSettings(),
+    thresholds: Thresholds = Thresholds(),
+    reported_motion: bool = True,
 ) -> pd.DataFrame:
     """Every model-free event of every vessel of `reports` (`identity`: vessels.parquet by
-    MMSI; `seen`: where training traffic reported ashore)."""
+    MMSI; `seen`: where training traffic reported ashore; `reported_motion`: False where
+    ingest derived SOG/COG from positions, `aisdati.tracks.reports.motion_derived`)."""
     frames = []
     for v in vessels(reports):
         who = _who(identity, v.mmsi)
-        found = find_events(v, settings, who["length_m"], seen)
+        found = find_events(v, thresholds, length_m=who["length_m"], seen=seen,
+                            reported_motion=reported_motion)  # fmt: skip
         if found:
-            frames.append(placed(v, found, who))
+            frames.append(placed(v, found, who, thresholds))
     return pd.concat(frames, ignore_index=True) if frames else empty_events()
 
 
@@ -126,8 +151,8 @@ def unseen_route_events(
 ) -> pd.DataFrame:
     """Tracks bound where no training track of their judging model went: the origin-destination
     distance (`aisdati.detection.routing.reach_km`) over the larger of `near_km` and the
-    (1 - `EVENT_RATE`) quantile of the training tracks' own distances to each other; the event
-    spans the track, placed at its end. Cards that do not record ends are left out."""
+    (1 - `UNSEEN_RATE`) quantile of the training tracks' own distances to each other;
+    the event spans the track, placed at its end. Cards that do not record ends are left out."""
     by_name = {m.name: m for m in models}
     limits = {name: _unseen_limit(m, near_km) for name, m in by_name.items()}
     rows = []
@@ -151,7 +176,7 @@ def _unseen_limit(model: Detector, near_km: float) -> float | None:
     if data.ends is None or len(data.starts) < 2:
         return None
     own = od_distances(data.starts, data.ends, data.starts, data.ends, leave_one_out=True)
-    return max(near_km, float(np.quantile(own, 1.0 - EVENT_RATE)) / 1000.0)
+    return max(near_km, float(np.quantile(own, 1.0 - UNSEEN_RATE)) / 1000.0)
 
 
 def _track_event(
@@ -171,10 +196,12 @@ def _track_event(
     times = (track.start + hours).round("us")
     return {
         "mmsi": track.mmsi, "name": who["name"], "ship_type": who["ship_type"], "kind": kind,
+        "class": KINDS[kind].cls,
         "start": times[a], "end": times[b], "duration_s": (times[b] - times[a]).total_seconds(),
         "n_reports": b - a + 1, "lon": float(track.positions[peak, 0]),
         "lat": float(track.positions[peak, 1]), "track_id": track.track_id,
-        "strength": round(strength, 3), "evidence": evidence, "model": model,
+        "strength": round(strength, 3), "rarity_days": None, "evidence": evidence,
+        "model": model,
         "lons": track.positions[a : b + 1, 0].tolist(),
         "lats": track.positions[a : b + 1, 1].tolist(),
     }  # fmt: skip
@@ -194,15 +221,19 @@ def with_identity(scores: pd.DataFrame, identity: pd.DataFrame) -> pd.DataFrame:
 
 
 def with_events(scores: pd.DataFrame, events: pd.DataFrame) -> pd.DataFrame:
-    """`scores` with each track's number of events and kinds, flagged where it has one."""
+    """`scores` with each track's number of events, of alerts, and their kinds, flagged where it
+    has an alert (an activity flags nothing)."""
     on_track = events.dropna(subset=["track_id"])
-    per = on_track.groupby(on_track["track_id"].astype("int64"))["kind"]
-    counts = per.size()
-    kinds = per.agg(lambda k: ", ".join(sorted(set(k))))
+    ids = on_track["track_id"].astype("int64")
+    counts = on_track.groupby(ids).size()
+    alerts = on_track[on_track["class"] == ALERT]
+    per_alert = alerts.groupby(alerts["track_id"].astype("int64"))["kind"]
+    kinds = on_track.groupby(ids)["kind"].agg(lambda k: ", ".join(sorted(set(k))))
     out = scores.copy()
     out["events"] = out["track_id"].map(counts).fillna(0).astype("int64")
+    out["alerts"] = out["track_id"].map(per_alert.size()).fillna(0).astype("int64")
     out["event_kinds"] = out["track_id"].map(kinds).astype(object).where(lambda k: k.notna(), "")
-    out["flagged"] = out["flagged"] | (out["events"] > 0)
+    out["flagged"] = out["flagged"] | (out["alerts"] > 0)
     return out
 
 

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.errors import UserError
-from aisdati.evaluation.metrics import flagging, ranking, weighted_f1
+from aisdati.metrics import flagging, ranking, weighted_f1
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track
 

@@ -38,24 +38,27 @@ from aisdati.ais.card import card_methods
 from aisdati.detection.events import (
     all_events,
     empty_events,
-    event_settings,
+    event_thresholds,
     judged_reports,
+    judged_windows,
     model_free_events,
     off_traffic_events,
     uncalibrated_note,
     unseen_route_events,
     with_events,
     with_identity,
+    within,
 )
 from aisdati.detection.labels import evaluate_labels, read_labels
 from aisdati.detection.routing import Coverage, check_region, route_test_tracks
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import DEFAULT_CONTAMINATION, score_each
 from aisdati.errors import UserError
+from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.execution import Runner
 from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
-from aisdati.tracks.reports import read_reports, read_vessels
+from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -93,6 +96,9 @@ class DetectSettings:
     ashore: bool = True
     """Flag tracks with reports well inland whatever their score (`aisdati.tracks.ashore`);
     False scores the paper's way, by the model alone."""
+    alerts_per_1000: float = ALERTS_PER_1000
+    """The alert budget (`aisdati.events.budget`): the model-free alerts per 1,000
+    vessel-days the models' training periods would have raised."""
 
     @property
     def models_named(self) -> str | Path | None:
@@ -243,6 +249,8 @@ def check_settings(settings: DetectSettings) -> None:
         raise UserError(f"--contamination must be in (0, 1), got {settings.contamination:g}")
     if settings.top_percent is not None and settings.threshold is not None:
         raise UserError("give --threshold or --top-percent, not both")
+    if not settings.alerts_per_1000 > 0:
+        raise UserError(f"--alerts-per-1000 must be positive, got {settings.alerts_per_1000:g}")
     if not settings.near_km > 0:
         raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
     if settings.score is not None and settings.score not in SCORES:
@@ -311,15 +319,23 @@ def _events(
     """The detection's events (`aisdati.detection.events`) and the reports they judged
     (`identity`: vessels.parquet)."""
     every = settings.cluster == AREA and not settings.track_ids
-    reports = judged_reports(settings.data_dir, tracks, coverage.training, every)
+    windows = judged_windows(tracks, every)
+    reports = judged_reports(settings.data_dir, windows)
     seen = [np.asarray(m.card.data.ashore, np.float64).reshape(-1, 2) for m in models]
-    how = event_settings([m for m in models if m.name in set(scores["model"])])
-    free = model_free_events(reports, identity, np.concatenate(seen) if seen else None, how)
+    how = event_thresholds(
+        [m for m in models if m.name in set(scores["model"])], settings.alerts_per_1000
+    )
+    reported = not motion_derived(settings.data_dir)
+    where = np.concatenate(seen) if seen else None
+    free = model_free_events(reports, identity, where, how, reported)
+    free = within(free, windows, coverage.training)
     if not settings.ashore:
         free = free[free["kind"] != "ashore"]
     learned = off_traffic_events(tracks, scores, profiles, identity)
     unseen = unseen_route_events(tracks, scores, models, identity, settings.near_km)
-    return all_events([learned, unseen, free]), len(reports)
+    judged = within(reports.assign(start=reports["time"], end=reports["time"]), windows,
+                    coverage.training)  # fmt: skip
+    return all_events([learned, unseen, free]), len(judged)
 
 
 def events_only(data_dir: Path) -> Detection:
@@ -327,7 +343,9 @@ def events_only(data_dir: Path) -> Detection:
     an ingest output: `detect --models none`."""
     t0 = time.perf_counter()
     reports = read_reports(data_dir)
-    events = all_events([model_free_events(reports, read_vessels(data_dir))])
+    reported = not motion_derived(data_dir)
+    free = model_free_events(reports, read_vessels(data_dir), reported_motion=reported)
+    events = all_events([free])
     scores = pd.DataFrame(columns=list(SCORE_COLUMNS))
     timings = {"events_s": time.perf_counter() - t0, "score_s": 0.0}
     judged = len(reports)

@@ -20,20 +20,21 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from aisdati.ais.training import TrainSettings, check_settings, model_stem, training_set
 from aisdati.detectors.base import detector_class
 from aisdati.detectors.scoring import ScoreSettings
 from aisdati.errors import UserError
-from aisdati.events.calibrate import calibration
-from aisdati.events.reports import VesselReports
+from aisdati.events.calibrate import calibration, training_period
+from aisdati.events.reports import vessels
 from aisdati.execution import InProcess, Runner
 from aisdati.model.trainer import Callback
 from aisdati.progress import EpisodeProgress
 from aisdati.storage import RemoteFolder, staging_folder
-from aisdati.tracks.reports import read_reports
-from aisdati.tracks.store import read_track_table, select_cluster
+from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
+from aisdati.tracks.store import Track, read_track_table, select_cluster
 
 ROUTES_PER_TASK = 1
 """Routes one training task holds by default: each route is a task of its own."""
@@ -206,7 +207,7 @@ def fit_and_save(
     for s, det, (tracks, _) in zip(settings, detectors, sets, strict=True):
         stem = model_stem(s)
         assert stem is not None  # every settings has an out_dir (checked above)
-        det.card.calibration |= event_calibration(s.data_dir, [t.track_id for t in tracks])
+        det.card.calibration |= event_calibration(s.data_dir, tracks, det.card.data.ashore)
         det.save(stem)
         wall = time.perf_counter() - t0
         model = stem.with_suffix(det.model_suffix)
@@ -214,14 +215,27 @@ def fit_and_save(
     return trained
 
 
-def event_calibration(data_dir: Path | None, track_ids: list[int]) -> dict[str, list[float]]:
-    """The training tracks' own event statistics (`aisdati.events.calibrate`), read from
-    their reports, for the card beside its scores."""
+def event_calibration(
+    data_dir: Path | None, tracks: Sequence[Track], seen: np.ndarray
+) -> dict[str, list[float]]:
+    """The alert budget's record of the training period (`aisdati.events.calibrate`): the
+    training tracks' vessels' reports over the tracks' span, every one (slow ones too, as
+    detection judges them), for the card beside its scores; `seen`: where the training traffic
+    reported ashore."""
     if data_dir is None:
         return {}
-    reports = read_reports(data_dir, track_ids)
-    tracks = [VesselReports.of(group) for _, group in reports.groupby("track_id", sort=True)]
-    return calibration(tracks)
+    span = pd.DataFrame(
+        {
+            "mmsi": [t.mmsi for t in tracks],
+            "start": [t.start for t in tracks],
+            "end": [t.start + pd.Timedelta(hours=float(np.sum(t.dts))) for t in tracks],
+        }
+    )
+    reports = read_reports(data_dir, mmsis=sorted(set(span["mmsi"])))
+    period = training_period(reports, span)
+    lengths = read_vessels(data_dir)["length_m"].dropna().to_dict()
+    reported = not motion_derived(data_dir)
+    return calibration(vessels(period), lengths=lengths, seen=seen, reported_motion=reported)
 
 
 def train_detector(

@@ -15,11 +15,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aisdati.detection.events import all_events, model_free_events, off_traffic_events
+from aisdati.detection.events import (
+    all_events,
+    event_thresholds,
+    model_free_events,
+    off_traffic_events,
+)
 from aisdati.detectors import Detector
+from aisdati.evaluation.alerts import alert_rates
 from aisdati.evaluation.metrics import EVENT_FIELDS
-from aisdati.tracks.reports import read_reports, read_vessels
-from aisdati.tracks.store import Track
+from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
+from aisdati.tracks.store import Track, read_track_table
 
 TOLERANCE_US = 1000
 """Event times (from track hours) meet report times (microseconds) within this."""
@@ -29,15 +35,36 @@ def model_free(
     data: Path, track_ids: Sequence[int], detectors: Sequence[Detector], ashore: bool
 ) -> pd.DataFrame:
     """Every model-free event of each of the tracks (`model_free_events`), judged track by
-    track, with the water the detectors' training traffic sailed ashore as detect takes it;
-    without `ashore`, no ashore events (as `detect --no-ashore`)."""
+    track, with the alert thresholds the detectors calibrated and the water their training
+    traffic sailed ashore, as detect takes them; without `ashore`, no ashore events (as
+    `detect --no-ashore`)."""
     reports = read_reports(data, list(track_ids))
     identity = read_vessels(data)
     seen = [np.asarray(d.card.data.ashore, np.float64).reshape(-1, 2) for d in detectors]
     where = np.concatenate(seen) if seen else None
-    parts = [model_free_events(g, identity, where) for _, g in reports.groupby("track_id")]
+    how, reported = event_thresholds(detectors), not motion_derived(data)
+    parts = [
+        model_free_events(g, identity, where, how, reported) for _, g in reports.groupby("track_id")
+    ]
     events = all_events(parts)
     return events if ashore else events[events["kind"] != "ashore"]
+
+
+def forward_alerts(
+    data: Path, before: pd.Timestamp, detectors: Sequence[Detector], resamples: int = 1000
+) -> dict:
+    """The measure of record on the untouched traffic from `before` on (every report of `data`,
+    on a track or not), judged by the detectors' alert thresholds as `detect --cluster all`
+    judges it (`aisdati.evaluation.alerts.alert_rates`)."""
+    reports = read_reports(data)
+    later = reports[reports["time"] >= before]
+    seen = [np.asarray(d.card.data.ashore, np.float64).reshape(-1, 2) for d in detectors]
+    where = np.concatenate(seen) if seen else None
+    how, reported = event_thresholds(detectors), not motion_derived(data)
+    events = model_free_events(later, read_vessels(data), where, how, reported)
+    tracks = read_track_table(data)
+    ids = tracks.loc[tracks["start"] >= before, "track_id"].to_numpy()
+    return alert_rates(events, later, ids, resamples) | {"budget": how.budget}
 
 
 def with_off_traffic(

@@ -52,6 +52,7 @@ def report(ev: Evaluation) -> dict[str, Any]:
         "timings_s": {k: {n: round(v, 2) for n, v in t.items()} for k, t in ev.timings.items()},
         "results": table.to_dict(orient="records"),
         "events": event_rows(ev.event_table),
+        "alerts": ev.alerts,
     }
 
 

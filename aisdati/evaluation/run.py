@@ -37,10 +37,11 @@ from aisdati.ais.training import TrainSettings
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector, model_name
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
-from aisdati.evaluation.events import model_free, on_reports, with_off_traffic
+from aisdati.evaluation.events import forward_alerts, model_free, on_reports, with_off_traffic
 from aisdati.evaluation.inject import parse_params, with_strength
-from aisdati.evaluation.metrics import event_metrics, flagging, ranking
+from aisdati.evaluation.metrics import event_metrics
 from aisdati.execution import Runner
+from aisdati.metrics import flagging, ranking
 from aisdati.scores import score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
 from aisdati.tracks.store import load_tracks, read_track_table, routes_with, select_cluster
@@ -116,6 +117,9 @@ class Evaluation:
     """The held-out tracks' events per detector: `detector` and `EVENT_FIELDS`."""
     event_table: pd.DataFrame = field(default_factory=pd.DataFrame)
     """One row per detector x injected kind (`event_metrics`), and 'any'."""
+    alerts: dict[str, Any] | None = None
+    """With `before`: the measure of record on the untouched later traffic
+    (`aisdati.evaluation.events.forward_alerts`)."""
 
 
 def check(settings: EvaluateSettings) -> None:
@@ -319,6 +323,9 @@ def _score(
     say("finding events")
     result.events = _events(prepared, detectors, heldout, result)
     result.event_table = _event_table(result.events, split.labels, settings)
+    if settings.before is not None:
+        say("counting alerts on the untouched later traffic")
+        result.alerts = forward_alerts(settings.data_dir, settings.before, list(detectors.values()))
     return result
 
 

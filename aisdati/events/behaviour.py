@@ -5,13 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from aisdati.events.reports import VesselReports
+from aisdati.events.reports import AT_ANCHOR, MOORED, VesselReports
 from aisdati.events.settings import EventSettings
 from aisdati.events.stretch import Found, runs
 from aisdati.tracks.ashore import AshoreCheck
-
-AT_ANCHOR, MOORED = 1, 5
-"""Navigational status codes (ITU-R M.1371) of a vessel that says it is not under way."""
 
 
 def angle_apart(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -42,7 +39,7 @@ def drift(v: VesselReports, s: EventSettings, length_m: float = np.nan) -> list[
 
 def sudden_speed_change(v: VesselReports, s: EventSettings) -> list[Found]:
     """A fall from over `ssc_from_kn` to under `ssc_to_kn` within `ssc_within_s`, the low speed
-    held for `ssc_hold_s`: from the last fast report to the end of the hold."""
+    held for `ssc_hold_s`: from the last fast report to the report that completes the hold."""
     out = []
     for a, b in runs(v.sog < s.ssc_to_kn):
         if a == 0 or v.time_s[b] - v.time_s[a] < s.ssc_hold_s:
@@ -52,9 +49,10 @@ def sudden_speed_change(v: VesselReports, s: EventSettings) -> list[Found]:
         )
         if before.size:
             k = int(before[-1])
+            held = a + int(np.searchsorted(v.time_s[a : b + 1], v.time_s[a] + s.ssc_hold_s))
             out.append(
                 Found(
-                    "sudden-speed-change", k, b, a, (v.sog[k] - v.sog[a]) / s.ssc_from_kn,
+                    "sudden-speed-change", k, min(held, b), a, v.sog[k] / s.ssc_from_kn,
                     f"{v.sog[k]:.1f} kn to {v.sog[a]:.1f} kn in {v.time_s[a] - v.time_s[k]:.0f} s",
                 )
             )  # fmt: skip
@@ -70,7 +68,7 @@ def loitering(v: VesselReports, s: EventSettings) -> list[Found]:
     for a, b in runs(slow):
         held = v.time_s[b] - v.time_s[a]
         parked = np.isin(v.status[a : b + 1], (AT_ANCHOR, MOORED)).mean() > 0.5
-        if a == 0 or b == len(v) - 1 or held < s.loiter_min_s or parked:
+        if a == 0 or b == len(v) - 1 or not s.loiter_min_s <= held <= s.loiter_max_s or parked:
             continue
         out.append(
             Found(
@@ -87,7 +85,7 @@ def gaps(v: VesselReports, s: EventSettings, check: AshoreCheck) -> list[Found]:
     if len(v) < 3:
         return []
     usual = float(np.median(v.dt_s))
-    limit = max(s.gap_min_s, s.gap_factor * usual)
+    limit = gap_limit(v, s)
     steps = np.flatnonzero(
         (v.dt_s > limit) & (v.dt_s <= s.gap_max_s) & (v.sog[:-1] >= s.gap_under_way_kn)
     )
@@ -107,6 +105,13 @@ def gaps(v: VesselReports, s: EventSettings, check: AshoreCheck) -> list[Found]:
         for k, land in zip(steps, on_land, strict=True)
         if not land
     ]
+
+
+def gap_limit(v: VesselReports, s: EventSettings) -> float:
+    """How long a vessel may be silent before it is a gap: at least `gap_min_s` and
+    `gap_factor` times its usual (median) interval. One rule for the batch's gaps between
+    reports and the live watch's silence that has not ended yet."""
+    return max(s.gap_min_s, s.gap_factor * float(np.median(v.dt_s)))
 
 
 def ashore(v: VesselReports, check: AshoreCheck, seen: np.ndarray | None) -> list[Found]:

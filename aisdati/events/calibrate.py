@@ -1,64 +1,84 @@
-"""Thresholds of the consistency kinds and of the gap, calibrated on an area's training
-tracks: what is unusual for a vessel depends on how the area's traffic reports (its receivers'
-coverage holes, how much its courses wander between reports), so a model records each training
-track's largest statistic of each kind beside its scores (`ModelCard.calibration`, keys
-`event:<kind>`), and detection sets each threshold to their (1 - `EVENT_RATE`) quantile.
-Without a model the defaults of `EventSettings` hold."""
+"""The alert budget calibrated on a model's training period: what a model's card records of
+the events its training period's reports raise at the finders' floors (the strongest
+`KEEP` strengths of each budgeted kind, under `event:<kind>`, and the period's vessel-days,
+under `event-days`), and the thresholds detection, evaluation and the live watch read back
+from the cards (`thresholds_of`), pooled over the judging models."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Mapping, Sequence
 
 import numpy as np
+import pandas as pd
 
-from aisdati.events.behaviour import gaps
-from aisdati.events.motion import course_inconsistent, position_jumps, speed_inconsistent
+from aisdati.events.budget import ALERTS_PER_1000, Thresholds, thresholds_for
+from aisdati.events.find import found_at_floor
+from aisdati.events.kinds import BUDGETED
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
-from aisdati.events.stretch import Found
-from aisdati.tracks.ashore import AshoreCheck
 
-EVENT_RATE = 0.01
-"""The share of training tracks each calibrated kind would raise an event on."""
 KEY = "event:"
-Finder = Callable[[VesselReports, EventSettings], list[Found]]
-CALIBRATED: dict[str, tuple[str, float, Finder]] = {
-    "position-jump": ("jump_z", 5.0, position_jumps),
-    "speed-inconsistent": ("speed_limit", 50.0, speed_inconsistent),
-    "course-inconsistent": ("course_limit", 50.0, course_inconsistent),
-    "gap": ("gap_min_s", 600.0, lambda v, s: gaps(v, s, AshoreCheck())),
-}
-"""Kind -> (the setting that is its threshold, the lowest it may be calibrated to, its
-finder). The floors keep a model of very regular traffic from raising events on noise no
-analyst would look at."""
+DAYS = "event-days"
+KEEP = 1000
+"""The strongest events of a kind a card keeps: enough for a budget of 1,000 alerts per
+1,000 vessel-days over a training period of a thousand vessel-days per kind."""
 
 
-def largest(kind: str, v: VesselReports, s: EventSettings = EventSettings()) -> float:
-    """The largest statistic of `kind` on these reports, in the unit of its threshold; 0 where
-    none reaches the kind's floor (below it, no threshold is set anyway)."""
-    name, floor, finder = CALIBRATED[kind]
-    found = finder(v, replace(s, **{name: floor}))
-    if kind == "gap":  # its strength is the silence over max(gap_min_s, factor x interval)
-        return max((float(v.dt_s[e.start]) for e in found), default=0.0)
-    return max((e.strength * floor for e in found), default=0.0)
+def vessel_days(vessels: Sequence[VesselReports]) -> float:
+    """How many (vessel, UTC day) pairs have a report."""
+    days = 0
+    for v in vessels:
+        days += len(np.unique(np.floor(v.time_s / 86400.0)))
+    return float(days)
 
 
-def calibration(tracks: Sequence[VesselReports], s: EventSettings = EventSettings()) -> dict:
-    """What a model's card records: each calibrated kind's largest statistic on each of its
-    training tracks (`largest`), under `event:<kind>`."""
-    return {KEY + kind: [round(largest(kind, v, s), 6) for v in tracks] for kind in CALIBRATED}
+def calibration(
+    vessels: Sequence[VesselReports],
+    settings: EventSettings = EventSettings(),
+    lengths: Mapping[int, float] | None = None,
+    seen: np.ndarray | None = None,
+    reported_motion: bool = True,
+) -> dict[str, list[float]]:
+    """What a model's card records of its training period (each vessel's reports, `lengths`
+    by MMSI where known, `seen`: where its traffic reported ashore; `reported_motion`: False
+    where SOG/COG were derived from positions)."""
+    lengths = lengths or {}
+    strengths: dict[str, list[float]] = {kind: [] for kind in BUDGETED}
+    for v in vessels:
+        for e in found_at_floor(v, settings, lengths.get(v.mmsi, np.nan), seen, reported_motion):
+            if e.kind in strengths:
+                strengths[e.kind].append(e.strength)
+    out = {  # a kind with no event is left out (a card's lists are never empty)
+        KEY + k: [round(x, 6) for x in sorted(s, reverse=True)[:KEEP]]
+        for k, s in strengths.items()
+        if s
+    }
+    return out | {DAYS: [vessel_days(vessels)]}
 
 
-def calibrated(
-    recorded: Mapping[str, Sequence[float]], s: EventSettings = EventSettings()
-) -> EventSettings:
-    """`s` with each threshold the models recorded (`calibration`, pooled over models) set to
-    the (1 - `EVENT_RATE`) quantile of its statistics, no lower than its floor; thresholds of
-    kinds not recorded keep their defaults."""
-    changed = {}
-    for kind, (name, floor, _) in CALIBRATED.items():
-        values = recorded.get(KEY + kind)
-        if values:
-            changed[name] = max(floor, float(np.quantile(values, 1.0 - EVENT_RATE)))
-    return replace(s, **changed)
+def is_calibrated(recorded: Mapping[str, Sequence[float]]) -> bool:
+    """Whether a card records the alert budget's calibration (cards from before it do not)."""
+    return DAYS in recorded
+
+
+def thresholds_of(
+    recorded: Sequence[Mapping[str, Sequence[float]]], budget: float = ALERTS_PER_1000
+) -> Thresholds:
+    """The thresholds of `budget` from the calibrations of the judging models' cards, pooled
+    (the defaults where none records one)."""
+    cards = [r for r in recorded if is_calibrated(r)]
+    if not cards:
+        return Thresholds()
+    strengths = {kind: [x for r in cards for x in r.get(KEY + kind, [])] for kind in BUDGETED}
+    days = sum(float(r[DAYS][0]) for r in cards)
+    return thresholds_for(strengths, days, budget)
+
+
+def training_period(reports: pd.DataFrame, tracks: pd.DataFrame) -> pd.DataFrame:
+    """The reports a model's alert budget is calibrated on: those of its training tracks'
+    vessels within its training tracks' time span (`tracks`: mmsi, start, end)."""
+    if not len(tracks):
+        return reports.iloc[:0]
+    first, last = tracks["start"].min(), tracks["end"].max()
+    keep = reports["mmsi"].isin(tracks["mmsi"].unique())
+    return reports[keep & (reports["time"] >= first) & (reports["time"] <= last)]

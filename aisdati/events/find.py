@@ -1,5 +1,10 @@
-"""Events from reports: every model-free finder run over each vessel's reports, and the
-events placed (times, where, the track) as the rows of events.parquet."""
+"""Events from reports: every model-free finder run over one vessel's reports at its floor,
+the alerts kept where they reach their kind's threshold (`aisdati.events.budget.Thresholds`),
+each kind's overlapping events merged into one and each bounded (`aisdati.events.kinds`), and
+the events placed (times, where, the track, class, rarity) as the rows of events.parquet.
+
+An event is a function of the vessel's reports alone (the hours around it), so the same
+reports give the same events alone, in any batch and live."""
 
 from __future__ import annotations
 
@@ -10,56 +15,106 @@ import numpy as np
 import pandas as pd
 
 from aisdati.events.behaviour import ashore, drift, gaps, loitering, sudden_speed_change
+from aisdati.events.budget import Thresholds
+from aisdati.events.kinds import KINDS, READ_REPORTED_MOTION
 from aisdati.events.motion import course_inconsistent, position_jumps, speed_inconsistent
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
-from aisdati.events.stretch import Found
+from aisdati.events.stretch import Found, merged
 from aisdati.tracks.ashore import AshoreCheck
 
 EVENT_COLUMNS = (
-    "mmsi", "name", "ship_type", "kind", "start", "end", "duration_s", "n_reports", "lon",
-    "lat", "track_id", "strength", "evidence", "model", "lons", "lats",
+    "mmsi", "name", "ship_type", "kind", "class", "start", "end", "duration_s", "n_reports",
+    "lon", "lat", "track_id", "strength", "rarity_days", "evidence", "model", "lons", "lats",
 )  # fmt: skip
 """An event's fields (events.parquet; `lons`/`lats`: the stretch's positions)."""
 
+Finder = Callable[[VesselReports, EventSettings, float, "np.ndarray | None"], list[Found]]
+FINDERS: dict[str, Finder] = {
+    "position-jump": lambda v, s, length, seen: position_jumps(v, s),
+    "speed-inconsistent": lambda v, s, length, seen: speed_inconsistent(v, s),
+    "course-inconsistent": lambda v, s, length, seen: course_inconsistent(v, s),
+    "drift": lambda v, s, length, seen: drift(v, s, length),
+    "sudden-speed-change": lambda v, s, length, seen: sudden_speed_change(v, s),
+    "ashore": lambda v, s, length, seen: ashore(v, AshoreCheck(), seen),
+    "loitering": lambda v, s, length, seen: loitering(v, s),
+    "gap": lambda v, s, length, seen: gaps(v, s, AshoreCheck()),
+}
+"""Each model-free kind's finder: (reports, settings, the vessel's length if known, where
+the area's training traffic reported ashore) -> its events at the floor."""
 
-def find_events(
+
+def finders(reported_motion: bool = True) -> dict[str, Finder]:
+    """The finders to run: all, or where SOG and COG were derived from positions, those that
+    do not judge the reported motion (`READ_REPORTED_MOTION`)."""
+    return {k: f for k, f in FINDERS.items() if reported_motion or k not in READ_REPORTED_MOTION}
+
+
+def found_at_floor(
     v: VesselReports,
     settings: EventSettings = EventSettings(),
     length_m: float = np.nan,
     seen: np.ndarray | None = None,
+    reported_motion: bool = True,
 ) -> list[Found]:
-    """Every model-free event of one vessel (`aisdati.events.kinds.MODEL_FREE`), in time order;
-    `length_m`: the vessel's length if known; `seen`: where its area's training traffic reported
-    ashore (`aisdati.tracks.ashore`)."""
-    check = AshoreCheck()
-    finders: list[Callable[[], list[Found]]] = [
-        lambda: position_jumps(v, settings),
-        lambda: speed_inconsistent(v, settings),
-        lambda: course_inconsistent(v, settings),
-        lambda: drift(v, settings, length_m),
-        lambda: sudden_speed_change(v, settings),
-        lambda: loitering(v, settings),
-        lambda: gaps(v, settings, check),
-        lambda: ashore(v, check, seen),
-    ]
-    found = [event for finder in finders for event in finder()]
-    return sorted(found, key=lambda e: (e.start, e.kind))
+    """Every model-free event of one vessel at its kind's floor, each kind's overlaps merged:
+    what the alert budget counts on a training period (`aisdati.events.budget`)."""
+    found = finders(reported_motion).values()
+    return [e for find in found for e in merged(find(v, settings, length_m, seen))]
 
 
-def placed(v: VesselReports, found: Sequence[Found], identity: dict | None = None) -> pd.DataFrame:
+def find_events(
+    v: VesselReports,
+    thresholds: Thresholds = Thresholds(),
+    settings: EventSettings = EventSettings(),
+    length_m: float = np.nan,
+    seen: np.ndarray | None = None,
+    reported_motion: bool = True,
+) -> list[Found]:
+    """Every model-free event of one vessel (`aisdati.events.kinds.MODEL_FREE`) that reaches
+    its threshold, each kind's overlaps merged, each bounded, in time order; `length_m`: the
+    vessel's length if known; `seen`: where its area's training traffic reported ashore
+    (`aisdati.tracks.ashore`); `reported_motion`: False where SOG/COG were derived from
+    positions. A kept event's strength is over its threshold (1 = at it)."""
+    out = []
+    for find in finders(reported_motion).values():
+        kept = [thresholds.over(e) for e in find(v, settings, length_m, seen)]
+        out += [bounded(v, e) for e in merged([e for e in kept if e is not None])]
+    return sorted(out, key=lambda e: (e.start, e.kind))
+
+
+def bounded(v: VesselReports, e: Found) -> Found:
+    """`e` cut to its kind's longest (`EventKind.max_s`) around its strongest report."""
+    bound = KINDS[e.kind].max_s
+    if bound is None or v.time_s[e.end] - v.time_s[e.start] <= bound:
+        return e
+    t = v.time_s
+    start = max(e.start, int(np.searchsorted(t, t[e.peak] - bound / 2)))
+    end = int(np.searchsorted(t, t[start] + bound, side="right")) - 1
+    return Found(e.kind, start, max(min(end, e.end), e.peak), e.peak, e.strength, e.evidence)
+
+
+def placed(
+    v: VesselReports,
+    found: Sequence[Found],
+    identity: dict | None = None,
+    thresholds: Thresholds = Thresholds(),
+) -> pd.DataFrame:
     """The events of one vessel as rows of `EVENT_COLUMNS` (`placed_rows`), as a table."""
-    return pd.DataFrame(placed_rows(v, found, identity), columns=list(EVENT_COLUMNS))
+    return pd.DataFrame(placed_rows(v, found, identity, thresholds), columns=list(EVENT_COLUMNS))
 
 
 def placed_rows(
-    v: VesselReports, found: Sequence[Found], identity: dict | None = None
+    v: VesselReports,
+    found: Sequence[Found],
+    identity: dict | None = None,
+    thresholds: Thresholds = Thresholds(),
 ) -> list[dict[str, Any]]:
     """The events of one vessel as records of `EVENT_COLUMNS`: times, the report where each is
-    strongest (its place), the track of that report, the stretch's positions, and the vessel's
-    name and type (`identity`: name, ship_type) when known. Records, not a table: the live
-    watch places events thousands of times a second, and a table costs about as much as
-    finding them."""
+    strongest (its place), the track of that report, its class and rarity (`thresholds`), the
+    stretch's positions, and the vessel's name and type (`identity`: name, ship_type) when
+    known. Records, not a table: the live watch places events thousands of times a second, and
+    a table costs about as much as finding them."""
     identity = identity or {}
     rows = []
     for e in found:
@@ -70,6 +125,7 @@ def placed_rows(
                 "name": identity.get("name"),
                 "ship_type": identity.get("ship_type"),
                 "kind": e.kind,
+                "class": KINDS[e.kind].cls,
                 "start": _utc(v.time_s[e.start]),
                 "end": _utc(v.time_s[e.end]),
                 "duration_s": float(v.time_s[e.end] - v.time_s[e.start]),
@@ -78,6 +134,7 @@ def placed_rows(
                 "lat": float(v.lat[e.peak]),
                 "track_id": track if track >= 0 else None,
                 "strength": round(float(e.strength), 3),
+                "rarity_days": thresholds.rarity_days(e),
                 "evidence": e.evidence,
                 "model": None,
                 "lons": v.lon[e.start : e.end + 1].tolist(),

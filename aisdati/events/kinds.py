@@ -1,10 +1,20 @@
-"""The kinds of event, defined once: what each means, whether it needs a learned model, and
-whose definition it follows. docs/detectors.md prints this table; events.parquet's `kind`
-holds the names."""
+"""The kinds of event, defined once: what each means, whether it is an alert or an activity,
+whether it needs a learned model, how long one may last, and whose definition it follows.
+docs/detectors.md prints this table; events.parquet's `kind` and `class` hold the names.
+
+An **alert** says a vessel or its reports behave abnormally: it flags the track and vessel,
+and its kind's threshold is set by the alert budget (`aisdati.events.budget`). An
+**activity** says what a vessel does that an analyst may want listed (it loitered, it went
+silent): it is listed apart and flags nothing. A newcomer adding a kind adds it here, its
+finder to `aisdati.events.find.FINDERS`, and its line to docs/detectors.md."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
+
+ALERT, ACTIVITY = "alert", "activity"
+HOUR = 3600.0
 
 
 @dataclass(frozen=True)
@@ -12,8 +22,12 @@ class EventKind:
     name: str
     label: str
     """A few words for tables and popups."""
+    cls: Literal["alert", "activity"]
     needs_model: bool
     """Whether it comes from a learned model (else: from the reports alone)."""
+    max_s: float | None
+    """The longest one may last (longer: cut to this around its strongest report); None: as
+    long as what it describes lasts (a track, a gap's day)."""
     definition: str
     follows: str
     """Whose definition it follows, and where ours differs."""
@@ -23,91 +37,86 @@ KINDS: dict[str, EventKind] = {
     k.name: k
     for k in (
         EventKind(
-            "off-traffic",
-            "off the learned traffic",
-            True,
+            "off-traffic", "off the learned traffic", ALERT, True, None,
             "the stretch around a flagged track's largest deviation where its deviation from "
             "what the area model generates stays above half its peak",
             "ours (DATI's score, section 6.2 of the paper, made local)",
         ),
         EventKind(
-            "unseen-route",
-            "bound where no training track went",
-            True,
+            "unseen-route", "bound where no training track went", ALERT, True, None,
             "a track whose start and end are farther from every training track's start and end "
             "than --near-km and than 99 % of the training tracks are from each other",
             "ours (the routing's origin-destination distance)",
         ),
         EventKind(
-            "position-jump",
-            "position inconsistent with reported motion",
-            False,
-            "a stretch that the positions enter and leave by a jump the reported speed and "
-            "course do not explain, the two jumps opposite (the stretch displaced as a whole: "
-            "a shifted or spoofed stretch)",
+            "position-jump", "position inconsistent with reported motion", ALERT, False,
+            12 * HOUR,
+            "a stretch of a vessel under way that its positions enter and leave by opposite "
+            "jumps of 300 m or more, each within 15 minutes, that its reported speed and course "
+            "do not explain (the stretch displaced as a whole: a shifted or spoofed stretch)",
             "ours",
         ),
         EventKind(
-            "speed-inconsistent",
-            "reported speed inconsistent",
-            False,
-            "a stretch where the reported speed jumps report to report (from its neighbours' "
-            "mean) far beyond the vessel's own jumps, accumulated by a CUSUM: a faulty speed log",
+            "speed-inconsistent", "reported speed inconsistent", ALERT, False, 3 * HOUR,
+            "a stretch of a vessel under way where the reported speed jumps report to report "
+            "(from its neighbours' mean) far beyond the vessel's own jumps of the hours around, "
+            "accumulated by a CUSUM: a faulty speed log",
             "ours",
         ),
         EventKind(
-            "course-inconsistent",
-            "reported course inconsistent",
-            False,
-            "a stretch where the reported course departs from the course the positions show (the "
-            "bearing from the report before to the report after) far beyond the vessel's own "
-            "departures, under way (over 2 kn), accumulated by a CUSUM",
+            "course-inconsistent", "reported course inconsistent", ALERT, False, 3 * HOUR,
+            "a stretch of a vessel under way (over 2 kn) where the reported course departs from "
+            "the course the positions show (the bearing from the report before to the report "
+            "after) far beyond the vessel's own departures of the hours around, accumulated by "
+            "a CUSUM",
             "ours",
         ),
         EventKind(
-            "drift",
-            "drift",
-            False,
+            "drift", "drift", ALERT, False, 24 * HOUR,
             "course over ground more than 45 degrees from the heading and from its reverse, "
             "at 1-5 kn, for at least 10 minutes; vessels known to be under 50 m are left out",
             "AisAbnormal's drift; ours also reports it for vessels of unknown length",
         ),
         EventKind(
-            "sudden-speed-change",
-            "sudden speed change",
-            False,
+            "sudden-speed-change", "sudden speed change", ALERT, False, 600.0,
             "the reported speed falls from over 7 kn to under 1 kn within 30 s and stays under "
-            "1 kn for at least a minute",
+            "1 kn for at least a minute; the event ends when that minute is held",
             "AisAbnormal's sudden speed change",
         ),
         EventKind(
-            "loitering",
-            "loitering",
-            False,
-            "under 2 kn (reported and by position) for at least an hour between two stretches "
-            "under way, not reporting at anchor or moored",
-            "Global Fishing Watch's loitering (average speed under 2 kn for an hour or more); "
-            "ours needs no distance from shore but excludes the ends of a vessel's reports "
-            "(port and anchorage before or after its voyage)",
-        ),
-        EventKind(
-            "gap",
-            "gap at sea (going dark)",
-            False,
-            "no report for more than 10 times the vessel's usual interval and at least 5 "
-            "minutes (at most a day), after reporting under way, both ends on water",
-            "Global Fishing Watch's AIS gaps (theirs: 12 hours offshore); ours scales with the "
-            "vessel's own interval",
-        ),
-        EventKind(
-            "ashore",
-            "reports ashore",
-            False,
+            "ashore", "reports ashore", ALERT, False, 24 * HOUR,
             "two or more reports 400 m or more inland on the coastline, where the training "
             "traffic never reported",
             "ours (aisdati.tracks.ashore)",
         ),
+        EventKind(
+            "loitering", "loitering", ACTIVITY, False, None,
+            "under 2 kn (reported and by position) for at least an hour and at most a day "
+            "between two stretches under way, not reporting at anchor or moored",
+            "Global Fishing Watch's loitering (average speed under 2 kn for an hour or more); "
+            "ours needs no distance from shore but excludes the ends of a vessel's reports "
+            "(port and anchorage before or after its voyage) and stays of over a day (a vessel "
+            "laid up or at its berth)",
+        ),
+        EventKind(
+            "gap", "gap at sea (going dark)", ACTIVITY, False, None,
+            "no report for at least 30 minutes and 10 times the vessel's usual interval (at "
+            "most a day), after reporting under way, both ends on water",
+            "Global Fishing Watch's AIS gaps (theirs: 12 hours, 50 nm offshore, for satellite "
+            "reception); ours is for terrestrial receivers hearing a vessel every few minutes, "
+            "and scales with the vessel's own interval",
+        ),
     )
-}
+}  # fmt: skip
 MODEL_FREE = tuple(name for name, kind in KINDS.items() if not kind.needs_model)
 """The kinds found from the reports alone, with no trained model."""
+READ_REPORTED_MOTION = ("speed-inconsistent", "course-inconsistent", "sudden-speed-change", "drift")
+"""The kinds that judge what a vessel reports of its motion: not looked for where ingest derived
+SOG and COG from positions (a positions-only file), whose "reported" motion is the positions'."""
+BUDGETED = tuple(n for n, k in KINDS.items() if k.cls == ALERT and not k.needs_model)
+"""The alert kinds whose thresholds the alert budget sets (the learned kinds are bounded by
+their model's track-level contamination instead)."""
+
+
+def is_alert(kind: str) -> bool:
+    return KINDS[kind].cls == ALERT

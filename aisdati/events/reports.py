@@ -17,6 +17,8 @@ from aisdati.geo import EARTH_RADIUS_M
 from aisdati.tracks.schema import KNOT_MPS
 
 M_PER_DEG = EARTH_RADIUS_M * np.pi / 180.0
+AT_ANCHOR, MOORED = 1, 5
+"""Navigational status codes (ITU-R M.1371) of a vessel that says it is not under way."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,11 @@ class VesselReports:
     def positions(self, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """[n, 2] lon/lat of the reports `rows`."""
         return np.column_stack([self.lon[rows], self.lat[rows]])
+
+    def under_way(self, min_kn: float) -> np.ndarray:
+        """[n] whether each report has the vessel under way: at least `min_kn` reported, and
+        not saying it is at anchor or moored."""
+        return (self.sog >= min_kn) & ~np.isin(self.status, (AT_ANCHOR, MOORED))
 
     @cached_property
     def dt_s(self) -> np.ndarray:

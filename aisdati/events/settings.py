@@ -1,9 +1,12 @@
-"""The settings of the event finders, in one dataclass. The behaviour rules (drift, sudden
-speed change, loitering) carry the published definitions they follow (`aisdati.events.kinds`);
-the consistency rules compare each report with the vessel's own report-to-report variation, so
-that one setting serves 2-second and 10-minute reporting alike. The defaults serve where no
-model is (`detect --models none`); a model calibrates the thresholds of the consistency kinds
-and of the gap on its own training tracks (`aisdati.events.calibrate`)."""
+"""The settings of the event finders, in one dataclass: the *floors* at which each kind's
+finder looks. An alert found at its floor is raised only when its strength (over the floor)
+reaches its kind's threshold, which the alert budget sets (`aisdati.events.budget`): on a
+model's training period, or by the documented defaults where no model is. The behaviour
+rules (drift, sudden speed change, loitering, gap) carry the published definitions they follow
+(`aisdati.events.kinds`) as their floors; the consistency rules compare each report with the
+vessel's own report-to-report variation of the hours around it, so that one setting serves
+2-second and 10-minute reporting alike and an event depends on those hours only, not on what
+else is judged."""
 
 from __future__ import annotations
 
@@ -13,27 +16,35 @@ from typing import Any
 
 @dataclass(frozen=True)
 class EventSettings:
+    # what a vessel under way is (the consistency kinds judge only it)
+    under_way_kn: float = 2.0
+    scale_window_s: float = 6 * 3600.0
+    """The hours around a report (centred) whose reports give the vessel's own spread."""
     # position-jump
     gps_m: float = 25.0
     """Position noise a report may carry whatever its step (GPS, rounding of coordinates)."""
-    jump_z: float = 8.0
-    """A step's unexplained displacement, over its scale, that makes it a jump."""
+    clock_s: float = 60.0
+    """The clock offset a receiver's time stamps may carry: along its course, that many
+    seconds of a vessel's speed is not a jump."""
+    jump_z: float = 5.0
+    """A step's unexplained displacement, over its scale, that makes it a jump (the floor)."""
+    jump_min_m: float = 300.0
+    """The smallest unexplained displacement a jump is (a vessel swinging at anchor, GPS
+    noise and rounding stay under it)."""
+    jump_step_max_s: float = 900.0
+    """A jump is a step of at most this long (over a longer silence a vessel may do anything)."""
     jump_min_reports: int = 3
     """Fewest reports a displaced stretch holds (fewer: a glitch, not a shifted stretch)."""
-    jump_max_share: float = 0.5
-    """Most of a vessel's reports a displaced stretch may hold."""
     # speed- and course-inconsistent
     sog_floor_kn: float = 0.2
     cog_floor_deg: float = 2.0
-    under_way_kn: float = 2.0
-    """Course is read only where the vessel reports at least this speed."""
     noise_cap: float = 25.0
     """A report's squared surprise counts at most this much (one wild value is not a stretch)."""
     noise_drift: float = 5.0
     """What each report's squared surprise must exceed to add to the CUSUM."""
-    speed_limit: float = 150.0
-    """The CUSUM's level that makes a stretch of reported speeds an event."""
-    course_limit: float = 150.0
+    speed_limit: float = 50.0
+    """The CUSUM's level that makes a stretch of reported speeds an event (the floor)."""
+    course_limit: float = 50.0
     """The same for reported courses."""
     # drift (AisAbnormal)
     drift_min_kn: float = 1.0
@@ -49,12 +60,11 @@ class EventSettings:
     # loitering (after Global Fishing Watch)
     loiter_kn: float = 2.0
     loiter_min_s: float = 3600.0
+    loiter_max_s: float = 86400.0
+    """Slow for longer than this is a vessel laid up or at its berth, not loitering."""
     # gap at sea
     gap_factor: float = 10.0
     gap_min_s: float = 1800.0
-    """The shortest gap at sea; an area's model calibrates it on its training tracks'
-    silences (its coverage holes), as it does `jump_z`, `speed_limit` and `course_limit`
-    (`aisdati.events.calibrate`)."""
     gap_max_s: float = 86400.0
     gap_under_way_kn: float = 1.0
 

@@ -24,6 +24,24 @@ class Found:
     evidence: str
 
 
+def merged(found: list[Found]) -> list[Found]:
+    """One kind's events of one vessel with the overlapping ones merged into one: its reports
+    the union, its peak, strength and evidence the strongest's (one event per thing). Two that
+    share only an end report (a gap and the next) do not overlap in time."""
+    out: list[Found] = []
+    for e in sorted(found, key=lambda e: (e.start, e.end)):
+        if out and e.start < out[-1].end:
+            last = out[-1]
+            strong = e if e.strength > last.strength else last
+            out[-1] = Found(
+                e.kind, last.start, max(last.end, e.end), strong.peak, strong.strength,
+                strong.evidence,
+            )  # fmt: skip
+        else:
+            out.append(e)
+    return out
+
+
 def deviation_stretch(profile: np.ndarray) -> tuple[int, int]:
     """The contiguous stretch around a profile's peak where it stays above half the peak: where
     the track strays most, as an index range [start, end)."""

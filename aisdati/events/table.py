@@ -12,7 +12,7 @@ import pandas as pd
 import pyarrow as pa
 import shapely
 
-from aisdati.events.kinds import KINDS
+from aisdati.events.kinds import ALERT, KINDS
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.schema import UTC_US, geo_metadata
 
@@ -23,6 +23,7 @@ EVENTS_SCHEMA = pa.schema(
         ("name", pa.string()),
         ("ship_type", pa.string()),
         ("kind", pa.string()),
+        ("class", pa.string()),
         ("start", UTC_US),
         ("end", UTC_US),
         ("duration_s", pa.float64()),
@@ -31,6 +32,7 @@ EVENTS_SCHEMA = pa.schema(
         ("lat", pa.float64()),
         ("track_id", pa.int64()),
         ("strength", pa.float64()),
+        ("rarity_days", pa.float64()),
         ("evidence", pa.string()),
         ("model", pa.string()),
         ("geometry", pa.binary()),
@@ -38,8 +40,10 @@ EVENTS_SCHEMA = pa.schema(
 )
 """events.parquet (GeoParquet, WKB in WGS84 lon/lat): `start`/`end` the event's first and
 last report; `lon`/`lat` the report where it is strongest; `track_id` that report's track
-(null: a report in no track, e.g. a slow one); `strength` how far over its threshold (1 = at
-it); `model` the model of an off-traffic event; `geometry` the stretch."""
+(null: a report in no track, e.g. a slow one); `class` alert or activity; `strength` how far
+over its threshold (1 = at it); `rarity_days` an alert as strong came once in so many
+vessel-days of the training period (null: not calibrated, or an activity); `model` the model of
+a learned event; `geometry` the stretch."""
 GEO_METADATA = geo_metadata("LineString", "Point")
 
 
@@ -94,13 +98,24 @@ def write_events(events: pd.DataFrame, out: Path) -> list[Path]:
     return [parquet, geojson]
 
 
+def ranked(events: pd.DataFrame) -> pd.DataFrame:
+    """What to look at first: the alerts, rarest first (on the training traffic; then the
+    strongest where not calibrated), then the activity in time order."""
+    alerts = events[events["class"] == ALERT]
+    alerts = alerts.sort_values(["rarity_days", "strength"], ascending=False, na_position="last")
+    return pd.concat([alerts, events[events["class"] != ALERT].sort_values("start")])
+
+
 def events_summary(events: pd.DataFrame, reports_judged: int) -> dict[str, Any]:
-    """report.json's events: how many reports were judged, events per kind, and each event
-    (its stretch's positions left to events.geojson)."""
+    """report.json's events: how many reports were judged, alerts and events per kind, and
+    each event, alerts first and rarest first (`ranked`; its stretch's positions left to
+    events.geojson)."""
     return {
         "reports_judged": reports_judged,
+        "alerts": int((events["class"] == ALERT).sum()) if len(events) else 0,
         "events_by_kind": events["kind"].value_counts().to_dict() if len(events) else {},
         "events": [
-            {k: v for k, v in e.items() if k not in ("lons", "lats")} for e in _records(events)
+            {k: v for k, v in e.items() if k not in ("lons", "lats")}
+            for e in _records(ranked(events))
         ],
     }

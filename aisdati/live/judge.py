@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from aisdati.events.behaviour import gap_limit
+from aisdati.events.budget import Thresholds
 from aisdati.events.find import find_events, placed_rows
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
@@ -94,6 +96,7 @@ def cleaned(
 def judge(
     windows: dict[int, tuple[dict[str, np.ndarray], Identity]],
     settings: EventSettings,
+    thresholds: Thresholds,
     ingest: IngestSettings,
 ) -> dict[int, Judged]:
     """The model-free events of each vessel's window (MMSI: its window and identity), in the
@@ -107,7 +110,8 @@ def judge(
         if len(v) == 0:
             continue
         who = {"name": identity.name, "ship_type": identity.ship_type}
-        events = placed_rows(v, find_events(v, settings, identity.length_m), who)
+        found = find_events(v, thresholds, settings, identity.length_m)
+        events = placed_rows(v, found, who, thresholds)
         out[mmsi] = Judged(
             events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, settings), v
         )
@@ -116,9 +120,9 @@ def judge(
 
 def last_report(v: VesselReports, settings: EventSettings) -> LastReport:
     """The vessel's last report and its silence limit, by the gap kind's own rule
-    (`aisdati.events.behaviour.gaps`)."""
+    (`aisdati.events.behaviour.gap_limit`)."""
     usual = float(np.median(v.dt_s)) if len(v) > 1 else np.nan
     limit = None
     if len(v) >= 3 and v.sog[-1] >= settings.gap_under_way_kn:
-        limit = max(settings.gap_min_s, settings.gap_factor * usual)
+        limit = gap_limit(v, settings)
     return LastReport(v.mmsi, float(v.time_s[-1]), float(v.lon[-1]), float(v.lat[-1]), limit, usual)

@@ -12,6 +12,7 @@ from typing import Any
 
 import pandas as pd
 
+from aisdati.events.budget import Thresholds
 from aisdati.events.settings import EventSettings
 from aisdati.live.area import AreaJudge
 from aisdati.live.decode import Decoder
@@ -61,6 +62,7 @@ class Watch:
     store: Store
     vessels: Vessels = field(default_factory=Vessels)
     settings: EventSettings = field(default_factory=EventSettings)
+    thresholds: Thresholds = field(default_factory=Thresholds)
     ingest: IngestSettings = field(default_factory=IngestSettings)
     pacer: Pacer | None = None
     emit: Callable[[list[Change]], None] = lambda changes: None
@@ -106,7 +108,7 @@ class Watch:
         """The vessels with new reports judged together, their changes in MMSI order."""
         new = {m: self.vessels.recent[m].new for m in dirty}
         windows = {m: (self.vessels.window(m), self.vessels.recent[m].identity) for m in dirty}
-        judged = judge(windows, self.settings, self.ingest)
+        judged = judge(windows, self.settings, self.thresholds, self.ingest)
         learned = self._learned(judged, new)
         changes = []
         for mmsi, one in judged.items():

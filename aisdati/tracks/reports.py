@@ -5,6 +5,7 @@ reports, heading and status where it has them."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -22,10 +23,12 @@ def has_reports(data_dir: Path) -> bool:
     return (data_dir / REPORTS).exists()
 
 
-def read_reports(data_dir: Path, track_ids: list[int] | None = None) -> pd.DataFrame:
+def read_reports(
+    data_dir: Path, track_ids: list[int] | None = None, mmsis: list[int] | None = None
+) -> pd.DataFrame:
     """The reports to judge, sorted by vessel and time: every report of reports.parquet (or,
     where the output predates it, of points.parquet's tracks); `track_ids`: only the reports of
-    those tracks."""
+    those tracks; `mmsis`: only those vessels' reports."""
     path = data_dir / (REPORTS if has_reports(data_dir) else "points.parquet")
     if not path.exists():
         wanted = data_dir / REPORTS
@@ -33,10 +36,23 @@ def read_reports(data_dir: Path, track_ids: list[int] | None = None) -> pd.DataF
     try:
         dataset = ds.dataset(path, format="parquet")
         wanted = ds.field("track_id").isin(track_ids) if track_ids is not None else None
+        if mmsis is not None:
+            of_vessels = ds.field("mmsi").isin(mmsis)
+            wanted = of_vessels if wanted is None else wanted & of_vessels
         frame = dataset.to_table(filter=wanted).to_pandas()
     except (OSError, ValueError) as exc:
         raise UserError(f"cannot read {path}: {str(exc).splitlines()[0]}") from None
     return frame.sort_values(["mmsi", "time"], kind="stable").reset_index(drop=True)
+
+
+def motion_derived(data_dir: Path) -> bool:
+    """Whether ingest derived SOG and COG from positions for every file it read (a
+    positions-only input): its reports' motion then says nothing the positions do not."""
+    path = data_dir / "ingest_report.json"
+    if not path.exists():
+        return False
+    files = json.loads(path.read_text()).get("files") or []
+    return bool(files) and all({"sog", "cog"} & set(f.get("derived") or []) for f in files)
 
 
 def read_vessels(data_dir: Path) -> pd.DataFrame:

@@ -11,6 +11,8 @@ import pandas as pd
 
 from aisdati.events.kinds import MODEL_FREE
 from aisdati.events.settings import EventSettings
+from aisdati.tracks.store import load_tracks, read_track_table
+from tests.helpers.area import save_nearest
 from tests.helpers.cli import one_line_error, run
 from tests.helpers.models import detect_args, train_ny_nearest
 
@@ -69,11 +71,56 @@ def test_a_model_from_before_event_calibration_loads_and_says_the_defaults_judge
     world = train_ny_nearest(tmp_path)
     card = world["models"] / "down-nearest.json"
     doc = json.loads(card.read_text())
-    assert any(k.startswith("event:") for k in doc["calibration"])  # train records them
-    doc["calibration"] = {k: v for k, v in doc["calibration"].items() if ":" not in k}
-    card.write_text(json.dumps(doc))  # as a card written before events
+    assert "event-days" in doc["calibration"]  # train records the alert budget's period
+    assert any(k.startswith("event:") for k in doc["calibration"])
+    doc["calibration"] = {k: v for k, v in doc["calibration"].items() if k != "event-days"}
+    card.write_text(json.dumps(doc))  # as a card written before the budget (per-track stats)
     got = run(*detect_args(world, tmp_path / "out"))
     assert got.exit_code == 0, got.output
-    assert "predate(s) event calibration" in " ".join(got.output.split())
+    assert "predate(s) the alert budget" in " ".join(got.output.split())
     report = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert any("event calibration" in w for w in report["warnings"])
+    assert any("alert budget" in w for w in report["warnings"])
+
+
+def _judged(world: dict, out: Path, *which) -> tuple[pd.DataFrame, pd.DataFrame]:
+    got = run(*detect_args(world, out, *which))
+    assert got.exit_code == 0, got.output
+    return pd.read_parquet(out / "scores.parquet"), pd.read_parquet(out / "events.parquet")
+
+
+def _of_track(events: pd.DataFrame, track_id: int) -> set[tuple]:
+    mine = events[events["track_id"] == track_id]
+    return {(e.kind, e.start, e.end, e.strength) for e in mine.itertuples()}
+
+
+def _same_alone_as_in_the_batch(world: dict, tmp_path: Path, cluster: str) -> int:
+    """`detect --cluster C` and `detect --track ID` give each track the same events and flag;
+    the number of the tracks compared that had an event."""
+    scores, events = _judged(world, tmp_path / "batch", "--cluster", cluster)
+    with_events = set(events["track_id"].dropna().astype("int64"))
+    ids = sorted(scores["track_id"], key=lambda t: (t not in with_events, t))[:4]
+    for track_id in ids:
+        alone, alone_events = _judged(world, tmp_path / f"t{track_id}", "--track", track_id)
+        row = scores.set_index("track_id").loc[track_id]
+        assert bool(alone["flagged"].iloc[0]) == bool(row["flagged"]), track_id
+        assert _of_track(alone_events, track_id) == _of_track(events, track_id), track_id
+    return len(with_events & set(ids))
+
+
+def test_a_track_has_the_same_events_and_flag_alone_as_in_the_batch_kitimat(
+    months, kitimat, tmp_path
+):
+    july, _, _ = months
+    save_nearest(july, "all", tmp_path / "models")
+    world = {"proc": kitimat, "models": tmp_path / "models"}
+    assert _same_alone_as_in_the_batch(world, tmp_path, "all") >= 1
+
+
+def test_a_track_has_the_same_events_and_flag_alone_as_in_the_batch_ny_harbor(processed, tmp_path):
+    """The NY Harbor hour: an area model of every other vessel's tracks judges the rest."""
+    table = read_track_table(processed)
+    vessels = sorted(table["mmsi"].unique())
+    ids = table.loc[table["mmsi"].isin(vessels[::2]), "track_id"].tolist()
+    save_nearest(load_tracks(processed, ids), "all", tmp_path / "models")
+    world = {"proc": processed, "models": tmp_path / "models"}
+    _same_alone_as_in_the_batch(world, tmp_path, "all")

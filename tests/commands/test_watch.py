@@ -15,9 +15,9 @@ import sys
 import pandas as pd
 
 from aisdati.commands import watch as watch_command
-from aisdati.detection.events import event_settings
+from aisdati.detection.events import event_thresholds
 from aisdati.detectors import load_detectors
-from aisdati.events.settings import EventSettings
+from aisdati.events.budget import Thresholds
 from aisdati.live.decode import Decoder
 from aisdati.live.loop import Watch
 from tests.helpers.cli import one_line_error, run
@@ -138,15 +138,16 @@ def test_option_mistakes_are_one_line(tmp_path):
 
 
 def test_models_give_the_thresholds_they_calibrated(tmp_path, monkeypatch):
-    """`--models`: the watch judges by the event thresholds the NY hour's nearest model
-    calibrated on its training traffic (as `detect` judges with it), not the defaults; FRIO's
-    drift, a kind no model calibrates, is the same; a folder without models is one line."""
+    """`--models`: the watch judges by the alert thresholds the NY hour's nearest model
+    calibrated on its training period (as `detect` judges with it), not the defaults; FRIO's
+    drift, at its floor (AisAbnormal's definition) either way, is the same; a folder without
+    models is one line."""
     world = train_ny_nearest(tmp_path)
-    calibrated = event_settings(load_detectors(world["models"], []))
-    assert calibrated != EventSettings()
+    calibrated = event_thresholds(load_detectors(world["models"], []))
+    assert calibrated != Thresholds() and calibrated.vessel_days
     used = []
     monkeypatch.setattr(
-        watch_command, "Watch", lambda *a, **k: used.append(k["settings"]) or Watch(*a, **k)
+        watch_command, "Watch", lambda *a, **k: used.append(k["thresholds"]) or Watch(*a, **k)
     )
     live = replayed(tmp_path / "models", FRIO, "--models", world["models"])
     assert used == [calibrated]

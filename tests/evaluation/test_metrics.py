@@ -8,9 +8,10 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from aisdati.evaluation.inject import inject
-from aisdati.evaluation.metrics import EVENT_FIELDS, event_metrics, interval
+from aisdati.evaluation.metrics import EVENT_FIELDS, event_metrics
 from aisdati.events.find import find_events
 from aisdati.events.reports import VesselReports
+from aisdati.metrics import interval
 
 
 def _reports(frame, got=None):

@@ -30,9 +30,11 @@ def _altered(v: VesselReports, **changed: np.ndarray) -> VesselReports:
 
 
 def _stretch(v: VesselReports) -> tuple[int, int]:
-    """A stretch of 15 % of the reports in the middle third."""
+    """A stretch of 15 % of the reports in the middle third, at most an hour: a minority of the
+    hours around it, whose reports give the vessel's own spread (`scale_window_s`)."""
     a = len(v) // 3
-    return a, a + max(5, int(0.15 * len(v)))
+    b = a + max(5, int(0.15 * len(v)))
+    return a, min(b, int(np.searchsorted(v.time_s, v.time_s[a] + 3600.0)))
 
 
 def _overlaps(v: VesselReports, kind: str, a: int, b: int) -> bool:
