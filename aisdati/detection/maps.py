@@ -13,8 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 
 from aisdati.detection.webmap import html_detection_map
+from aisdati.events.kinds import ACTIVITY, ALERT
 from aisdati.events.stretch import deviation_stretch
 from aisdati.events.table import events_geojson
 from aisdati.execution import InProcess, Runner
@@ -41,6 +43,11 @@ def map_subset(flagged: np.ndarray, most: int) -> np.ndarray:
     return np.sort(np.r_[np.flatnonzero(flagged), normal[::stride]])
 
 
+def places(events: pd.DataFrame, cls: str) -> np.ndarray:
+    """[k, 2] lon/lat where each event of class `cls` is strongest."""
+    return events.loc[events["class"] == cls, ["lon", "lat"]].to_numpy(np.float64)
+
+
 # ------------------------------------------------------------------------------- map.png
 @plain_text()  # its texts may hold model names: drawn as they are
 def plot_detection_map(
@@ -52,10 +59,12 @@ def plot_detection_map(
     title: str = "",
     evidence_label: str = "nearest rollout",
     events: np.ndarray | None = None,
+    activity: np.ndarray | None = None,
 ) -> bytes:
     """map.png (its bytes): test tracks grey, flagged tracks red with their nearest rollout blue
-    and a cross where they deviate most, events ([k, 2] lon/lat, where each is strongest) as
-    orange diamonds, the models' regions dashed, over the offline coastline
+    and a cross where they deviate most, alerts (`events`: [k, 2] lon/lat, where each is
+    strongest) as orange diamonds, activity (loitering, gaps) as open blue circles, the models'
+    regions dashed, over the offline coastline
     (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
     stretched by 1/cos(latitude) so that shapes are true)."""
     from matplotlib.collections import LineCollection
@@ -73,6 +82,8 @@ def plot_detection_map(
         ax.plot(max_dev[flagged, 0], max_dev[flagged, 1], "kx", ms=7, mew=1.6, zorder=4)
     places = np.empty((0, 2)) if events is None else np.reshape(events, (-1, 2))
     ax.plot(places[:, 0], places[:, 1], "D", color="tab:orange", mec="k", ms=6, zorder=5)
+    done = np.empty((0, 2)) if activity is None else np.reshape(activity, (-1, 2))
+    ax.plot(done[:, 0], done[:, 1], "o", mfc="none", mec="tab:blue", mew=1.5, ms=7, zorder=5)
     for lo, hi in regions:
         ax.plot(
             [lo[0], hi[0], hi[0], lo[0], lo[0]],
@@ -91,7 +102,8 @@ def plot_detection_map(
         plt.Line2D([], [], color="tab:red", lw=1.4, label="flagged track"),
         plt.Line2D([], [], color="tab:blue", lw=1, label=evidence_label),
         plt.Line2D([], [], color="k", marker="x", ls="", label="largest deviation"),
-        plt.Line2D([], [], color="tab:orange", mec="k", marker="D", ls="", label="event"),
+        plt.Line2D([], [], color="tab:orange", mec="k", marker="D", ls="", label="alert"),
+        plt.Line2D([], [], mfc="none", mec="tab:blue", marker="o", ls="", label="activity"),
         plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
     ]
     ax.legend(handles=handles, fontsize=8, loc="best")
@@ -275,7 +287,8 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
                 {
                     "title": title,
                     "evidence_label": result.evidence_kind,
-                    "events": result.events[["lon", "lat"]].to_numpy(np.float64),
+                    "events": places(result.events, ALERT),
+                    "activity": places(result.events, ACTIVITY),
                 },
             ),
         ),
