@@ -138,7 +138,7 @@ def main() -> None:
     parser.add_argument("--defaults", action="store_true")
     parser.add_argument("--kinds", default="jump,shift,drift,gap")
     parser.add_argument("--min-anomalies", type=int, default=200)
-    parser.add_argument("--max-seeds", type=int, default=20)
+    parser.add_argument("--max-seeds", type=int, default=60)
     parser.add_argument("--resamples", type=int, default=1000)
     add_json_option(parser, "alert_budget")
     args = parser.parse_args()

@@ -218,21 +218,18 @@ def fit_and_save(
 def event_calibration(
     data_dir: Path | None, tracks: Sequence[Track], seen: np.ndarray
 ) -> dict[str, list[float]]:
-    """The alert budget's record of the training period (`aisdati.events.calibrate`): the
-    training tracks' vessels' reports over the tracks' span, every one (slow ones too, as
-    detection judges them), for the card beside its scores; `seen`: where the training traffic
-    reported ashore."""
+    """The alert budget's record of the training period (`aisdati.events.calibrate`): every
+    report over the training tracks' span (slow ones too, as detection judges them), for the
+    card beside its scores; `seen`: where the training traffic reported ashore."""
     if data_dir is None:
         return {}
     span = pd.DataFrame(
         {
-            "mmsi": [t.mmsi for t in tracks],
             "start": [t.start for t in tracks],
             "end": [t.start + pd.Timedelta(hours=float(np.sum(t.dts))) for t in tracks],
         }
     )
-    reports = read_reports(data_dir, mmsis=sorted(set(span["mmsi"])))
-    period = training_period(reports, span)
+    period = training_period(read_reports(data_dir), span)
     lengths = read_vessels(data_dir)["length_m"].dropna().to_dict()
     reported = not motion_derived(data_dir)
     return calibration(vessels(period), lengths=lengths, seen=seen, reported_motion=reported)

@@ -75,10 +75,11 @@ def thresholds_of(
 
 
 def training_period(reports: pd.DataFrame, tracks: pd.DataFrame) -> pd.DataFrame:
-    """The reports a model's alert budget is calibrated on: those of its training tracks'
-    vessels within its training tracks' time span (`tracks`: mmsi, start, end)."""
+    """The reports a model's alert budget is calibrated on: every vessel's within its training
+    tracks' time span (`tracks`: start, end). Every vessel's, as detection judges every
+    vessel's: calibrated on the vessels with long tracks alone, the budget held for them and not
+    for the rest (on a US coastal day, 1,050 vessel-days, 273 alerts per 1,000 against 10)."""
     if not len(tracks):
         return reports.iloc[:0]
     first, last = tracks["start"].min(), tracks["end"].max()
-    keep = reports["mmsi"].isin(tracks["mmsi"].unique())
-    return reports[keep & (reports["time"] >= first) & (reports["time"] <= last)]
+    return reports[(reports["time"] >= first) & (reports["time"] <= last)]
