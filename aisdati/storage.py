@@ -39,6 +39,13 @@ NOT_COPIED = (".ckpt",)
 them, in a local folder)."""
 
 
+def without_password(url: str) -> str:
+    """`url` as messages show it: its password (`user:PW@`, `password=PW`) replaced by `***`,
+    so that no error, progress line or log holds it."""
+    url = re.sub(r"(://[^/:@]+):[^/]*@", r"\1:***@", url)
+    return re.sub(r"(?i)([?&]password=)[^&#]*", r"\1***", url)
+
+
 def is_url(text: str | os.PathLike[str]) -> bool:
     """Whether a folder option names a URL (`scheme://...`) rather than a local path."""
     return isinstance(text, str) and bool(URL.match(text))
@@ -82,7 +89,7 @@ class RemoteFolder:
     @property
     def shown(self) -> str:
         """The URL without a password, for messages."""
-        return re.sub(r"(://[^/:@]+):[^/@]*@", r"\1:***@", self.url)
+        return without_password(self.url)
 
     def join(self, name: str) -> str:
         """The URL of `name` in this folder without its password: what a model's

@@ -3,10 +3,11 @@ in a database, printed, and shown on a live page (`aisdati.live`)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from aisdati.commands.common import err_console
@@ -25,7 +26,7 @@ from aisdati.live.store import open_store
 from aisdati.live.vessels import Vessels
 from aisdati.options import Range
 from aisdati.preprocess.settings import parse_duration
-from aisdati.storage import fetched_models
+from aisdati.storage import fetched_models, without_password
 
 PROGRESS_S = 5.0
 """Wall seconds between two progress lines on stderr."""
@@ -104,35 +105,41 @@ def run(o: WatchOptions) -> None:
     window_s = check(o)
     thresholds, area = judging(o.models_dir)
     chunks = open_source(o.source, say, paced=o.speed is not None)
-    store, state, show = open_store(o.db), LiveState(), printer(o.as_json)
+    state, show, db = LiveState(), printer(o.as_json), without_password(o.db)
 
     def emit(changes: list[Change]) -> None:
         show(changes)
         state.record(changes)
 
-    watch = Watch(
-        store, Vessels(window_s=window_s, max_vessels=o.max_vessels), thresholds=thresholds,
-        pacer=None if o.speed is None else Pacer(o.speed), emit=emit, area=area,
-    )  # fmt: skip
-    server = start_server(o.serve, state) if o.serve else None
-    try:
-        if resumed := watch.resume():
-            say(f"resumed {resumed} open event(s) from {o.db}")
-        if server:
-            say(f"live page at http://{o.serve}/")
-        shown = time.monotonic()
-        for lines in chunks:
-            watch.step(lines)
-            state.refresh(watch)
-            if time.monotonic() - shown >= PROGRESS_S:
-                say(summary(watch))
-                shown = time.monotonic()
-        state.refresh(watch, force=True)
-        say(f"feed ended: {summary(watch)}")
-    finally:
-        left = watch.stop()
-        store.close()
-        if server:
-            server.shutdown()
-        say(f"stopped; {left} open event(s) kept open in {o.db}")
+    with contextlib.ExitStack() as held:
+        if o.serve:  # before the database: a port in use leaves no database file behind
+            held.callback(start_server(o.serve, state).shutdown)
+        store = open_store(o.db)
+        held.callback(store.close)
+        watch = Watch(
+            store, Vessels(window_s=window_s, max_vessels=o.max_vessels), thresholds=thresholds,
+            pacer=None if o.speed is None else Pacer(o.speed), emit=emit, area=area,
+        )  # fmt: skip
+        try:
+            if resumed := watch.resume():
+                say(f"resumed {resumed} open event(s) from {db}")
+            if o.serve:
+                say(f"live page at http://{o.serve}/")
+            follow(watch, chunks, state)
+        finally:
+            left = watch.stop()
+            say(f"stopped; {left} open event(s) kept open in {db}")
     sys.stdout.flush()
+
+
+def follow(watch: Watch, chunks: Iterator[list[bytes]], state: LiveState) -> None:
+    """The feed through the watch, to its end, a progress line every `PROGRESS_S`."""
+    shown = time.monotonic()
+    for lines in chunks:
+        watch.step(lines)
+        state.refresh(watch)
+        if time.monotonic() - shown >= PROGRESS_S:
+            say(summary(watch))
+            shown = time.monotonic()
+    state.refresh(watch, force=True)
+    say(f"feed ended: {summary(watch)}")

@@ -10,6 +10,8 @@ a gap, which closes when the vessel is heard again (or is forgotten)."""
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -60,13 +62,14 @@ class Change:
 class Ledger:
     settings: EventSettings = field(default_factory=EventSettings)
     known: dict[int, list[LiveEvent]] = field(default_factory=dict)
-    next_id: int = 1
+    new_id: Callable[[], int] = field(default_factory=lambda: itertools.count(1).__next__)
+    """Where a new event's id comes from: the watch's database (`Store.new_id`), so that no
+    other watch on it and no restart ever gives the same id to another event."""
 
     def load(self, events: list[LiveEvent]) -> None:
         """The events a store kept (open ones, and recent closed ones to match again)."""
         for e in events:
             self.known.setdefault(int(e.fields["mmsi"]), []).append(e)
-            self.next_id = max(self.next_id, e.event_id + 1)
 
     def update(self, mmsi: int, judged: Judged) -> list[Change]:
         """The changes one judgement of a vessel's window brings."""
@@ -77,7 +80,7 @@ class Ledger:
             state = "open" if end_s >= judged.last_s and row["kind"] != "gap" else "closed"
             match = next((e for e in known if e.overlaps(row["kind"], start_s, end_s)), None)
             if match is None:
-                match = LiveEvent(self._new_id(), row, state)
+                match = LiveEvent(self.new_id(), row, state)
                 known.append(match)
                 changes.append(Change.of("opened" if state == "open" else "closed", match))
             elif change := _changed(match, row, state, judged.first_s):
@@ -107,7 +110,7 @@ class Ledger:
             return None
         if ashore.reports(np.array([[last.lon, last.lat]])).any():
             return None
-        event = LiveEvent(self._new_id(), _gap_fields(last, silence, clock_s) | who)
+        event = LiveEvent(self.new_id(), _gap_fields(last, silence, clock_s) | who)
         known.append(event)
         return Change.of("opened", event)
 
@@ -122,10 +125,6 @@ class Ledger:
 
     def open_events(self) -> list[LiveEvent]:
         return [e for events in self.known.values() for e in events if e.state == "open"]
-
-    def _new_id(self) -> int:
-        self.next_id += 1
-        return self.next_id - 1
 
 
 def _changed(e: LiveEvent, row: dict[str, Any], state: str, first_s: float) -> str | None:

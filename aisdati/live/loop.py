@@ -76,7 +76,7 @@ class Watch:
     """The area models judging each vessel's window every `area.EVERY` reports (None: none)."""
 
     def __post_init__(self) -> None:
-        self.ledger = Ledger(self.settings)
+        self.ledger = Ledger(self.settings, new_id=self.store.new_id)
 
     def resume(self) -> int:
         """Pick up where the database left off: its open and recent events, and the vessels'

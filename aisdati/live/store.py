@@ -2,7 +2,13 @@
 one row per event, open or closed), one of vessels (last known position and identity, and the
 recent window kept when the watch stops, to resume from). SQLite by default (a file), or
 PostgreSQL (`postgresql://...`, through psycopg), with a PostGIS geometry column where the
-extension is installed. docs/usage/watch.md prints the schema."""
+extension is installed. docs/usage/watch.md prints the schema.
+
+Event ids come from the database (SQLite: an AUTOINCREMENT table; PostgreSQL: a sequence), never
+from what one watch has seen: two watches on one database, or a watch restarted after its
+recent events were dropped from memory, never number two events alike. A database that cannot
+be opened, or that another writer keeps locked longer than `LOCK_WAIT_S`, is one line
+(`UserError`), naming it without its password."""
 
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ from aisdati.errors import UserError
 from aisdati.live.decode import Identity
 from aisdati.live.ledger import Change, LiveEvent
 from aisdati.live.vessels import FIELDS
+from aisdati.storage import first_line, without_password
 
 EVENT_FIELDS = (
     "event_id", "mmsi", "name", "ship_type", "kind", "start_time", "end_time", "duration_s",
@@ -32,6 +39,10 @@ VESSEL_FIELDS = (
     "mmsi", "name", "ship_type", "length_m", "time", "lon", "lat", "sog", "cog", "heading",
     "status", "recent",
 )  # fmt: skip
+START_WAIT_S = 5.0
+"""How long opening the database waits for another writer's lock before it says so."""
+LOCK_WAIT_S = 60.0
+"""How long a write waits for another writer's lock (SQLite) before the watch stops."""
 RESUME_S = 86400.0
 """Closed events this recent (by their end, before the newest) are read back on a restart, so
 that a replay of the same stretch finds them again rather than twice."""
@@ -66,7 +77,25 @@ def schema(d: Dialect) -> list[str]:
             mmsi BIGINT PRIMARY KEY, name TEXT, ship_type TEXT, length_m {d.real},
             time {d.time}, lon {d.real}, lat {d.real}, sog {d.real}, cog {d.real},
             heading {d.real}, status BIGINT, recent TEXT)""",
+        "CREATE TABLE IF NOT EXISTS event_ids (id INTEGER PRIMARY KEY AUTOINCREMENT)"
+        if d is SQLITE
+        else "CREATE SEQUENCE IF NOT EXISTS event_ids",
     ]
+
+
+def id_floor(d: Dialect) -> str:
+    """The statement that moves the id allocator past every event the table holds (a database
+    written before ids came from the allocator); it never moves it back."""
+    if d is SQLITE:
+        return (
+            "INSERT OR IGNORE INTO event_ids (id) "
+            "SELECT event_id FROM events ORDER BY event_id DESC LIMIT 1"
+        )
+    return (
+        "SELECT setval('event_ids', e.top) FROM event_ids s, "
+        "(SELECT max(event_id) AS top FROM events) e "
+        "WHERE e.top >= s.last_value + s.is_called::int"
+    )
 
 
 def upsert(d: Dialect, table: str, columns: Sequence[str], key: str) -> str:
@@ -86,19 +115,34 @@ def _number(x: Any) -> Any:
 
 
 class Store:
-    """A connection and its dialect; every write is one transaction."""
+    """A connection and its dialect; every write is one transaction. `name`: the database as
+    messages show it; `failures`: the driver's errors of the database rather than of this code
+    (locked, unreachable, full), each turned into one line."""
 
-    def __init__(self, conn: Any, dialect: Dialect) -> None:
-        self.conn, self.d = conn, dialect
+    def __init__(
+        self, conn: Any, dialect: Dialect, name: str, failures: tuple[type[Exception], ...]
+    ) -> None:
+        self.conn, self.d, self.name, self.failures = conn, dialect, name, failures
         with self.transaction():
-            for statement in schema(dialect):
+            for statement in [*schema(dialect), id_floor(dialect)]:
                 self.conn.execute(statement)
 
     @contextlib.contextmanager
     def transaction(self) -> Iterator[None]:
-        """A block committed whole (SQLite's connection as a context; psycopg's transaction)."""
-        with self.conn if self.d is SQLITE else self.conn.transaction():
-            yield
+        """A block committed whole (SQLite's connection as a context; psycopg's transaction);
+        a failure of the database is one line."""
+        try:
+            with self.conn if self.d is SQLITE else self.conn.transaction():
+                yield
+        except self.failures as exc:
+            raise UserError(f"{self.name}: {first_line(exc)}") from None
+
+    def new_id(self) -> int:
+        """A new event's id, allocated by the database (never given twice)."""
+        with self.transaction():
+            if self.d is SQLITE:
+                return int(self.conn.execute("INSERT INTO event_ids DEFAULT VALUES").lastrowid)
+            return int(self.conn.execute("SELECT nextval('event_ids')").fetchone()[0])
 
     def when(self, t: pd.Timestamp | datetime | None) -> Any:
         """A time as the database takes it (SQLite: ISO 8601 text)."""
@@ -224,19 +268,29 @@ def _geojson(f: dict[str, Any]) -> str:
 
 
 def open_store(url: str) -> Store:
-    """The database at `url`: postgresql://... (psycopg), else a SQLite file's path."""
+    """The database at `url`: postgresql://... (psycopg), else a SQLite file's path. One that
+    cannot be opened (locked, not a database, unreachable) is one line, and nothing written."""
     if url.startswith(("postgresql://", "postgres://")):
         return _postgres(url)
     path = Path(url)
     if path.parent and not path.parent.is_dir():
         raise UserError(f"{path.parent}: no such folder for the database")
     try:
-        conn = sqlite3.connect(path, check_same_thread=False)
+        conn = sqlite3.connect(path, timeout=START_WAIT_S, check_same_thread=False)
     except sqlite3.Error as exc:
         raise UserError(f"{path}: {exc}") from None
-    conn.execute("PRAGMA journal_mode=WAL")
-    conn.execute("PRAGMA synchronous=NORMAL")  # WAL: a crash of the watch loses nothing
-    return Store(conn, SQLITE)
+    try:
+        conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute("PRAGMA synchronous=NORMAL")  # WAL: a crash of the watch loses nothing
+        store = Store(conn, SQLITE, str(path), (sqlite3.OperationalError,))
+    except sqlite3.Error as exc:
+        conn.close()
+        raise UserError(f"{path}: {exc}") from None
+    except UserError:
+        conn.close()
+        raise
+    conn.execute(f"PRAGMA busy_timeout = {int(LOCK_WAIT_S * 1000)}")
+    return store
 
 
 def _postgres(url: str) -> Store:
@@ -244,18 +298,26 @@ def _postgres(url: str) -> Store:
         import psycopg
     except ImportError:
         raise UserError("PostgreSQL needs psycopg: pip install 'psycopg[binary]'") from None
+    shown = without_password(url)
     try:
         conn = psycopg.connect(url)
     except psycopg.Error as exc:
-        raise UserError(f"{url}: {str(exc).strip().splitlines()[0]}") from None
+        raise UserError(f"{shown}: {first_line(exc)}") from None
     conn.autocommit = True  # each block is its own transaction (`Store.transaction`)
-    store = Store(conn, POSTGRES)
-    cur = conn.execute("SELECT 1 FROM pg_available_extensions WHERE name = 'postgis'")
-    if cur.fetchone() is not None:
-        with store.transaction():
-            conn.execute("CREATE EXTENSION IF NOT EXISTS postgis")
-            conn.execute(
-                "ALTER TABLE events ADD COLUMN IF NOT EXISTS geom geometry(Geometry, 4326)"
-            )
-        store.d = Dialect(POSTGRES.mark, POSTGRES.time, POSTGRES.real, geometry=True)
+    try:
+        store = Store(conn, POSTGRES, shown, (psycopg.OperationalError,))
+        cur = conn.execute("SELECT 1 FROM pg_available_extensions WHERE name = 'postgis'")
+        if cur.fetchone() is not None:
+            with store.transaction():
+                conn.execute("CREATE EXTENSION IF NOT EXISTS postgis")
+                conn.execute(
+                    "ALTER TABLE events ADD COLUMN IF NOT EXISTS geom geometry(Geometry, 4326)"
+                )
+            store.d = Dialect(POSTGRES.mark, POSTGRES.time, POSTGRES.real, geometry=True)
+    except psycopg.Error as exc:
+        conn.close()
+        raise UserError(f"{shown}: {first_line(exc)}") from None
+    except UserError:
+        conn.close()
+        raise
     return store

@@ -12,11 +12,13 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+import psycopg
 import pytest
 
 from aisdati.live.loop import Watch
 from aisdati.live.sources import replay
 from aisdati.live.store import open_store
+from tests.helpers.cli import one_line_error, run
 from tests.helpers.live import FRIO, free_port
 
 CHUNK_LINES = 200
@@ -111,3 +113,19 @@ def test_a_stopped_watch_resumes_its_open_drift(db, tmp_path):
     resumed = rows(db)
     assert [r[1:3] for r in resumed] == [("closed", None)]
     assert [r[3:] for r in resumed] == [r[3:] for r in rows(once)]  # nothing lost or doubled
+
+
+def test_the_postgresql_password_is_never_printed(postgres):
+    """Neither the connection's error nor the watch's lines ("stopped; 0 open event(s) kept
+    open in postgresql://...") show the URL's password (the test server trusts any)."""
+    with psycopg.connect(postgres, autocommit=True) as conn:
+        conn.execute("DROP DATABASE IF EXISTS secret")
+        conn.execute("CREATE DATABASE secret")
+    url = postgres.replace("postgres@", "postgres:S3CRET@").rsplit("/", 1)[0] + "/secret"
+    got = run("watch", "--input", FRIO, "--db", url)
+    assert got.exit_code == 0, got.output
+    assert "postgres:***@" in got.stderr and "S3CRET" not in got.output
+    unreachable = f"postgresql://ais:S3CRET@127.0.0.1:{free_port()}/ais"
+    got = run("watch", "--input", FRIO, "--db", unreachable)
+    one_line_error(got, r"postgresql://ais:\*\*\*@127")
+    assert "S3CRET" not in got.output
