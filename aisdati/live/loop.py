@@ -40,6 +40,7 @@ class Counters:
     reports: int = 0
     changes: int = 0
     recent: deque = field(default_factory=deque)  # (monotonic s, lines) of the last RATE_S
+    begun: float = field(default_factory=time.monotonic)
 
     def count(self, lines: int, reports: int, changes: int) -> None:
         now = time.monotonic()
@@ -51,10 +52,11 @@ class Counters:
             self.recent.popleft()
 
     def rate(self) -> float:
-        if len(self.recent) < 2:
-            return 0.0
-        span = max(self.recent[-1][0] - self.recent[0][0], 1e-3)
-        return sum(n for _, n in list(self.recent)[1:]) / span
+        """Lines per second over the last `RATE_S`, or since counting began when that is
+        sooner (the first chunk's lines count: they came in that time)."""
+        now = time.monotonic()
+        since = max(self.begun, now - RATE_S)
+        return sum(n for t, n in self.recent if t >= since) / max(now - since, 1e-3)
 
 
 @dataclass
@@ -91,7 +93,7 @@ class Watch:
 
     def step(self, lines: list[bytes]) -> list[Change]:
         """One chunk of lines through; the event changes it brought (already stored)."""
-        reports = self.decoder.reports(lines)
+        reports = self.decoder.reports(lines, self.vessels.clock_us)
         self.vessels.identify(self.decoder.identities())
         dirty = self.vessels.add(reports)
         if self.pacer is not None and reports.num_rows:

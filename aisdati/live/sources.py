@@ -1,21 +1,32 @@
 """Where the sentences come from: a TCP server (connected to, and reconnected with back-off when
-it drops or refuses), UDP datagrams (listened for), a file or folder of NMEA (replayed), or
-stdin. Each source yields chunks of lines; an empty chunk when nothing came for `IDLE_S`, so
-that the watch keeps its clock, its page and its counters going on a quiet feed."""
+it drops or refuses), UDP datagrams (listened for), a file or folder of NMEA (replayed, each
+file plain or compressed as ingest reads it: `.gz`, `.zst`, a `.zip` of NMEA files), or stdin.
+Each source yields chunks of lines; an empty chunk when nothing came for `IDLE_S`, so that the
+watch keeps its clock, its page and its counters going on a quiet feed."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import socket
 import sys
 import time
+import zipfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from urllib.parse import urlsplit
 
 from aisdati.errors import UserError
+from aisdati.preprocess.inputs import (
+    NMEA_SUFFIXES,
+    Archive,
+    Source,
+    check_member,
+    describe_read_error,
+)
 from aisdati.preprocess.nmea import MAX_LINE_BYTES, read_lines
+from aisdati.preprocess.streams import READ_ERRORS
 
 IDLE_S = 0.2
 """The longest a source blocks before it yields an empty chunk."""
@@ -25,6 +36,8 @@ REPLAY_LINES = 2000
 """Lines per chunk of a file replayed as fast as possible (one judgement of the vessels each)."""
 PACED_LINES = 20
 """Lines per chunk of a file replayed at --speed: a report's wait is at most this many lines."""
+PLAIN_NMEA = tuple(s for s in NMEA_SUFFIXES if s.count(".") == 1)
+"""The names of a zip archive's members that are replayed (ingest's NMEA files, uncompressed)."""
 Say = Callable[[str], None]
 
 
@@ -116,17 +129,22 @@ def udp(host: str, port: int, say: Say) -> Iterator[list[bytes]]:
             yield Lines().split(data + b"\n")
 
 
-def replay(paths: list[Path], chunk_lines: int) -> Iterator[list[bytes]]:
-    """The lines of files, in order, `chunk_lines` at a time."""
-    for path in paths:
-        with path.open("rb") as stream:
-            chunk: list[bytes] = []
-            for line in read_lines(stream):
-                chunk.append(line)
-                if len(chunk) >= chunk_lines:
-                    yield chunk
-                    chunk = []
-            yield chunk
+def replay(sources: list[Source], chunk_lines: int) -> Iterator[list[bytes]]:
+    """The lines of recordings, in order, `chunk_lines` at a time, decompressed as ingest
+    reads them; a corrupt or truncated one is one line."""
+    for source in sources:
+        chunk: list[bytes] = []
+        try:
+            stream, _ = source.open()
+            with contextlib.closing(stream):
+                for line in read_lines(stream):
+                    chunk.append(line)
+                    if len(chunk) >= chunk_lines:
+                        yield chunk
+                        chunk = []
+        except READ_ERRORS as exc:
+            raise describe_read_error(source, exc) from None
+        yield chunk
 
 
 def stdin() -> Iterator[list[bytes]]:
@@ -142,6 +160,32 @@ def stdin() -> Iterator[list[bytes]]:
             yield lines.rest()
             return
         yield lines.split(data)
+
+
+def recordings(path: Path) -> list[Source]:
+    """What a file or folder to replay holds, in name order: plain, `.gz` and `.zst` files, and
+    the NMEA members of a `.zip` archive (ingest's readers of each)."""
+    found: list[Source] = []
+    for file in files_of(path):
+        found += zip_members(file) if file.name.lower().endswith(".zip") else [Source(file)]
+    return found
+
+
+def zip_members(path: Path) -> list[Source]:
+    """The NMEA members of a zip archive (`.nmea`, `.ais`, `.txt`), in name order."""
+    archive = Archive(path)
+    try:
+        members = sorted(
+            (i for i in archive.zip.infolist() if i.filename.lower().endswith(PLAIN_NMEA)),
+            key=lambda i: i.filename,
+        )
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise UserError(f"{path}: not a readable zip archive ({exc})") from None
+    if not members:
+        raise UserError(f"{path}: the zip archive holds no {', '.join(PLAIN_NMEA)} file")
+    for info in members:
+        check_member(path, info)
+    return [Source(path, info.filename, archive) for info in members]
 
 
 def files_of(path: Path) -> list[Path]:
@@ -172,7 +216,7 @@ def open_source(spec: str, say: Say, paced: bool = False) -> Iterator[list[bytes
         if url.scheme == "tcp":
             return tcp(url.hostname or "127.0.0.1", port, say)
         return udp(url.hostname or "", port, say)
-    return replay(files_of(Path(spec)), PACED_LINES if paced else REPLAY_LINES)
+    return replay(recordings(Path(spec)), PACED_LINES if paced else REPLAY_LINES)
 
 
 class Pacer:

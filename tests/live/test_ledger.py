@@ -53,7 +53,9 @@ def test_a_silent_vessel_opens_a_gap_that_closes_when_it_is_heard(replayed):
     watch, _ = replayed
     last = watch.last[538004030]
     two_hours = last.time_s + 7200
-    opened = watch.step([position(219000001, two_hours, 11.0, 57.9, 10.0)])  # the clock moves
+    # the clock moves: three reports agree on the time (one alone is held: aisdati.live.future)
+    heard = [position(219000001, two_hours + k, 11.0 + k / 1e4, 57.9, 10.0) for k in (0, 9, 18)]
+    opened = watch.step(heard)
     assert [(c.what, c.event.fields["kind"]) for c in opened] == [("opened", "gap")]
     assert "so far" in opened[0].event.fields["evidence"]
     closed = watch.step([position(538004030, two_hours + 60, last.lon + 0.01, last.lat, 10.0)])

@@ -16,7 +16,7 @@ import psycopg
 import pytest
 
 from aisdati.live.loop import Watch
-from aisdati.live.sources import replay
+from aisdati.live.sources import recordings, replay
 from aisdati.live.store import open_store
 from tests.helpers.cli import one_line_error, run
 from tests.helpers.live import FRIO, free_port
@@ -91,7 +91,7 @@ def _text(x: object) -> str | None:
 
 
 def test_a_stopped_watch_resumes_its_open_drift(db, tmp_path):
-    chunks = replay([FRIO], CHUNK_LINES)
+    chunks = replay(recordings(FRIO), CHUNK_LINES)
     first = Watch(open_store(db))
     while not first.ledger.open_events():
         first.step(next(chunks))
@@ -107,7 +107,7 @@ def test_a_stopped_watch_resumes_its_open_drift(db, tmp_path):
     second.store.close()
     once = str(tmp_path / "once.sqlite")  # the same replay, never stopped
     whole = Watch(open_store(once))
-    for chunk in replay([FRIO], CHUNK_LINES):
+    for chunk in replay(recordings(FRIO), CHUNK_LINES):
         whole.step(chunk)
     whole.store.close()
     resumed = rows(db)
