@@ -1,5 +1,6 @@
 // The live page's script: polls /state.json every second and redraws the vessels' last
 // positions, the open and recent events (a popup each) and the feed's summary, without reload.
+// Every text shown is set as text (textContent, or an element given to Leaflet), never HTML.
 const map = L.map('map', {zoomSnap: 0.25, preferCanvas: true}).setView([0, 0], 2);
 map.attributionControl.setPrefix('Leaflet');
 L.control.scale().addTo(map);
@@ -43,11 +44,18 @@ function drawEvents(events) {
     list.appendChild(item);
   }
 }
+function text(words) {
+  // Leaflet renders a string tooltip as HTML: a vessel's name (`<IMG SRC=...>` is one) goes in
+  // as an element's text, never as markup.
+  const span = document.createElement('span');
+  span.textContent = words;
+  return span;
+}
 function drawVessels(vessels) {
   vesselLayer.clearLayers();
   for (const [mmsi, lon, lat, name] of vessels) {
     L.circleMarker([lat, lon], {radius: 3, color: '#1f77b4', weight: 1})
-      .bindTooltip(`${name || ''} ${mmsi}`).addTo(vesselLayer);
+      .bindTooltip(text(`${name || ''} ${mmsi}`)).addTo(vesselLayer);
   }
   if (!framed && vessels.length) {
     map.fitBounds(vessels.map(v => [v[2], v[1]]), {padding: [30, 30], maxZoom: 12});

@@ -1,16 +1,22 @@
 """The live page in a real headless Chromium (skipped where there is none, as the detection
 map's test is): served by a watch reading FRIO's recording from a real TCP feed, drawn on the
 package's own Leaflet with every other host unresolvable, it shows the vessel, the drift with
-its popup's fields, and the feed's summary, polled without a reload."""
+its popup's fields, and the feed's summary, polled without a reload; a vessel's name is shown
+as text, never run as HTML."""
 
 from __future__ import annotations
 
+import html
+import http.server
 import json
+import re
 import shutil
 import subprocess
+import threading
 import urllib.request
 
 import pytest
+from pyais.encode import encode_dict
 
 from tests.helpers.live import FRIO, Feed, free_port, poll, stopped, watch
 
@@ -68,3 +74,78 @@ def test_the_live_page_shows_vessels_events_and_the_feed(tmp_path):
         "2014-09-28T16:37:54.051000+00:00",
     )
     assert drift["evidence"].startswith("course 54 deg off heading")
+
+
+HOVER = b"""<script>
+setInterval(() => {  // a user's pointer over every vessel: each tooltip open, what it holds noted
+  vesselLayer.eachLayer(marker => marker.openTooltip());
+  const tips = [...document.querySelectorAll('.leaflet-tooltip')];
+  if (tips.length) document.body.dataset.tooltips = JSON.stringify(
+    tips.map(t => [t.textContent, t.querySelectorAll('img').length]));
+}, 300);
+</script>"""
+
+
+def hovered(page: str) -> http.server.ThreadingHTTPServer:
+    """The watch's page at `page` as a user hovering its vessels sees it: served from another
+    port (the page with `HOVER` in it; every other path, state.json too, the watch's own)."""
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            with urllib.request.urlopen(page + self.path.lstrip("/"), timeout=5) as reply:
+                body, kind = reply.read(), reply.headers["Content-Type"]
+            if self.path == "/":
+                body = body.replace(b"</body>", HOVER + b"</body>")
+            self.send_response(200)
+            self.send_header("Content-Type", kind)
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server
+
+
+NAME = "<IMG SRC=//X.IO/A>"
+"""A vessel's name as a type 5 message can spell it (AIS's six-bit text has no lower case)."""
+
+
+def named_vessel() -> list[bytes]:
+    """A vessel calling itself `NAME` (type 5), and one report of it near FRIO, at FRIO's
+    time (28 September 2014, 16:00 UTC)."""
+    static = {"type": 5, "mmsi": 219000009, "shipname": NAME, "ship_type": 70, "to_bow": 50,
+              "to_stern": 20}  # fmt: skip
+    report = {"type": 1, "mmsi": 219000009, "lon": 10.6, "lat": 57.6, "speed": 8.0,
+              "course": 90.0, "heading": 90, "status": 0}  # fmt: skip
+    lines = encode_dict(static, talker_id="AI", seq_id=1)
+    lines.append(f"\\c:1411920000*00\\{encode_dict(report, talker_id='AI')[0]}")
+    return [line.encode() for line in lines]
+
+
+def test_a_vessel_name_is_shown_as_text_never_run(tmp_path):
+    """The name reached state.json raw and the vessel's tooltip was built as HTML from it:
+    hovering made an <img> that loaded a foreign URL (an ONERROR= would run)."""
+    feed, port = Feed(FRIO.read_bytes().splitlines() + named_vessel()), free_port()
+    url = f"http://127.0.0.1:{port}/"
+    proc = watch("--input", f"tcp://127.0.0.1:{feed.port}", "--db", tmp_path / "w.sqlite",
+                 "--serve", f"127.0.0.1:{port}", out=tmp_path / "watch")  # fmt: skip
+    try:
+        poll(lambda: "live page" in (tmp_path / "watch" / "stderr").read_text(), 60, "the page")
+        poll(lambda: any(v[3] == NAME for v in state(url)["vessels"]), 60, "the named vessel")
+        proxy = hovered(url)
+        try:
+            page = dom(f"http://127.0.0.1:{proxy.server_address[1]}/", tmp_path / "profile")
+        finally:
+            proxy.shutdown()
+    finally:
+        stopped(proc)
+        feed.stop()
+    found = re.search(r'data-tooltips="([^"]*)"', page)
+    assert found, page[-2000:]
+    tips = dict(json.loads(html.unescape(found[1])))
+    assert tips == {f"{NAME} 219000009": 0, "FRIO 538004030": 0}  # its text, and no <img>
+    assert "data-error" not in page
