@@ -82,6 +82,11 @@ STARTED = time.time()
 
 
 # ------------------------------------------------------------------------------ output folders
+URL_LIKE = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]+):/")
+"""A URL given for an output folder (`memory://r`, which a path option reads as `memory:/r`):
+refused, rather than written as a local folder named `memory:`."""
+
+
 def same_folder(a: str | Path, b: str | Path) -> bool:
     """Whether two folder options name the same folder (whatever the spelling or links)."""
     return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
@@ -111,6 +116,11 @@ def prepare_output_dir(
     folders of part files: a folder that holds other files). Then sweep our stale temporaries
     out of it."""
     path = Path(path)
+    if scheme := URL_LIKE.match(str(path)):
+        raise UserError(
+            f"{option} {scheme[1]}://...: a URL, where this command writes a local folder "
+            "(only `aisdati train --out` copies its models to a URL)"
+        )
     if path.exists() and not path.is_dir():
         raise _refuse(path, option, "it is a file, not a folder")
     try:
