@@ -79,9 +79,19 @@ def loitering(v: VesselReports, s: EventSettings) -> list[Found]:
     return out
 
 
-def gaps(v: VesselReports, s: EventSettings, check: AshoreCheck) -> list[Found]:
+def land_mask(v: VesselReports, seen: np.ndarray | None) -> np.ndarray | None:
+    """[n] which of the vessel's reports are ashore (`aisdati.tracks.ashore`: on land by the
+    coastline and its margin, where the area's training traffic never reported, `seen`): the one
+    land check of a vessel's reports, which the gap and ashore kinds both read; None where the
+    coastline is too coarse for it."""
+    check = AshoreCheck()
+    return check.reports(v.positions(), seen) if check.available() else None
+
+
+def gaps(v: VesselReports, s: EventSettings, land: np.ndarray | None) -> list[Found]:
     """Silences far longer than the vessel's usual interval, after reporting under way, with
-    both ends on water (a vessel in port or leaving the coverage is not going dark at sea)."""
+    both ends on water (`land`: `land_mask`; a vessel in port or leaving the coverage is not
+    going dark at sea)."""
     if len(v) < 3:
         return []
     usual = float(np.median(v.dt_s))
@@ -91,8 +101,7 @@ def gaps(v: VesselReports, s: EventSettings, check: AshoreCheck) -> list[Found]:
     )
     if steps.size == 0:
         return []
-    ends = v.positions(np.concatenate([steps, steps + 1]))
-    on_land = check.reports(ends).reshape(2, -1).any(axis=0)
+    on_land = np.zeros(len(steps), bool) if land is None else land[steps] | land[steps + 1]
     return [
         Found(
             "gap",
@@ -114,12 +123,11 @@ def gap_limit(v: VesselReports, s: EventSettings) -> float:
     return max(s.gap_min_s, s.gap_factor * float(np.median(v.dt_s)))
 
 
-def ashore(v: VesselReports, check: AshoreCheck, seen: np.ndarray | None) -> list[Found]:
-    """Each run of reports ashore, when the vessel has at least the rule's number of them."""
-    if not check.available():
-        return []
-    inland = check.reports(v.positions(), seen)
-    if inland.sum() < check.min_reports:
+def ashore(v: VesselReports, land: np.ndarray | None) -> list[Found]:
+    """Each run of reports ashore (`land`: `land_mask`), when the vessel has at least the rule's
+    number of them."""
+    check = AshoreCheck()
+    if land is None or land.sum() < check.min_reports:
         return []
     return [
         Found(
@@ -127,8 +135,8 @@ def ashore(v: VesselReports, check: AshoreCheck, seen: np.ndarray | None) -> lis
             a,
             b,
             a,
-            float(inland.sum() / check.min_reports),
+            float(land.sum() / check.min_reports),
             f"{b - a + 1} report(s) {check.margin_m:g} m or more inland",
         )
-        for a, b in runs(inland)
+        for a, b in runs(land)
     ]

@@ -14,14 +14,20 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aisdati.events.behaviour import ashore, drift, gaps, loitering, sudden_speed_change
+from aisdati.events.behaviour import (
+    ashore,
+    drift,
+    gaps,
+    land_mask,
+    loitering,
+    sudden_speed_change,
+)
 from aisdati.events.budget import Thresholds
 from aisdati.events.kinds import KINDS, READ_REPORTED_MOTION
 from aisdati.events.motion import course_inconsistent, position_jumps, speed_inconsistent
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
 from aisdati.events.stretch import Found, merged
-from aisdati.tracks.ashore import AshoreCheck
 
 EVENT_COLUMNS = (
     "mmsi", "name", "ship_type", "kind", "class", "start", "end", "duration_s", "n_reports",
@@ -31,17 +37,17 @@ EVENT_COLUMNS = (
 
 Finder = Callable[[VesselReports, EventSettings, float, "np.ndarray | None"], list[Found]]
 FINDERS: dict[str, Finder] = {
-    "position-jump": lambda v, s, length, seen: position_jumps(v, s),
-    "speed-inconsistent": lambda v, s, length, seen: speed_inconsistent(v, s),
-    "course-inconsistent": lambda v, s, length, seen: course_inconsistent(v, s),
-    "drift": lambda v, s, length, seen: drift(v, s, length),
-    "sudden-speed-change": lambda v, s, length, seen: sudden_speed_change(v, s),
-    "ashore": lambda v, s, length, seen: ashore(v, AshoreCheck(), seen),
-    "loitering": lambda v, s, length, seen: loitering(v, s),
-    "gap": lambda v, s, length, seen: gaps(v, s, AshoreCheck()),
+    "position-jump": lambda v, s, length, land: position_jumps(v, s),
+    "speed-inconsistent": lambda v, s, length, land: speed_inconsistent(v, s),
+    "course-inconsistent": lambda v, s, length, land: course_inconsistent(v, s),
+    "drift": lambda v, s, length, land: drift(v, s, length),
+    "sudden-speed-change": lambda v, s, length, land: sudden_speed_change(v, s),
+    "ashore": lambda v, s, length, land: ashore(v, land),
+    "loitering": lambda v, s, length, land: loitering(v, s),
+    "gap": lambda v, s, length, land: gaps(v, s, land),
 }
-"""Each model-free kind's finder: (reports, settings, the vessel's length if known, where
-the area's training traffic reported ashore) -> its events at the floor."""
+"""Each model-free kind's finder: (reports, settings, the vessel's length if known, which of
+its reports are ashore: `land_mask`, computed once per vessel) -> its events at the floor."""
 
 
 def finders(reported_motion: bool = True) -> dict[str, Finder]:
@@ -59,8 +65,8 @@ def found_at_floor(
 ) -> list[Found]:
     """Every model-free event of one vessel at its kind's floor, each kind's overlaps merged:
     what the alert budget counts on a training period (`aisdati.events.budget`)."""
-    found = finders(reported_motion).values()
-    return [e for find in found for e in merged(find(v, settings, length_m, seen))]
+    found, land = finders(reported_motion).values(), land_mask(v, seen)
+    return [e for find in found for e in merged(find(v, settings, length_m, land))]
 
 
 def find_events(
@@ -76,9 +82,9 @@ def find_events(
     vessel's length if known; `seen`: where its area's training traffic reported ashore
     (`aisdati.tracks.ashore`); `reported_motion`: False where SOG/COG were derived from
     positions. A kept event's strength is over its threshold (1 = at it)."""
-    out = []
+    out, land = [], land_mask(v, seen)
     for find in finders(reported_motion).values():
-        kept = [thresholds.over(e) for e in find(v, settings, length_m, seen)]
+        kept = [thresholds.over(e) for e in find(v, settings, length_m, land)]
         out += [bounded(v, e) for e in merged([e for e in kept if e is not None])]
     return sorted(out, key=lambda e: (e.start, e.kind))
 
