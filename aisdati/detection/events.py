@@ -22,8 +22,9 @@ from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
 from aisdati.events.budget import ALERTS_PER_1000, Thresholds
 from aisdati.events.calibrate import is_calibrated, thresholds_of
-from aisdati.events.find import EVENT_COLUMNS, find_events, placed
-from aisdati.events.kinds import ALERT, KINDS
+from aisdati.events.find import find_events, placed
+from aisdati.events.kinds import ALERT
+from aisdati.events.record import EVENT_COLUMNS, event_row
 from aisdati.events.reports import vessels
 from aisdati.events.stretch import deviation_stretch
 from aisdati.tracks.reports import read_reports
@@ -191,20 +192,14 @@ def _track_event(
     """A learned event on a track's points `where` = (first, last, strongest), as a row of
     `EVENT_COLUMNS`; its times the reports' own (microseconds)."""
     a, b, peak = where
-    who = _who(identity, track.mmsi)
-    hours = pd.to_timedelta(np.r_[0, np.cumsum(track.dts)], unit="h")
-    times = (track.start + hours).round("us")
-    return {
-        "mmsi": track.mmsi, "name": who["name"], "ship_type": who["ship_type"], "kind": kind,
-        "class": KINDS[kind].cls,
-        "start": times[a], "end": times[b], "duration_s": (times[b] - times[a]).total_seconds(),
-        "n_reports": b - a + 1, "lon": float(track.positions[peak, 0]),
-        "lat": float(track.positions[peak, 1]), "track_id": track.track_id,
-        "strength": round(strength, 3), "rarity_days": None, "evidence": evidence,
-        "model": model,
-        "lons": track.positions[a : b + 1, 0].tolist(),
-        "lats": track.positions[a : b + 1, 1].tolist(),
-    }  # fmt: skip
+    hours = np.r_[0, np.cumsum(track.dts)]
+    start_s = track.start.value / 1e9 + hours * 3600.0
+    p = track.positions
+    return event_row(
+        track.mmsi, kind, (start_s[a], start_s[b]), b - a + 1, (p[peak, 0], p[peak, 1]),
+        (p[a : b + 1, 0].tolist(), p[a : b + 1, 1].tolist()), strength, evidence,
+        identity=_who(identity, track.mmsi), track_id=track.track_id, model=model,
+    )  # fmt: skip
 
 
 def empty_events() -> pd.DataFrame:

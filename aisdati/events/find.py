@@ -25,15 +25,10 @@ from aisdati.events.behaviour import (
 from aisdati.events.budget import Thresholds
 from aisdati.events.kinds import KINDS, READ_REPORTED_MOTION
 from aisdati.events.motion import course_inconsistent, position_jumps, speed_inconsistent
+from aisdati.events.record import EVENT_COLUMNS, event_row
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
 from aisdati.events.stretch import Found, merged
-
-EVENT_COLUMNS = (
-    "mmsi", "name", "ship_type", "kind", "class", "start", "end", "duration_s", "n_reports",
-    "lon", "lat", "track_id", "strength", "rarity_days", "evidence", "model", "lons", "lats",
-)  # fmt: skip
-"""An event's fields (events.parquet; `lons`/`lats`: the stretch's positions)."""
 
 Finder = Callable[[VesselReports, EventSettings, float, "np.ndarray | None"], list[Found]]
 FINDERS: dict[str, Finder] = {
@@ -116,39 +111,21 @@ def placed_rows(
     identity: dict | None = None,
     thresholds: Thresholds = Thresholds(),
 ) -> list[dict[str, Any]]:
-    """The events of one vessel as records of `EVENT_COLUMNS`: times, the report where each is
-    strongest (its place), the track of that report, its class and rarity (`thresholds`), the
-    stretch's positions, and the vessel's name and type (`identity`: name, ship_type) when
-    known. Records, not a table: the live watch places events thousands of times a second, and
-    a table costs about as much as finding them."""
-    identity = identity or {}
+    """The events of one vessel as records (`aisdati.events.record.event_row`): times, the
+    report where each is strongest (its place), the track of that report, its rarity
+    (`thresholds`), the stretch's positions, and the vessel's name and type (`identity`: name,
+    ship_type) when known. Records, not a table: the live watch places events thousands of
+    times a second, and a table costs about as much as finding them."""
     rows = []
     for e in found:
         track = int(v.track_id[e.peak])
         rows.append(
-            {
-                "mmsi": v.mmsi,
-                "name": identity.get("name"),
-                "ship_type": identity.get("ship_type"),
-                "kind": e.kind,
-                "class": KINDS[e.kind].cls,
-                "start": _utc(v.time_s[e.start]),
-                "end": _utc(v.time_s[e.end]),
-                "duration_s": float(v.time_s[e.end] - v.time_s[e.start]),
-                "n_reports": int(e.end - e.start + 1),
-                "lon": float(v.lon[e.peak]),
-                "lat": float(v.lat[e.peak]),
-                "track_id": track if track >= 0 else None,
-                "strength": round(float(e.strength), 3),
-                "rarity_days": thresholds.rarity_days(e),
-                "evidence": e.evidence,
-                "model": None,
-                "lons": v.lon[e.start : e.end + 1].tolist(),
-                "lats": v.lat[e.start : e.end + 1].tolist(),
-            }
-        )
+            event_row(
+                v.mmsi, e.kind, (v.time_s[e.start], v.time_s[e.end]), e.end - e.start + 1,
+                (v.lon[e.peak], v.lat[e.peak]),
+                (v.lon[e.start : e.end + 1].tolist(), v.lat[e.start : e.end + 1].tolist()),
+                e.strength, e.evidence, identity=identity,
+                track_id=track if track >= 0 else None, rarity_days=thresholds.rarity_days(e),
+            )
+        )  # fmt: skip
     return rows
-
-
-def _utc(seconds: float) -> pd.Timestamp:
-    return pd.Timestamp(round(seconds * 1e6), unit="us", tz="UTC")

@@ -13,37 +13,10 @@ import pyarrow as pa
 import shapely
 
 from aisdati.events.kinds import ALERT, KINDS
+from aisdati.events.record import EVENTS_SCHEMA
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
-from aisdati.tracks.schema import UTC_US, geo_metadata
+from aisdati.tracks.schema import geo_metadata
 
-EVENTS_SCHEMA = pa.schema(
-    [
-        ("event_id", pa.int64()),
-        ("mmsi", pa.int64()),
-        ("name", pa.string()),
-        ("ship_type", pa.string()),
-        ("kind", pa.string()),
-        ("class", pa.string()),
-        ("start", UTC_US),
-        ("end", UTC_US),
-        ("duration_s", pa.float64()),
-        ("n_reports", pa.int64()),
-        ("lon", pa.float64()),
-        ("lat", pa.float64()),
-        ("track_id", pa.int64()),
-        ("strength", pa.float64()),
-        ("rarity_days", pa.float64()),
-        ("evidence", pa.string()),
-        ("model", pa.string()),
-        ("geometry", pa.binary()),
-    ]
-)
-"""events.parquet (GeoParquet, WKB in WGS84 lon/lat): `start`/`end` the event's first and
-last report; `lon`/`lat` the report where it is strongest; `track_id` that report's track
-(null: a report in no track, e.g. a slow one); `class` alert or activity; `strength` how far
-over its threshold (1 = at it); `rarity_days` an alert as strong came once in so many
-vessel-days of the training period (null: not calibrated, or an activity); `model` the model of
-a learned event; `geometry` the stretch."""
 GEO_METADATA = geo_metadata("LineString", "Point")
 
 
