@@ -3,14 +3,18 @@
 `check_options` validates CLI numbers in one place: every float option must be finite (typer
 reads `nan` and `inf` as floats, and NaN compares false with every bound, so a NaN threshold
 would silently switch its filter off) and inside the range `OPTION_RANGES` gives it.
-`parse_names` reads a comma-separated list of names against the known ones.
+`parse_names` reads a comma-separated list of names against the known ones; `parse_time` a
+date or ISO 8601 time.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
+
+import pandas as pd
 
 from aisdati.errors import UserError
 
@@ -31,6 +35,32 @@ def parse_names(text: str | Iterable[str], known: Iterable[str], what: str) -> t
         if name not in known:
             raise UserError(f"unknown {what} {name!r}; choose from {', '.join(known)}")
     return names
+
+
+# ------------------------------------------------------------------------------ times
+ISO_TIME = (
+    r"\d{4}-\d{2}-\d{2}"  # the date
+    r"(?:[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?)?"  # a time of day
+    r"(?:Z|[+-]\d{2}(?::?\d{2})?)?"  # a zone
+)
+"""What a time given by a user may be: ISO 8601, date first, nothing else. Looser parsing read
+`07/08/2018` month-first in one place and day-first in the next, and took `now` as a time."""
+
+
+def parse_time(text: str, option: str) -> pd.Timestamp:
+    """'2018-08-01', '2018-08-01T06:30', '2018-08-01 06:30:00+02:00' -> that instant in UTC (UTC
+    unless a zone is given); anything else is a one-line `UserError` naming `option`."""
+    stamp = text.strip()
+    try:
+        time = pd.Timestamp(stamp) if re.fullmatch(ISO_TIME, stamp) else pd.NaT
+    except ValueError:  # 2018-13-01, 2018-02-30
+        time = pd.NaT
+    if pd.isna(time):
+        raise UserError(
+            f"{option} {text!r}: expected a date or an ISO 8601 time such as 2018-08-01 or "
+            "2018-08-01T06:30 (UTC unless a zone is given)"
+        )
+    return time.tz_localize("UTC") if time.tzinfo is None else time.tz_convert("UTC")
 
 
 # ------------------------------------------------------------------------------ numeric options

@@ -9,7 +9,7 @@ import re
 import pytest
 
 from aisdati.errors import UserError
-from aisdati.options import check_option
+from aisdati.options import check_option, parse_time
 from tests.helpers.cli import one_line_error, run
 from tests.helpers.ingest import NY_HOUR, ingest
 from tests.helpers.models import detect_dati
@@ -78,3 +78,22 @@ def test_train_seed_out_of_range(ny_dati, tmp_path):
     result = run("train", "--cluster", "down", "--data", ny_dati["proc"], "--out", tmp_path / "m",
                  "--seed", -1)  # fmt: skip
     one_line_error(result, "--seed must be an integer in \\[0, 4294967295\\], got -1")
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("2018-08-01", "2018-08-01T00:00:00+00:00"),
+        (" 2018-08-01T06:30 ", "2018-08-01T06:30:00+00:00"),
+        ("2018-08-01 06:30:00+02:00", "2018-08-01T04:30:00+00:00"),
+        ("2018-08-01T00:00:00Z", "2018-08-01T00:00:00+00:00"),
+    ],
+)
+def test_parse_time_reads_dates_and_iso_times_in_utc(text, expected):
+    assert parse_time(text, "--since").isoformat() == expected
+
+
+@pytest.mark.parametrize("text", ["now", "07/08/2018", "2018-13-01", "2018-02-30", "", "2018"])
+def test_parse_time_refuses_what_is_no_iso_time(text):
+    with pytest.raises(UserError, match=r"--until .*expected a date or an ISO 8601 time"):
+        parse_time(text, "--until")

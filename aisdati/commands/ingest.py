@@ -23,7 +23,7 @@ from aisdati.preprocess.inputs import expand_inputs
 from aisdati.preprocess.output import DATASET_NAMES, OUTPUT_NAMES
 from aisdati.preprocess.pipeline import ingest
 from aisdati.preprocess.roi import load_roi
-from aisdati.preprocess.settings import IngestSettings, parse_duration
+from aisdati.preprocess.settings import IngestSettings, parse_duration, parse_since_until
 
 
 def run(o: IngestOptions) -> None:
@@ -35,7 +35,10 @@ def run(o: IngestOptions) -> None:
     execution = Execution.parse(o.workers)
     if not o.inputs and o.download is None:
         raise UserError("nothing to ingest: give --input FILES or --download PERIOD")
+    since, until = parse_since_until(o.since, o.until)
     settings = IngestSettings(
+        since=since,
+        until=until,
         min_sog_kn=o.min_sog,
         max_speed_kn=o.max_speed,
         stop_gap_s=parse_duration(o.stop_gap),

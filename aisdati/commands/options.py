@@ -79,9 +79,10 @@ LANE = typer.Option(
 
 @dataclass(frozen=True)
 class IngestOptions:
-    """Read MarineCadastre AIS files (downloaded or local), then filter, clean, segment and
-    cluster them into points.parquet, tracks.parquet and ingest_report.json (with route
-    clusters: routes.parquet, routes.geojson and routes.png)."""
+    """Read AIS files (MarineCadastre's or the Danish Maritime Authority's CSV or parquet, NMEA
+    0183 logs; or MarineCadastre's files of a period, downloaded), then filter, clean, segment
+    and cluster them into points.parquet, tracks.parquet, reports.parquet and
+    ingest_report.json (with route clusters: routes.parquet, routes.geojson and routes.png)."""
 
     inputs: Annotated[
         list[str] | None,
@@ -112,6 +113,24 @@ class IngestOptions:
             "GeoJSON Polygon/MultiPolygon file."
         ),
     ] = "florida-straits"
+    since: Annotated[
+        str | None,
+        typer.Option(
+            "--since",
+            help="Take the reports from this date or ISO time on (UTC unless a zone is given; "
+            "inclusive), e.g. 2018-08-01; the others are counted as outside_period.",
+            show_default=False,
+        ),
+    ] = None
+    until: Annotated[
+        str | None,
+        typer.Option(
+            "--until",
+            help="Take the reports before this date or ISO time (exclusive), e.g. 2018-08-01 "
+            "or 2018-08-01T12:00.",
+            show_default=False,
+        ),
+    ] = None
     min_sog: Annotated[float, typer.Option(help="Keep reports with SOG above this (knots).")] = 3.0
     max_speed: Annotated[
         float,

@@ -31,6 +31,7 @@ import pandas as pd
 
 from aisdati.errors import UserError
 from aisdati.metrics import flagging, ranking, weighted_f1
+from aisdati.options import ISO_TIME
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.store import Track
 
@@ -151,15 +152,6 @@ def _label_ints(values: pd.Series, column: str, low: int, high: int, path: Path)
             )
         out[row] = number
     return pd.Series(out, index=values.index)
-
-
-ISO_TIME = (
-    r"\d{4}-\d{2}-\d{2}"  # the date
-    r"(?:[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?)?"  # a time of day
-    r"(?:Z|[+-]\d{2}(?::?\d{2})?)?"  # a zone
-)
-"""What a label's time may be: ISO 8601, date first, nothing else. Looser parsing read
-`07/08/2018` month-first in one row and day-first in the next, and took `now` as a time."""
 
 
 def _label_times(values: pd.Series, column: str, path: Path) -> pd.Series:

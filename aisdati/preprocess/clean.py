@@ -1,8 +1,9 @@
-"""Filter and clean: sentinels and ranges, region of interest and SOG, duplicates, position
-outliers, and SOG/COG for sources that only give positions.
+"""Filter and clean: sentinels and ranges, period, region of interest and SOG, duplicates,
+position outliers, and SOG/COG for sources that only give positions.
 
-Two kinds of stage. `check_values` and `filter_area_speed` look at one row at a time, so they run
-on every record batch as it is read (vectorised, cheap, and they drop most rows early).
+Two kinds of stage. `check_values`, `filter_period` and `filter_area_speed` look at one row at a
+time, so they run on every record batch as it is read (vectorised, cheap, and they drop most
+rows early).
 `clean_vessels` needs each vessel's reports in time order, so it runs on a partition that holds
 whole vessels. Every function returns a rejection code per row (see `report.REASONS`) instead of
 dropping rows, so each dropped row is counted under one reason.
@@ -93,6 +94,18 @@ def _check_rows(lat, lon, sog, cog, codes, sentinel, sentinel_cog, out_of_range)
                 c = 0.0
         out[i] = c
     return out
+
+
+def filter_period(table: pa.Table, codes: np.ndarray, settings: IngestSettings) -> None:
+    """Reject reports outside the period (`--since`, inclusive; `--until`, exclusive)."""
+    since, until = settings.period_us()
+    if since is None and until is None:
+        return
+    time_us = _col(table, "time").view(np.int64)
+    if since is not None:
+        _mark(codes, time_us < since, "outside_period")
+    if until is not None:
+        _mark(codes, time_us >= until, "outside_period")
 
 
 def filter_area_speed(table: pa.Table, codes: np.ndarray, roi, settings: IngestSettings) -> None:

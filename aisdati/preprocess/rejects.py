@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from aisdati.preprocess.report import REASONS
+from aisdati.preprocess.report import N_CODES, REASONS
 from aisdati.tracks.schema import REJECTS_SCHEMA
 
-_REASON_NAMES = np.array([""] + [reason for _, reason, _ in REASONS.values()], dtype=object)
+_REASON_NAMES = np.array([""] + [REASONS[code][1] for code in range(1, N_CODES)], dtype=object)
 
 
 def reject_rows(table: pa.Table, codes: np.ndarray, source: str | list[str]) -> pa.Table:

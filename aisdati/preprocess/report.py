@@ -18,8 +18,8 @@ import numpy as np
 
 KEPT = 0
 
-# code -> (stage, reason, description); the order is the order in which checks are applied (but
-# for codes added later, listed last: a code's place is its index in `rejects._REASON_NAMES`).
+# code -> (stage, reason, description), listed in the order the checks are applied (a code
+# added later takes the next number, wherever it is listed).
 REASONS: dict[int, tuple[str, str, str]] = {
     1: ("read", "malformed_row", "too many or too few fields"),
     2: ("read", "header_line", "header repeated mid-file (joined files); later rows read under it"),
@@ -38,14 +38,15 @@ REASONS: dict[int, tuple[str, str, str]] = {
     15: ("clean", "sentinel_sog", "SOG 102.3 (not available)"),
     16: ("clean", "sentinel_cog", "COG 360 (not available)"),
     17: ("clean", "out_of_range", "LAT/LON/SOG/COG outside their valid ranges"),
+    26: ("filter", "outside_period", "time before --since or at or after --until"),
     18: ("filter", "outside_roi", "outside the region of interest"),
     19: ("filter", "slow", "SOG at or below --min-sog (not learned from; in reports.parquet)"),
     20: ("vessel", "duplicate", "exact duplicate of another report"),
     21: ("vessel", "repeated_timestamp", "second report of a vessel at the same time"),
     22: ("vessel", "implied_speed", "position outlier: implied speed above --max-speed"),
+    25: ("vessel", "same_time_flood", "report of a vessel at one time beyond a piece's worth"),
     23: ("segment", "short_segment", "in a segment with fewer than --min-points reports"),
     24: ("segment", "dwell", "inside a stop: within --dwell-radius for at least --dwell-time"),
-    25: ("vessel", "same_time_flood", "report of a vessel at one time beyond a piece's worth"),
 }
 CODE = {reason: code for code, (_, reason, _) in REASONS.items()}
 N_CODES = max(REASONS) + 1

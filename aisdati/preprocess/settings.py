@@ -6,7 +6,10 @@ import re
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import pandas as pd
+
 from aisdati.errors import UserError
+from aisdati.options import parse_time
 
 
 @dataclass(frozen=True)
@@ -37,9 +40,37 @@ class IngestSettings:
     route_seed: int = 0
     rows_per_bucket: int = 2_000_000
     """Upper bound on the rows of one on-disk vessel partition; keeps memory bounded."""
+    since: str | None = None
+    """The period taken (`--since`, `--until`): reports from `since` (inclusive) to `until`
+    (exclusive), ISO 8601 in UTC; None: unbounded. The others are counted as `outside_period`."""
+    until: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    def period_us(self) -> tuple[int | None, int | None]:
+        """The period's bounds in microseconds since 1970 (what the time column holds)."""
+        return _us(self.since), _us(self.until)
+
+
+def _us(time: str | None) -> int | None:
+    return None if time is None else pd.Timestamp(time).value // 1000
+
+
+def parse_since_until(since: str | None, until: str | None) -> tuple[str | None, str | None]:
+    """--since and --until (dates or ISO 8601 times, UTC unless a zone is given) -> their ISO
+    UTC forms; a bad value, or a period that holds no instant, is a one-line `UserError`."""
+    start = None if since is None else parse_time(since, "--since")
+    end = None if until is None else parse_time(until, "--until")
+    if start is not None and end is not None and start >= end:
+        raise UserError(
+            f"--since {since} is not before --until {until}: the period holds no report "
+            "(--since is inclusive, --until exclusive)"
+        )
+    return (
+        None if start is None else start.isoformat(),
+        None if end is None else end.isoformat(),
+    )
 
 
 _UNITS_S = {"s": 1.0, "sec": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}

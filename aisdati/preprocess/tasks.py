@@ -36,7 +36,12 @@ import pyarrow.compute as pc
 from rich.progress import Progress
 
 from aisdati.errors import UserError
-from aisdati.preprocess.clean import check_values, clean_vessels, filter_area_speed
+from aisdati.preprocess.clean import (
+    check_values,
+    clean_vessels,
+    filter_area_speed,
+    filter_period,
+)
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.output import PartWriter, build_tracks
@@ -141,6 +146,7 @@ def _spill_rows(
     rows = 0
     for table, codes in reader.tables(task.src):
         table = check_values(table, codes)
+        filter_period(table, codes, task.settings)
         filter_area_speed(table, codes, task.roi, task.settings)
         rows += len(codes)
         counts.add_codes(codes)

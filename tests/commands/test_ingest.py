@@ -18,6 +18,7 @@ import zstandard
 
 from aisdati.preprocess.roi import florida_straits, in_roi
 from aisdati.tracks.schema import POINTS_SCHEMA
+from tests.helpers.cli import one_line_error, run
 
 HEAD_ZIP = "AIS_2022_01_03_head.zip"
 HEADER = "MMSI,BaseDateTime,LAT,LON,SOG,COG,Heading,VesselName"
@@ -276,3 +277,43 @@ def test_zst_and_directory_inputs(cli, data, tmp_path):
     assert result.exit_code == 0, result.output
     assert len(report["files"]) == 2 and report["rows_read"] > 8689
     check_contract(tmp_path / "out", report)
+
+
+def test_since_until_take_a_period_on_every_reader(cli, data, tmp_path):
+    """--since (inclusive) and --until (exclusive) take a period; the rows outside are counted
+    as outside_period, not dropped unseen, whether the CSV goes by the fast path or the same
+    rows are read the usual way (parquet) (issue 69, item 2)."""
+    csv = data / "NYHarbor_2020_06_30_first_hour.csv"
+    parquet = tmp_path / "hour.parquet"
+    pd.read_csv(csv, dtype=str).to_parquet(parquet)
+    since, until = pd.Timestamp("2020-06-30T00:10Z"), pd.Timestamp("2020-06-30T00:40Z")
+    period = ("--since", "2020-06-30T00:10", "--until", "2020-06-30 00:40:00Z")
+    extra = ("--roi", "none", "--min-points", "5", *period)
+    reports = {}
+    for source in (csv, parquet):
+        out = tmp_path / source.suffix[1:]
+        result, reports[source.suffix] = ingest(cli, out, source, extra=extra)
+        assert result.exit_code == 0, result.output
+        check_contract(out, reports[source.suffix])
+        for name in ("points", "reports"):
+            times = pq.read_table(out / f"{name}.parquet").column("time").to_pandas()
+            assert times.min() >= since and times.max() < until
+    first = reports[".csv"]
+    assert first["rejected"]["outside_period"] == 4_205  # 8,689 rows, these outside
+    assert first["rejected"] == reports[".parquet"]["rejected"]
+    assert first["settings"]["since"] == "2020-06-30T00:10:00+00:00"
+
+
+@pytest.mark.parametrize(
+    "period, needle",
+    [
+        (("--since", "yesterday"), "--since 'yesterday': expected a date or an ISO 8601 time"),
+        (("--until", "30/06/2020"), "--until '30/06/2020': expected a date"),
+        (("--since", "2020-07-01", "--until", "2020-07-01"), "--since 2020-07-01 is not before"),
+    ],
+)
+def test_a_bad_period_is_a_one_line_error(data, tmp_path, period, needle):
+    out = tmp_path / "out"
+    result = run("ingest", "--input", data / HEAD_ZIP, "--roi", "none", "--out", out, *period)
+    one_line_error(result, needle)
+    assert not out.exists()

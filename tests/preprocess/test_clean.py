@@ -4,9 +4,16 @@ SOG/COG."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 
-from aisdati.preprocess.clean import check_values, clean_vessels, derive_sog_cog, filter_area_speed
+from aisdati.preprocess.clean import (
+    check_values,
+    clean_vessels,
+    derive_sog_cog,
+    filter_area_speed,
+    filter_period,
+)
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.report import CODE
 from aisdati.preprocess.roi import florida_straits
@@ -134,3 +141,14 @@ def test_a_confirmed_reference_stays_when_the_track_jumps_for_good():
         _table([1] * 5, [0, 60, 120, 180, 240], [-80.0] * 5, lat), IngestSettings()
     )
     assert list(codes) == [0, 0, 0, 0, 0]
+
+
+def test_period_filter_takes_since_inclusive_until_exclusive():
+    """`--since` keeps a report at its instant, `--until` drops one at its own (issue 69)."""
+    t = _table([1] * 4, [0, 60, 120, 180], [-81.5] * 4, [24.0] * 4)
+    codes = np.zeros(4, np.uint8)
+    codes[3] = CODE["bad_time"]  # a row already rejected keeps its first reason
+    since = pd.Timestamp(T0 + 60_000_000, unit="us", tz="UTC").isoformat()
+    until = pd.Timestamp(T0 + 120_000_000, unit="us", tz="UTC").isoformat()
+    filter_period(t, codes, IngestSettings(since=since, until=until))
+    assert list(codes) == [CODE["outside_period"], 0, CODE["outside_period"], CODE["bad_time"]]
