@@ -89,7 +89,7 @@ def run_events_only(o: DetectOptions) -> None:
     if o.as_json:
         print(json.dumps({**report_dict(result), "files": [str(f) for f in files]}, default=str))
         return
-    console.print(events_table(result.events))
+    console.print(events_table(result.events, width=console.width))
     console.print(
         f"{result.reports_judged:,} reports judged, no model (--models none: the kinds that "
         f"need one are left out); wrote {escape(', '.join(f.name for f in files))} to "
@@ -159,8 +159,8 @@ def coverage_line(coverage: Coverage) -> str:
 def print_detection(result: Detection, files: list[Path], out: Path) -> None:
     """The flagged tracks, the scores against hand labels if given, and what was written."""
     rule = result.settings.rule if result.settings else "calibrated"
-    console.print(detection_table(result.scores, result.score, rule))
-    console.print(events_table(result.events))
+    console.print(detection_table(result.scores, result.score, rule, width=console.width))
+    console.print(events_table(result.events, width=console.width))
     if result.coverage is not None:
         console.print(coverage_line(result.coverage), highlight=False)
     check = AshoreCheck()

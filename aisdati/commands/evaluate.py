@@ -13,12 +13,11 @@ from typing import Any
 
 import pandas as pd
 from rich.markup import escape
-from rich.table import Table
 
 from aisdati.ais.training import TrainSettings
 from aisdati.commands.common import console, err_console, lane_settings, shows_progress, spinner
 from aisdati.commands.options import EvaluateOptions
-from aisdati.commands.tables import pooled_table, results_table
+from aisdati.commands.tables import event_metrics_table, pooled_table, results_table
 from aisdati.detectors import ScoreSettings, parse_detectors
 from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
 from aisdati.evaluation.inject import parse_kinds, parse_params
@@ -158,7 +157,7 @@ def evaluate_one(
         print(json.dumps(report(result), default=str))
         return
     console.print(results_table(result, console.width))
-    console.print(events_table(result.event_table))
+    console.print(event_metrics_table(result.event_table, console.width))
     if result.alerts is not None:
         console.print(alerts_line(result.alerts))
     if settings.ashore:
@@ -196,7 +195,7 @@ def evaluate_every_route(
         print(json.dumps(routes_report(routes), default=str))
         return
     console.print(pooled_table(routes, console.width))
-    console.print(events_table(routes.event_table))
+    console.print(event_metrics_table(routes.event_table, console.width))
     for ev in routes.routes:
         times = ", ".join(
             f"{m} {t['train_s']:.0f} + {t['score_s']:.0f} s" for m, t in ev.timings.items()
@@ -211,38 +210,6 @@ def evaluate_every_route(
         f"[bold]{escape(str(settings.out_dir))}[/]",
         highlight=False,
     )
-
-
-def events_table(table: pd.DataFrame) -> Table:
-    """The event metrics (`aisdati.evaluation.metrics.event_metrics`) per detector and kind:
-    each share with its 95 % bootstrap interval."""
-    out = Table(
-        title="Events on the injected stretches",
-        caption="overlapped: stretches an event of any / the right kind overlaps; false/100: "
-        "right events per 100 normal tracks (any: every event); start error: median reports "
-        "from the right event's start to the stretch's; \\[low-high]: 95 % bootstrap intervals",
-    )
-    columns = ("detector", "kind", "n", "any event", "right event", "AUC", "false/100", "start err")
-    for name in columns:
-        out.add_column(name, justify="left" if name in ("detector", "kind") else "right")
-    for r in table.replace({float("nan"): None}).to_dict("records"):
-        out.add_row(
-            escape(str(r["detector"])), escape(str(r["kind"])), str(r["anomalies"]),
-            _with_ci(r, "overlapped_any"), _with_ci(r, "overlapped"), _with_ci(r, "roc_auc"),
-            _with_ci(r, "false_events_per_100", "{:.1f}"),
-            _with_ci(r, "median_start_error", "{:.0f}"),
-        )  # fmt: skip
-    return out
-
-
-def _with_ci(row: dict[str, Any], name: str, fmt: str = "{:.2f}") -> str:
-    """`value [low-high]`, '-' where the row has no value."""
-    value = row.get(name)
-    if value is None:
-        return "-"
-    low, high = row.get(f"{name}_ci") or (None, None)
-    interval = f" [{fmt.format(low)}-{fmt.format(high)}]" if low is not None else ""
-    return fmt.format(value) + interval
 
 
 def alerts_line(alerts: dict) -> str:

@@ -12,11 +12,12 @@ import pandas as pd
 from rich import box
 from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
+from aisdati.commands.columns import Column, fitted_table, width_needed
 from aisdati.events.kinds import ALERT
 from aisdati.events.table import ranked
 from aisdati.preprocess.report import REASONS, IngestCounts
-from aisdati.scores import Score
 from aisdati.scores import score as score_named
 
 if TYPE_CHECKING:
@@ -290,12 +291,25 @@ RULE_CAPTIONS = {
 }
 
 
+DETECTION_DROPS = ("max km", "threshold", "rank", "model", "events")
+"""What the ranked tracks' table leaves out, in this order, where the terminal is too narrow for
+every figure whole (all of it is in scores.parquet)."""
+EVENT_DROPS = ("x thr", "for")
+"""What the events table leaves out, in this order, once the evidence is beneath the kind (all
+of it is in events.parquet)."""
+
+
 def detection_table(
-    scores: pd.DataFrame, score: str = "lane", rule: str = "calibrated", limit: int = 15
+    scores: pd.DataFrame,
+    score: str = "lane",
+    rule: str = "calibrated",
+    limit: int = 15,
+    width: int = 120,
 ) -> Table:
     """The flagged tracks (or, if none, the top of the ranking) with where they deviate most;
     the score and its threshold in km, or in the unit of `score` where it is not metres
-    (`aisdati.scores.Score`); the caption names the flagging rule."""
+    (`aisdati.scores.Score`); the caption names the flagging rule. Every figure whole at
+    `width` columns (`aisdati.commands.columns`), `DETECTION_DROPS` left out where needed."""
     flagged = scores[scores["flagged"]].sort_values("rank")
     shown = flagged if len(flagged) else scores.sort_values("rank")
     title = (
@@ -303,72 +317,121 @@ def detection_table(
         if len(flagged)
         else f"no track flagged among {len(scores)}; the highest scores"
     )
-    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     kind = score_named(score)
-    several = scores["model"].nunique() > 1
-    ashore = bool((scores["ashore_reports"] > 0).any())
-    cols = [
-        "rank", "track", "vessel", *(["model"] if several else []),
-        f"score ({kind.readable_unit})", "threshold", "max km", "at (lat, lon)",
-        *(["ashore"] if ashore else []), "events",
-    ]  # fmt: skip
-    rows = [(detection_row(r, kind, several, ashore), bool(r.flagged))
-            for r in shown.head(limit).itertuples()]  # fmt: skip
-    # every figure whole at 80 columns (a log, a pipe): only the place and the model wrap
-    wraps = ("model", "at (lat, lon)", "events", "vessel")
-    for k, col in enumerate(cols):
-        whole = max([len(col), *(len(row[k]) for row, _ in rows)])
-        table.add_column(
-            col,
-            justify="left" if col in wraps else "right",
-            no_wrap=col not in wraps,
-            min_width=None if col in wraps else whole,
-            overflow="fold",
+    rows = list(shown.head(limit).itertuples())
+    cells = {
+        "rank": [str(r.rank) for r in rows],
+        "track": [str(r.track_id) for r in rows],
+        "vessel": [_vessel(r.mmsi, r.name) for r in rows],
+        "model": [str(r.model) for r in rows],
+        f"score ({kind.readable_unit})": [f"{kind.readable(r.score):,.2f}" for r in rows],
+        "threshold": [f"{kind.readable(r.threshold):,.2f}" for r in rows],
+        "max km": [f"{r.max_dev_m / 1000:,.2f}" for r in rows],
+        "at (lat, lon)": [_place(r.max_dev_lat, r.max_dev_lon) for r in rows],
+        "ashore": [str(r.ashore_reports) for r in rows],
+        "events": [r.event_kinds or "-" for r in rows],
+    }
+    if scores["model"].nunique() <= 1:
+        del cells["model"]
+    if not (scores["ashore_reports"] > 0).any():
+        del cells["ashore"]
+    styles = {f"score ({kind.readable_unit})": ["red" if r.flagged else "white" for r in rows]}
+    free = ("vessel", "model", "events")
+    columns = [
+        Column(
+            name,
+            [Text(v, style=styles.get(name, [""] * len(rows))[k]) for k, v in enumerate(values)],
+            right=name not in (*free, "at (lat, lon)"),
+            wraps=name in free,
         )
-    at = cols.index(f"score ({kind.readable_unit})")
-    for row, is_flagged in rows:
-        cells = [escape(c) for c in row]
-        cells[at] = f"[{'red' if is_flagged else 'white'}]{row[at]}[/]"
-        table.add_row(*cells)
-    table.caption = RULE_CAPTIONS[rule]
-    if len(shown) > limit:
-        table.caption += f"; ... and {len(shown) - limit} more in scores.parquet"
+        for name, values in cells.items()
+    ]
+    table = fitted_table(title, columns, width, DETECTION_DROPS)
+    more = f"... and {len(shown) - limit} more in scores.parquet" if len(shown) > limit else ""
+    table.caption = "; ".join(filter(None, [RULE_CAPTIONS[rule], table.caption, more]))
     return table
 
 
-def detection_row(r: Any, kind: Score, several: bool, ashore: bool) -> list[str]:
-    """One track's cells of `detection_table`, the model's where several judged."""
-    return [
-        str(r.rank), str(r.track_id), _vessel(r.mmsi, r.name), *([str(r.model)] if several else []),
-        f"{kind.readable(r.score):,.2f}", f"{kind.readable(r.threshold):,.2f}",
-        f"{r.max_dev_m / 1000:,.2f}", f"{r.max_dev_lat:.4f}, {r.max_dev_lon:.4f}",
-        *([str(r.ashore_reports)] if ashore else []), r.event_kinds or "-",
-    ]  # fmt: skip
-
-
-def events_table(events: pd.DataFrame, limit: int = 20) -> Table:
+def events_table(events: pd.DataFrame, limit: int = 20, width: int = 120) -> Table:
     """The events found, what to look at first (`ranked`: alerts, rarest first, then activity):
     which vessel did what, from when, for how long, where, and how far over its threshold
-    (strength 1 = at it)."""
+    (strength 1 = at it). Every figure whole at `width` columns: where the evidence has no room
+    of its own it goes beneath the kind, then `EVENT_DROPS` are left out."""
     alerts = int((events["class"] == ALERT).sum()) if len(events) else 0
     title = (
         f"{alerts} alert(s), {len(events) - alerts} activity event(s)"
         if len(events)
         else "no events"
     )
-    events = ranked(events) if len(events) else events
-    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    for col in ("kind", "vessel", "start (UTC)", "for", "at (lat, lon)", "x thr", "evidence"):
-        table.add_column(col, overflow="fold", justify="right" if col == "x thr" else "left")
-    for e in events.head(limit).itertuples():
-        table.add_row(
-            e.kind, escape(_vessel(e.mmsi, e.name)), f"{e.start:%Y-%m-%d %H:%M:%S}",
-            _duration(e.duration_s), f"{e.lat:.4f}, {e.lon:.4f}", f"{e.strength:.2f}",
-            escape(str(e.evidence)),
-        )  # fmt: skip
+    rows = list((ranked(events) if len(events) else events).head(limit).itertuples())
+    kinds = [Text(e.kind) for e in rows]
+    evidence = [Text(str(e.evidence), style="dim") for e in rows]
+    figures = [
+        Column("vessel", [Text(_vessel(e.mmsi, e.name)) for e in rows], wraps=True),
+        Column("start (UTC)", [Text(f"{e.start:%Y-%m-%d %H:%M:%S}") for e in rows]),
+        Column("for", [Text(_duration(e.duration_s)) for e in rows]),
+        Column("at (lat, lon)", [Text(_place(e.lat, e.lon)) for e in rows]),
+        Column("x thr", [Text(f"{e.strength:.2f}") for e in rows], right=True),
+    ]
+    columns = [Column("kind", kinds), *figures, Column("evidence", evidence, wraps=True)]
+    if width_needed(columns) > width:
+        beneath = [Text("\n").join([k, e]) for k, e in zip(kinds, evidence, strict=True)]
+        columns = [Column("kind, evidence", beneath, wraps=True), *figures]
+    table = fitted_table(title, columns, width, EVENT_DROPS)
     if len(events) > limit:
-        table.caption = f"... and {len(events) - limit} more in events.parquet"
+        more = f"... and {len(events) - limit} more in events.parquet"
+        table.caption = "; ".join(filter(None, [table.caption, more]))
     return table
+
+
+METRICS_CAPTION = (
+    "overlapped: stretches an event of any / the right kind overlaps; false/100: right events "
+    "per 100 normal tracks (any: every event); start err: median reports from the right event's "
+    "start to the stretch's; \\[low-high]: 95 % bootstrap intervals"
+)
+METRICS_DROPS = ("start err", "false/100", "AUC")
+"""What `evaluate`'s events table leaves out, in this order, where the terminal is too narrow
+(all of it is in evaluation.json)."""
+
+
+def event_metrics_table(table: pd.DataFrame, width: int = 120) -> Table:
+    """`evaluate`'s event metrics (`aisdati.evaluation.metrics.event_metrics`) per detector and
+    kind: each share with its 95 % bootstrap interval, the interval beneath its value where the
+    width needs it, never cut; `METRICS_DROPS` left out where still needed."""
+    rows = table.replace({float("nan"): None}).to_dict("records")
+    shares = {
+        "any event": ("overlapped_any", "{:.2f}"),
+        "right event": ("overlapped", "{:.2f}"),
+        "AUC": ("roc_auc", "{:.2f}"),
+        "false/100": ("false_events_per_100", "{:.1f}"),
+        "start err": ("median_start_error", "{:.0f}"),
+    }
+    columns = [
+        Column("detector", [Text(str(r["detector"])) for r in rows]),
+        Column("kind", [Text(str(r["kind"])) for r in rows]),
+        Column("n", [Text(str(r["anomalies"])) for r in rows], right=True),
+        *(
+            Column(name, [Text(_with_ci(r, key, fmt)) for r in rows], right=True, wraps=True)
+            for name, (key, fmt) in shares.items()
+        ),
+    ]
+    out = fitted_table("Events on the injected stretches", columns, width, METRICS_DROPS)
+    out.caption = "; ".join(filter(None, [out.caption, METRICS_CAPTION]))
+    return out
+
+
+def _with_ci(row: dict[str, Any], name: str, fmt: str = "{:.2f}") -> str:
+    """`value [low-high]`, '-' where the row has no value."""
+    value = row.get(name)
+    if value is None:
+        return "-"
+    low, high = row.get(f"{name}_ci") or (None, None)
+    interval = f" [{fmt.format(low)}-{fmt.format(high)}]" if low is not None else ""
+    return fmt.format(value) + interval
+
+
+def _place(lat: float, lon: float) -> str:
+    return f"{lat:.4f}, {lon:.4f}"
 
 
 def _vessel(mmsi: int, name: object) -> str:

@@ -174,8 +174,8 @@ def test_bad_input_is_one_line(run, tmp_path):
 
 def test_detect_table_of_several_models_keeps_its_figures_whole(kitimat, cli, tmp_path):
     """Kitimat's routes, each a `nearest` model, judge the area: the table gains the model's
-    column and still prints every figure whole at 80 columns (a log, a pipe), where the place
-    and the model's name may wrap but are never cut to an ellipsis."""
+    column and still prints every figure whole at 80 columns (a log, a pipe), never cut to an
+    ellipsis; the columns that do not fit are left out whole, and named (issue 69, item 3)."""
     models, out = tmp_path / "models", tmp_path / "report"
     r = cli(
         "train", "--method", "nearest", "--cluster", "routes", "--data", kitimat, "--out", models
@@ -190,4 +190,6 @@ def test_detect_table_of_several_models_keeps_its_figures_whole(kitimat, cli, tm
     shown = scores[scores["flagged"]].sort_values("rank").head(15)
     assert scores["model"].nunique() > 1 and len(shown) > 1 and "…" not in r.output
     for row in shown.itertuples():
-        assert f"{row.score / 1000:,.2f}" in r.output and f"{row.max_dev_m / 1000:,.2f}" in r.output
+        assert f"{row.score / 1000:,.2f}" in r.output and str(row.mmsi) in r.output
+        assert f"{row.max_dev_lat:.4f}, {row.max_dev_lon:.4f}" in r.output
+    assert "left out at 80 columns: max km, threshold" in " ".join(r.output.split())
