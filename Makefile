@@ -16,18 +16,22 @@ test: setup browser postgres
 	$(BIN)/ruff check aisdati tests benchmarks scripts
 	$(BIN)/pytest -n 2 --dist loadfile
 
-# Headless Chromium (Debian's package) for the offline-map test; where it cannot be installed
-# (not root, no apt-get, no registry) that test skips with a message instead of failing.
+# Headless Chromium (Debian's package) for the offline-map test, installed system-wide (as root,
+# with apt-get) and said so first; where it cannot be installed (not root, no apt-get, no
+# registry) that test skips with a message instead of failing.
 browser:
 	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null \
+	  && echo "installing Debian's chromium system-wide (apt-get install chromium) for the offline-map browser test" \
 	  && { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
 	  >/dev/null 2>&1; } || echo "chromium could not be installed: the offline-map browser test will skip"
 
 # A PostgreSQL server (Debian's package) for the watch's database test, which starts a throwaway
-# cluster of its own; where it cannot be installed that test skips with a message.
+# cluster of its own; installed system-wide and said so first, as chromium is; where it cannot be
+# installed that test skips with a message.
 postgres:
 	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || command -v initdb >/dev/null 2>&1 || { \
 	  [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null \
+	  && echo "installing Debian's postgresql system-wide (apt-get install postgresql) for the watch's database test" \
 	  && { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql; } \
 	  >/dev/null 2>&1; } || echo "postgresql could not be installed: the watch's PostgreSQL test will skip"
 

@@ -37,3 +37,13 @@ def test_an_80_column_help_gives_each_option_the_full_width(monkeypatch, command
 
 def test_rich_panels_from_100_columns():
     assert help_markup(99) is None and help_markup(100) == "rich"
+
+
+def test_the_help_names_what_a_command_takes():
+    """Issue 69, item 6: `train --help` left out `all`; `ingest --help` said MarineCadastre
+    only, though it reads the DMA's files and NMEA logs too."""
+    train = CliRunner().invoke(app, ["train", "--help"], env={"COLUMNS": "200"})
+    assert "all: one model of the whole area" in " ".join(train.output.split())
+    ingest = " ".join(CliRunner().invoke(app, ["ingest", "--help"]).output.split())
+    assert "Danish Maritime Authority" in ingest and "NMEA" in ingest
+    assert "--since" in ingest and "--until" in ingest

@@ -249,9 +249,9 @@ class TrainOptions:
         typer.Option(
             "--cluster",
             "-c",
-            help="Tracks to learn: a cluster (up, down, other), a route (route-<n>, unrouted), or "
-            "routes: every route with enough tracks, each its own model and task (--workers "
-            "spreads them).",
+            help="Tracks to learn: a cluster (up, down, other), a route (route-<n>, unrouted), "
+            "all: one model of the whole area (behaviour cloning by default), or routes: every "
+            "route with enough tracks, each its own model and task (--workers spreads them).",
         ),
     ]
     method: Annotated[

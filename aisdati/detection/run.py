@@ -183,7 +183,7 @@ def with_own_method(settings: DetectSettings) -> DetectSettings:
 
 
 def load_models(settings: DetectSettings) -> list[Detector]:
-    models = load_detectors(settings.models_dir, settings.models)
+    models = load_detectors(settings.models_dir, settings.models, settings.cluster)
     if not settings.models:
         models = [m for m in models if m.method == settings.method]
         if not models:

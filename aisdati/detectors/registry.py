@@ -34,8 +34,9 @@ def check_model_names(names: Sequence[str]) -> None:
             )
 
 
-def load_detectors(models_dir: Path, names: Sequence[str]) -> list[Detector]:
-    """The named models of a folder, or every model in it."""
+def load_detectors(models_dir: Path, names: Sequence[str], cluster: str = "all") -> list[Detector]:
+    """The named models of a folder, or every model in it; an empty folder is a one-line error
+    that suggests training `cluster` (what the caller was asked to judge)."""
     check_model_names(names)
     if names:
         stems = [models_dir / n for n in names]
@@ -43,5 +44,7 @@ def load_detectors(models_dir: Path, names: Sequence[str]) -> list[Detector]:
         stems = sorted(p.with_suffix("") for p in models_dir.glob("*.json"))
         stems = [s for s in stems if not s.name.endswith(".log")]
         if not stems:
-            raise UserError(f"no models in {models_dir}: run `aisdati train --cluster up` first")
+            raise UserError(
+                f"no models in {models_dir}: run `aisdati train --cluster {cluster}` first"
+            )
     return [load_detector(s) for s in stems]
