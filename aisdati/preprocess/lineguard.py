@@ -25,6 +25,9 @@ and counted as one malformed row, so one giant line neither fails the file on py
 nor holds more than this much memory."""
 RAW_TEXT_CHARS = 1000
 """How much of a malformed row's text is kept (for rejects.parquet)."""
+RECORD_LINES = 10
+"""Lines one record may span: a quoted field may hold line ends (valid CSV: `"NAME\nMORE"`), but
+a quote that stays open longer is a stray one, whose line alone is cut."""
 HEADER_MARK = b"mmsi"
 """Every header line names the MMSI column, so only lines holding this (in any case) can be a
 header repeated mid-file (two exports joined with `cat`): one compiled pass over the block
@@ -38,6 +41,11 @@ class HeaderLine:
 
     names: list[str]
     text: str
+
+
+class Multiline(bytes):
+    """Whole records of CSV some of which hold a line end in a quoted field: they must be read
+    by a parser that knows (pyarrow's with `newlines_in_values`), not line by line."""
 
 
 def shorten(text: str) -> str:
@@ -54,7 +62,10 @@ class LineGuard(ForwardOnly):
     random bytes fails its own checks, or is kept when they sit in a column we do not read,
     instead of failing the file), and cuts out, as one malformed row each, lines longer than
     `MAX_LINE_BYTES` and lines that end inside a quoted field (pyarrow would carry the quote on
-    over the following lines and swallow up to a block of good rows into one bad one).
+    over the following lines and swallow up to a block of good rows into one bad one) but for
+    a record whose quoted field holds line ends and which is valid CSV all the same: its quote
+    closes within `RECORD_LINES` lines, before a comma or the line end, and it has the header's
+    `fields` fields. Such records stay whole, and the piece holding them is a `Multiline`.
 
     Clean blocks (the usual case) pass as views of what was read, without a copy: the checks
     are searches over the block, and only a block that needs a change is copied and cut.
@@ -69,10 +80,13 @@ class LineGuard(ForwardOnly):
         on_malformed: Callable[[str], None],
         header_lines: int = 1,
         header_of: Callable[[bytes], list[str] | None] | None = None,
+        fields: int | None = None,
     ) -> None:
         self.raw = raw
         self.on_malformed = on_malformed
         self.header_of = header_of
+        self.fields = fields
+        """The header's number of fields (None: no record may span lines)."""
         self.closed = False
         self._ready: deque[bytes | memoryview | HeaderLine] = deque()  # whole lines, in order
         self._header: HeaderLine | None = None  # met, and not taken yet: the stream ends there
@@ -101,8 +115,9 @@ class LineGuard(ForwardOnly):
             self._header = piece
             return b""
         if len(piece) > want:  # grown by UTF-8 replacement characters: the rest comes next
-            self._ready.appendleft(piece[want:])
-            piece = piece[:want]
+            kind = type(piece)  # (a `Multiline` stays one)
+            self._ready.appendleft(kind(piece[want:]))
+            piece = kind(piece[:want])
         return piece
 
     def next_header(self) -> HeaderLine | None:
@@ -154,7 +169,7 @@ class LineGuard(ForwardOnly):
             start = first + 1
         cut = chunk.rfind(b"\n") + 1
         if cut > start:
-            self._emit(chunk, start, cut)
+            self._emit(chunk, start, cut, more=True)
         else:
             cut = start
         if cut < len(chunk):
@@ -199,13 +214,15 @@ class LineGuard(ForwardOnly):
             text += f"... ({size:,} bytes)"
         self.on_malformed(text)
 
-    def _emit(self, buf: bytes, a: int, b: int) -> None:
-        """Queue the whole lines buf[a:b], and a `HeaderLine` in place of each header among them."""
+    def _emit(self, buf: bytes, a: int, b: int, more: bool = False) -> None:
+        """Queue the whole lines buf[a:b], and a `HeaderLine` in place of each header among them;
+        `more`: the stream goes on after them (a record may continue there)."""
         for start, end, header in self._headers_in(buf, a, b):
             self._queue(buf, a, start)
             self._ready.append(header)
+            self.fields = len(header.names)
             a = end
-        self._queue(buf, a, b)
+        self._queue(buf, a, b, more)
 
     def _headers_in(self, buf: bytes, a: int, b: int) -> list[tuple[int, int, HeaderLine]]:
         """The header lines [start, end) of the whole lines buf[a:b] (see `HEADER_MARK`)."""
@@ -225,8 +242,9 @@ class LineGuard(ForwardOnly):
                 found.append((start, end, HeaderLine(names, text)))
         return found
 
-    def _queue(self, buf: bytes, a: int, b: int) -> None:
-        """Queue the whole lines buf[a:b]: as a view when they need nothing, else cleaned."""
+    def _queue(self, buf: bytes, a: int, b: int, more: bool = False) -> None:
+        """Queue the whole lines buf[a:b]: as a view when they need nothing, else cleaned (a
+        record whose quoted field runs on past b, when `more` may come, held for it)."""
         if a >= b:
             return
         clean = not (b - a > MAX_LINE_BYTES and _may_hold_long_line(buf, a, b))
@@ -240,12 +258,13 @@ class LineGuard(ForwardOnly):
         if clean:
             self._ready.append(memoryview(buf)[a:b])
         else:
-            cleaned = self._clean(buf[a:b])
+            cleaned = self._clean(buf[a:b], more)
             if cleaned:  # (an empty block would read as the end of the file)
                 self._ready.append(cleaned)
 
-    def _clean(self, body: bytes) -> bytes:
-        """Whole lines (or the file's last, unended one) made safe for pyarrow."""
+    def _clean(self, body: bytes, more: bool = False) -> bytes:
+        """Whole lines (or the file's last, unended one) made safe for pyarrow; a `Multiline`
+        where records span lines."""
         if _may_hold_long_line(body, 0, len(body)):
             starts = _line_starts(body)
             ends = np.r_[starts[1:], len(body)]
@@ -257,8 +276,28 @@ class LineGuard(ForwardOnly):
             except UnicodeDecodeError:
                 body = body.decode("utf-8", errors="replace").encode("utf-8")
         if b'"' in body:
-            body = self._cut(body, _unterminated_spans(body, 0, len(body)))
+            return self._records(body, _unterminated_spans(body, 0, len(body)), more)
         return body
+
+    def _records(self, body: bytes, open_lines: list[tuple[int, int]], more: bool) -> bytes:
+        """`body` with each line that ends inside a quoted field (`open_lines`) either kept as
+        the start of a record spanning lines (`record_end`) or cut; a record that may go on
+        past the body when `more` comes is held for it, with the lines after it."""
+        cut, spanned, done = [], False, 0
+        for start, end in open_lines:
+            if start < done:  # a line of a record already kept
+                continue
+            record = record_end(body, start, self.fields)
+            if record == RUNS_ON and more:
+                self._carry = bytes(body[start:])
+                body = body[:start]
+                break
+            if record > 0:
+                spanned, done = True, record
+            else:
+                cut.append((start, end))
+        body = self._cut(body, cut)
+        return Multiline(body) if spanned else body
 
     def _cut(self, body: bytes, spans: list[tuple[int, int]]) -> bytes:
         """`body` without the lines [start, end) of `spans` (each reported as a malformed row)."""
@@ -292,6 +331,44 @@ def _unterminated_spans(buf: bytes, a: int, b: int) -> list[tuple[int, int]]:
         checked += 1
         pos = buf.find(b'"', end, b) if end < b else -1
     return spans
+
+
+RUNS_ON = -1
+"""`record_end`: the record's quoted field is still open where the buffer ends."""
+
+
+def record_end(buf: bytes, start: int, fields: int | None) -> int:
+    """The end (past its line end) of the record starting at `start` whose quoted field holds
+    line ends, when it is valid CSV: each quote it opens closes before a comma or the line end,
+    within `RECORD_LINES` lines, and it has `fields` fields; 0 when it is not (a stray quote),
+    `RUNS_ON` when the buffer ends first."""
+    if fields is None:
+        return 0
+    state, count, lines, i, n = 0, 1, 1, start, len(buf)
+    while i < n:  # 0: field start, 1: unquoted field, 2: quoted, 3: just after a closing quote
+        c = buf[i]
+        if state == 2:
+            if c == 34:
+                if i + 1 == n:
+                    return RUNS_ON
+                if buf[i + 1] == 34:
+                    i += 1
+                else:
+                    state = 3
+            elif c == 10:
+                lines += 1
+                if lines > RECORD_LINES:
+                    return 0
+        elif c == 10:
+            return i + 1 if count == fields else 0
+        elif c == 44:
+            state, count = 0, count + 1
+        elif state == 3:
+            return 0
+        elif state == 0:
+            state = 2 if c == 34 else 1
+        i += 1
+    return RUNS_ON if state == 2 else 0
 
 
 def _ends_in_quotes(line: bytes) -> bool:

@@ -8,7 +8,8 @@ tally of who the vessels are (`vessels.VesselTally`). Only the columns the pipel
 read (the six of a position, the optional heading, status and the vessel's own columns), as
 strings for CSV, so one bad value costs one counted row, not the file (`convert.to_canonical`
 does the typing). `TableReader.tables` gives the rows typed: a CSV's plain rows parsed by the
-fast path (`fastcsv`), the rest the usual way.
+fast path (`fastcsv`), the rest the usual way, and a block whose records hold line ends in
+quoted fields (`lineguard.Multiline`: valid CSV, rare) the usual way whole.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from aisdati.preprocess.convert import is_time_type, to_canonical
 from aisdati.preprocess.fastcsv import ColumnSlots, ParsedBlock, parse_block, typed_batch
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.layouts import OPTIONAL, STATIC, layout_of, resolve_columns
-from aisdati.preprocess.lineguard import BLOCK_SIZE, HeaderLine, LineGuard, shorten
+from aisdati.preprocess.lineguard import BLOCK_SIZE, HeaderLine, LineGuard, Multiline, shorten
 from aisdati.preprocess.nmea import NmeaReader
 from aisdati.preprocess.streams import (
     READ_ERRORS,
@@ -253,7 +254,9 @@ class SourceReader:
         """The CSV's stretches under each header line: the guarded stream, positioned at the
         stretch's first row, with the stretch's column names and resolved columns."""
         raw, self._counter = self._open()
-        guard = LineGuard(raw, self.malformed.append, self._header_lines, self._header_of)
+        guard = LineGuard(
+            raw, self.malformed.append, self._header_lines, self._header_of, len(self.names)
+        )
         try:
             names, columns = self.names, self.columns
             while True:
@@ -298,7 +301,9 @@ class SourceReader:
                 read_options=pcsv.ReadOptions(
                     block_size=BLOCK_SIZE, skip_rows=0, column_names=names
                 ),
-                parse_options=pcsv.ParseOptions(invalid_row_handler=self._on_malformed),
+                parse_options=pcsv.ParseOptions(
+                    newlines_in_values=True, invalid_row_handler=self._on_malformed
+                ),
                 convert_options=text_columns(wanted),
             )
         except pa.ArrowInvalid as exc:
@@ -354,9 +359,13 @@ class SourceReader:
             while parsed:
                 yield self._block_table(*parsed.popleft(), names, columns, src)
 
-    def _plain_rows(self, block: bytes | memoryview, slots: ColumnSlots, src: int) -> PlainRows:
+    def _plain_rows(
+        self, block: bytes | memoryview, slots: ColumnSlots, src: int
+    ) -> PlainRows | None:
         """A block parsed by the fast path, its rows canonical (those it could not parse are
-        placeholders, `ParsedBlock.slow`)."""
+        placeholders, `ParsedBlock.slow`); None for a `Multiline` block (not read by lines)."""
+        if isinstance(block, Multiline):
+            return None
         parsed = parse_block(block, slots)
         batch = typed_batch(parsed, slots, self.columns)
         table, codes = to_canonical(batch, self.columns, src)
@@ -365,15 +374,23 @@ class SourceReader:
     def _block_table(
         self,
         block: bytes | memoryview,
-        plain: Future[PlainRows],
+        plain: Future[PlainRows | None],
         names: list[str],
         columns: dict[str, str],
         src: int,
     ) -> tuple[pa.Table, np.ndarray]:
         """One block's canonical rows in the block's order: its plain rows from the fast path,
         the others (`ParsedBlock.slow`) read the usual way, each numbered by its row; a block
-        of mostly other rows read the usual way whole. The vessels of every row tallied."""
-        parsed, table, codes, tally = plain.result()
+        of mostly other rows, or of records spanning lines, read the usual way whole. The
+        vessels of every row tallied."""
+        if (rows := plain.result()) is None:
+            malformed = len(self.malformed)
+            usual = self._read_usual(pa.py_buffer(block), names, columns, numbered=False)
+            table, codes = to_canonical(usual, self.columns, src)
+            self._tally(usual, table, np.arange(usual.num_rows))
+            self._position += usual.num_rows + len(self.malformed) - malformed
+            return table, codes
+        parsed, table, codes, tally = rows
         slow = np.flatnonzero(parsed.slow)
         if len(slow) * MOSTLY_SLOW > parsed.rows:
             usual = self._read_usual(pa.py_buffer(block), names, columns, numbered=False)
@@ -424,16 +441,17 @@ class SourceReader:
     def _read_usual(
         self, text: pa.Buffer, names: list[str], columns: dict[str, str], numbered: bool
     ) -> pa.RecordBatch:
-        """Whole lines read by pyarrow's parser as `_csv_batches` reads them, the needed columns
-        under the first header's names; `numbered`: each line starts with its row in the block
-        (`ROW_KEY`, kept as a column), which a malformed line's reported text leaves out."""
+        """Whole records read by pyarrow's parser as `_csv_batches` reads them, the needed
+        columns under the first header's names; `numbered`: each line starts with its row in the
+        block (`ROW_KEY`, kept as a column), which a malformed line's reported text leaves out."""
         wanted = [columns[c] for c in self.columns if c in columns]
         key = (ROW_KEY,) if numbered else ()
         table = pcsv.read_csv(
             text,
             read_options=pcsv.ReadOptions(column_names=[*key, *names], use_threads=False),
             parse_options=pcsv.ParseOptions(
-                invalid_row_handler=self._on_numbered_malformed if numbered else self._on_malformed
+                newlines_in_values=True,
+                invalid_row_handler=self._on_numbered_malformed if numbered else self._on_malformed,
             ),
             convert_options=text_columns(wanted, list(key)),
         )

@@ -1,19 +1,21 @@
 """The line guard (`aisdati.preprocess.lineguard`): one bad line costs one counted row, never
 the file. Against pyarrow's own CSV reader, at every offset, and through the real command line
 on the New York Harbor hour made bad the way a careless or unlucky analyst would (issue 13,
-items 9, 10, 13 and 14; issue 27)."""
+items 9, 10, 13 and 14; issue 27); a quoted field holding a line end read as the CSV it is
+(issue 66, item 8)."""
 
 from __future__ import annotations
 
 import io
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 import pytest
 
-from aisdati.preprocess.lineguard import LineGuard
+from aisdati.preprocess.lineguard import LineGuard, Multiline
 from tests.helpers.ingest import NY_ROWS, SETTINGS, ingest, ingest_ny_hour, ny_lines
 
 ROWS = b"".join(b"%d,x%d,z\n" % (i, i) for i in range(200))
@@ -195,3 +197,51 @@ def test_the_guard_stops_at_a_header_that_straddles_reads(data):
     assert guard.next_header() is None
     assert first.split() == b"".join(rows[:20]).split()
     assert rest.split() == b"".join(rows[20:]).split()
+
+
+# ------------------------------------------------- issue 66, item 8: a quoted line end is CSV
+def test_a_record_whose_quoted_field_holds_a_line_end_stays_whole_across_every_read():
+    """`1,"two\\nlines",z` is one valid record (pandas and pyarrow's `newlines_in_values` read
+    it): the guard keeps it whole, held over from one read to the next wherever they cut it,
+    and marks the piece holding it; a stray quote beside it is still cut alone."""
+    record = b'7,"two\nlines ""quoted""",z\n'
+    stray = b'8,"stray,z\n'
+    data = ROWS + record + ROWS + stray + ROWS
+    for size in (7, 64, 1 << 16):
+        cut: list[str] = []
+        guard = LineGuard(io.BytesIO(b"h1,h2,h3\n" + data), cut.append, fields=3)
+        pieces = list(iter(lambda guard=guard, size=size: guard.read(size), b""))
+        assert b"".join(pieces) == ROWS + record + ROWS + ROWS, size
+        assert cut == [stray.decode().rstrip("\n")]
+        marked = b"".join(p for p in pieces if isinstance(p, Multiline))
+        assert record in marked and len(marked) <= len(ROWS + record) + size
+    table = pcsv.read_csv(
+        io.BytesIO(b"".join(pieces)),
+        read_options=pcsv.ReadOptions(column_names=["a", "b", "c"]),
+        parse_options=pcsv.ParseOptions(newlines_in_values=True),
+        convert_options=pcsv.ConvertOptions(column_types={k: pa.string() for k in "abc"}),
+    )
+    assert table.num_rows == 601 and table.column("b")[200].as_py() == 'two\nlines "quoted"'
+
+
+def test_a_quoted_line_end_in_a_vessel_name_costs_nothing(cli, data, tmp_path, baseline):
+    """A MarineCadastre file whose VesselName holds a quoted line end (pandas reads it): every
+    row was read twice, both halves malformed, and the vessel's reports were lost."""
+    lines = ny_lines(data)
+    mmsi = b"367000140"
+    changed = 0
+    for k, line in enumerate(lines):
+        fields = line.split(b",")
+        if fields[3] == mmsi:
+            fields[7] = b'"SAMUEL I\nNEWHOUSE"'
+            lines[k], changed = b",".join(fields), changed + 1
+    src = tmp_path / "names.csv"
+    src.write_bytes(b"".join(lines))
+    result, report = ingest(cli, tmp_path / "out", src)
+    assert result.exit_code == 0, result.output
+    assert changed > 50 and report["rows_read"] == NY_ROWS
+    assert report["rejected"]["malformed_row"] == 0
+    assert report["kept_points"] == baseline["kept_points"]
+    vessels = pq.read_table(tmp_path / "out" / "vessels.parquet").to_pandas()
+    (name,) = vessels.loc[vessels["mmsi"] == int(mmsi), "name"]
+    assert name == pd.read_csv(src, dtype=str).query(f"MMSI == '{mmsi.decode()}'").iloc[0, 7]
