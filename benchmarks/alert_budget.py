@@ -34,8 +34,8 @@ from aisdati.evaluation.inject import MIN_POINTS, inject
 from aisdati.evaluation.metrics import RIGHT_EVENTS
 from aisdati.events.budget import ALERTS_PER_1000, Thresholds
 from aisdati.events.calibrate import calibration, thresholds_of, training_period
-from aisdati.events.find import find_events
 from aisdati.events.reports import VesselReports, vessels
+from aisdati.events.rules import EventRules
 from aisdati.metrics import interval
 from aisdati.tracks.ashore import AshoreCheck
 from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
@@ -67,7 +67,7 @@ def altered(v: VesselReports, kind: str, rng: np.random.Generator) -> tuple[Vess
 
 
 def recall(
-    tracks: list[VesselReports], kind: str, how: Thresholds, seen: np.ndarray, args
+    tracks: list[VesselReports], kind: str, rules: EventRules, args
 ) -> tuple[int, float, tuple]:
     """The share of `kind`'s injected stretches an event of the right kind overlaps."""
     hits: list[float] = []
@@ -77,7 +77,7 @@ def recall(
         rng = np.random.default_rng([seed, sum(map(ord, kind))])
         for k in rng.permutation(len(tracks))[: args.min_anomalies - len(hits)]:
             v, (a, b) = altered(tracks[k], kind, rng)
-            found = find_events(v, how, seen=seen, reported_motion=args.reported)
+            found = rules.events(v)
             right = [e for e in found if e.kind in RIGHT_EVENTS[kind]]
             hits.append(float(any(e.start < b and e.end >= a for e in right)))
     h = np.asarray(hits)
@@ -103,7 +103,8 @@ def area(spec: str, args, report: Report, rates, found) -> None:
     recorded = calibration(vessels(training_period(before, train_spans)), lengths=lengths,
                            seen=seen, reported_motion=reported)  # fmt: skip
     how = Thresholds() if args.defaults else thresholds_of([recorded], args.budget)
-    events = model_free_events(after, identity, seen, how, reported)
+    rules = EventRules(thresholds=how, seen=seen, reported_motion=reported)
+    events = model_free_events(after, identity, rules)
     later_ids = spans.loc[spans["start"] >= split, "track_id"].to_numpy()
     r = alert_rates(events, after, later_ids, args.resamples)
     lo, hi = r["alerts_per_1000_ci"]
@@ -122,9 +123,8 @@ def area(spec: str, args, report: Report, rates, found) -> None:
                 f"{ {k: round(v, 2) for k, v in how.minimum.items()} }")  # fmt: skip
     later = points[points["track_id"].isin(later_ids)].sort_values(["track_id", "time"])
     tracks = [VesselReports.of(g) for _, g in later.groupby("track_id") if len(g) >= MIN_POINTS]
-    args.reported = reported
     for kind in args.kinds:
-        n, share, (lo, hi) = recall(tracks, kind, how, seen, args)
+        n, share, (lo, hi) = recall(tracks, kind, rules, args)
         found.row([name, kind, n, f"{share:.2f} [{lo:.2f}, {hi:.2f}]"],
                   {"area": name, "kind": kind, "anomalies": n, "recall": share,
                    "recall_ci": [lo, hi]})  # fmt: skip

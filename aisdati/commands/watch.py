@@ -12,11 +12,11 @@ from typing import Any
 
 from aisdati.commands.common import err_console
 from aisdati.commands.options import WatchOptions
-from aisdati.detection.events import event_thresholds, uncalibrated_note
+from aisdati.detection.events import event_rules, uncalibrated_note
 from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
-from aisdati.events.budget import Thresholds
 from aisdati.events.kinds import KINDS
+from aisdati.events.rules import EventRules
 from aisdati.live.area import AreaJudge
 from aisdati.live.ledger import Change
 from aisdati.live.loop import Watch
@@ -75,14 +75,14 @@ def check(o: WatchOptions) -> float:
     return parse_duration(o.window, "--window")
 
 
-def judging(models_dir: str | None) -> tuple[Thresholds, AreaJudge | None]:
-    """What the watch judges by: the alert thresholds (the defaults, or those of the alert
-    budget the models of `models_dir` calibrated on their training period, as `detect` judges
-    with them; a model from before the budget says so and keeps the defaults), and its area
-    models (`--cluster all`), which judge each vessel's window; route and cluster models give
-    only thresholds."""
+def judging(models_dir: str | None) -> tuple[EventRules, AreaJudge | None]:
+    """What the watch judges by: the event rules (the defaults, or the alert budget the models
+    of `models_dir` calibrated on their training period and the water their traffic sailed
+    ashore, as `detect` judges with them; a model from before the budget says so and keeps the
+    defaults), and its area models (`--cluster all`), which judge each vessel's window; route and
+    cluster models give only the rules."""
     if models_dir is None:
-        return Thresholds(), None
+        return EventRules(), None
     with fetched_models(models_dir, [], "--models") as local:
         models = load_detectors(local, [])
     if note := uncalibrated_note(models):
@@ -90,7 +90,7 @@ def judging(models_dir: str | None) -> tuple[Thresholds, AreaJudge | None]:
     area = AreaJudge.of(models)
     judged = f"; {len(area.models)} area model(s) judge the vessels' windows" if area else ""
     say(f"event thresholds of {len(models)} model(s) in {models_dir}{judged}")
-    return event_thresholds(models), area
+    return event_rules(models), area
 
 
 def summary(w: Watch) -> str:
@@ -103,7 +103,7 @@ def summary(w: Watch) -> str:
 
 def run(o: WatchOptions) -> None:
     window_s = check(o)
-    thresholds, area = judging(o.models_dir)
+    rules, area = judging(o.models_dir)
     chunks = open_source(o.source, say, paced=o.speed is not None)
     state, show, db = LiveState(), printer(o.as_json), without_password(o.db)
 
@@ -117,7 +117,7 @@ def run(o: WatchOptions) -> None:
         store = open_store(o.db)
         held.callback(store.close)
         watch = Watch(
-            store, Vessels(window_s=window_s, max_vessels=o.max_vessels), thresholds=thresholds,
+            store, Vessels(window_s=window_s, max_vessels=o.max_vessels), rules=rules,
             pacer=None if o.speed is None else Pacer(o.speed), emit=emit, area=area,
         )  # fmt: skip
         try:

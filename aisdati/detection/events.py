@@ -20,12 +20,13 @@ import pandas as pd
 
 from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
-from aisdati.events.budget import ALERTS_PER_1000, Thresholds
+from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.calibrate import is_calibrated, thresholds_of
-from aisdati.events.find import find_events, placed
+from aisdati.events.find import placed
 from aisdati.events.kinds import ALERT
 from aisdati.events.record import EVENT_COLUMNS, event_row
 from aisdati.events.reports import vessels
+from aisdati.events.rules import EventRules
 from aisdati.events.stretch import deviation_stretch
 from aisdati.tracks.reports import read_reports
 from aisdati.tracks.store import Track
@@ -36,10 +37,18 @@ UNSEEN_RATE = 0.01
 exceed."""
 
 
-def event_thresholds(models: Sequence[Detector], budget: float = ALERTS_PER_1000) -> Thresholds:
-    """The alert thresholds of `budget` calibrated on the judging models' training periods
-    (`aisdati.events.calibrate`); the defaults for models from before the budget."""
-    return thresholds_of([m.card.calibration for m in models], budget)
+def event_rules(
+    models: Sequence[Detector], budget: float = ALERTS_PER_1000, reported_motion: bool = True
+) -> EventRules:
+    """What the judging models' areas judge reports by: the alert thresholds of `budget`
+    calibrated on their training periods (`aisdati.events.calibrate`; the defaults for models
+    from before the budget) and the water their training traffic sailed ashore."""
+    seen = [np.asarray(m.card.data.ashore, np.float64).reshape(-1, 2) for m in models]
+    return EventRules(
+        thresholds=thresholds_of([m.card.calibration for m in models], budget),
+        seen=np.concatenate(seen) if seen else None,
+        reported_motion=reported_motion,
+    )
 
 
 def uncalibrated_note(models: Sequence[Detector]) -> str | None:
@@ -91,22 +100,16 @@ def within(
 
 
 def model_free_events(
-    reports: pd.DataFrame,
-    identity: pd.DataFrame,
-    seen: np.ndarray | None = None,
-    thresholds: Thresholds = Thresholds(),
-    reported_motion: bool = True,
+    reports: pd.DataFrame, identity: pd.DataFrame, rules: EventRules = EventRules()
 ) -> pd.DataFrame:
-    """Every model-free event of every vessel of `reports` (`identity`: vessels.parquet by
-    MMSI; `seen`: where training traffic reported ashore; `reported_motion`: False where
-    ingest derived SOG/COG from positions, `aisdati.tracks.reports.motion_derived`)."""
+    """Every model-free event of every vessel of `reports` by `rules` (`identity`:
+    vessels.parquet by MMSI)."""
     frames = []
     for v in vessels(reports):
         who = _who(identity, v.mmsi)
-        found = find_events(v, thresholds, length_m=who["length_m"], seen=seen,
-                            reported_motion=reported_motion)  # fmt: skip
+        found = rules.events(v, who["length_m"])
         if found:
-            frames.append(placed(v, found, who, thresholds))
+            frames.append(placed(v, found, who, rules.thresholds))
     return pd.concat(frames, ignore_index=True) if frames else empty_events()
 
 

@@ -38,7 +38,7 @@ from aisdati.ais.card import card_methods
 from aisdati.detection.events import (
     all_events,
     empty_events,
-    event_thresholds,
+    event_rules,
     judged_reports,
     judged_windows,
     model_free_events,
@@ -55,6 +55,7 @@ from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import DEFAULT_CONTAMINATION, score_each
 from aisdati.errors import UserError
 from aisdati.events.budget import ALERTS_PER_1000
+from aisdati.events.rules import EventRules
 from aisdati.execution import Runner
 from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
@@ -321,13 +322,9 @@ def _events(
     every = settings.cluster == AREA and not settings.track_ids
     windows = judged_windows(tracks, every)
     reports = judged_reports(settings.data_dir, windows)
-    seen = [np.asarray(m.card.data.ashore, np.float64).reshape(-1, 2) for m in models]
-    how = event_thresholds(
-        [m for m in models if m.name in set(scores["model"])], settings.alerts_per_1000
-    )
-    reported = not motion_derived(settings.data_dir)
-    where = np.concatenate(seen) if seen else None
-    free = model_free_events(reports, identity, where, how, reported)
+    judging = [m for m in models if m.name in set(scores["model"])]
+    rules = event_rules(judging, settings.alerts_per_1000, not motion_derived(settings.data_dir))
+    free = model_free_events(reports, identity, rules)
     free = within(free, windows, coverage.training)
     if not settings.ashore:
         free = free[free["kind"] != "ashore"]
@@ -343,8 +340,8 @@ def events_only(data_dir: Path) -> Detection:
     an ingest output: `detect --models none`."""
     t0 = time.perf_counter()
     reports = read_reports(data_dir)
-    reported = not motion_derived(data_dir)
-    free = model_free_events(reports, read_vessels(data_dir), reported_motion=reported)
+    rules = EventRules(reported_motion=not motion_derived(data_dir))
+    free = model_free_events(reports, read_vessels(data_dir), rules)
     events = all_events([free])
     scores = pd.DataFrame(columns=list(SCORE_COLUMNS))
     timings = {"events_s": time.perf_counter() - t0, "score_s": 0.0}

@@ -17,7 +17,7 @@ import pandas as pd
 
 from aisdati.detection.events import (
     all_events,
-    event_thresholds,
+    event_rules,
     model_free_events,
     off_traffic_events,
 )
@@ -40,12 +40,8 @@ def model_free(
     `detect --no-ashore`)."""
     reports = read_reports(data, list(track_ids))
     identity = read_vessels(data)
-    seen = [np.asarray(d.card.data.ashore, np.float64).reshape(-1, 2) for d in detectors]
-    where = np.concatenate(seen) if seen else None
-    how, reported = event_thresholds(detectors), not motion_derived(data)
-    parts = [
-        model_free_events(g, identity, where, how, reported) for _, g in reports.groupby("track_id")
-    ]
+    rules = event_rules(detectors, reported_motion=not motion_derived(data))
+    parts = [model_free_events(g, identity, rules) for _, g in reports.groupby("track_id")]
     events = all_events(parts)
     return events if ashore else events[events["kind"] != "ashore"]
 
@@ -58,13 +54,11 @@ def forward_alerts(
     judges it (`aisdati.evaluation.alerts.alert_rates`)."""
     reports = read_reports(data)
     later = reports[reports["time"] >= before]
-    seen = [np.asarray(d.card.data.ashore, np.float64).reshape(-1, 2) for d in detectors]
-    where = np.concatenate(seen) if seen else None
-    how, reported = event_thresholds(detectors), not motion_derived(data)
-    events = model_free_events(later, read_vessels(data), where, how, reported)
+    rules = event_rules(detectors, reported_motion=not motion_derived(data))
+    events = model_free_events(later, read_vessels(data), rules)
     tracks = read_track_table(data)
     ids = tracks.loc[tracks["start"] >= before, "track_id"].to_numpy()
-    return alert_rates(events, later, ids, resamples) | {"budget": how.budget}
+    return alert_rates(events, later, ids, resamples) | {"budget": rules.thresholds.budget}
 
 
 def with_off_traffic(

@@ -79,13 +79,13 @@ def loitering(v: VesselReports, s: EventSettings) -> list[Found]:
     return out
 
 
-def land_mask(v: VesselReports, seen: np.ndarray | None) -> np.ndarray | None:
-    """[n] which of the vessel's reports are ashore (`aisdati.tracks.ashore`: on land by the
-    coastline and its margin, where the area's training traffic never reported, `seen`): the one
-    land check of a vessel's reports, which the gap and ashore kinds both read; None where the
-    coastline is too coarse for it."""
+def land_mask(positions: np.ndarray, seen: np.ndarray | None) -> np.ndarray | None:
+    """[n] which of a vessel's reports ([n, 2] lon/lat) are ashore (`aisdati.tracks.ashore`:
+    on land by the coastline and its margin, where the area's training traffic never reported,
+    `seen`): the one land check of a vessel's reports, which the gap and ashore kinds (and the
+    live watch's silences, on the last report) read; None where the coastline is too coarse."""
     check = AshoreCheck()
-    return check.reports(v.positions(), seen) if check.available() else None
+    return check.reports(positions, seen) if check.available() else None
 
 
 def gaps(v: VesselReports, s: EventSettings, land: np.ndarray | None) -> list[Found]:

@@ -60,7 +60,7 @@ def found_at_floor(
 ) -> list[Found]:
     """Every model-free event of one vessel at its kind's floor, each kind's overlaps merged:
     what the alert budget counts on a training period (`aisdati.events.budget`)."""
-    found, land = finders(reported_motion).values(), land_mask(v, seen)
+    found, land = finders(reported_motion).values(), land_mask(v.positions(), seen)
     return [e for find in found for e in merged(find(v, settings, length_m, land))]
 
 
@@ -77,7 +77,7 @@ def find_events(
     vessel's length if known; `seen`: where its area's training traffic reported ashore
     (`aisdati.tracks.ashore`); `reported_motion`: False where SOG/COG were derived from
     positions. A kept event's strength is over its threshold (1 = at it)."""
-    out, land = [], land_mask(v, seen)
+    out, land = [], land_mask(v.positions(), seen)
     for find in finders(reported_motion).values():
         kept = [thresholds.over(e) for e in find(v, settings, length_m, land)]
         out += [bounded(v, e) for e in merged([e for e in kept if e is not None])]

@@ -11,11 +11,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from aisdati.events.behaviour import gap_limit
-from aisdati.events.budget import Thresholds
-from aisdati.events.find import find_events, placed_rows
+from aisdati.events.behaviour import gap_limit, land_mask
+from aisdati.events.find import placed_rows
 from aisdati.events.reports import VesselReports
-from aisdati.events.settings import EventSettings
+from aisdati.events.rules import EventRules
 from aisdati.live.decode import Identity
 from aisdati.live.vessels import FIELDS
 from aisdati.preprocess.clean import clean_vessels
@@ -39,6 +38,8 @@ class LastReport:
     lat: float
     limit_s: float | None
     usual_s: float
+    ashore: bool = False
+    """Whether it is ashore (`aisdati.events.behaviour.land_mask`): a silence there is no gap."""
 
 
 @dataclass(frozen=True)
@@ -95,8 +96,7 @@ def cleaned(
 
 def judge(
     windows: dict[int, tuple[dict[str, np.ndarray], Identity]],
-    settings: EventSettings,
-    thresholds: Thresholds,
+    rules: EventRules,
     ingest: IngestSettings,
 ) -> dict[int, Judged]:
     """The model-free events of each vessel's window (MMSI: its window and identity), in the
@@ -110,19 +110,22 @@ def judge(
         if len(v) == 0:
             continue
         who = {"name": identity.name, "ship_type": identity.ship_type}
-        found = find_events(v, thresholds, settings, identity.length_m)
-        events = placed_rows(v, found, who, thresholds)
+        events = placed_rows(v, rules.events(v, identity.length_m), who, rules.thresholds)
         out[mmsi] = Judged(
-            events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, settings), v
+            events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, rules), v
         )
     return out
 
 
-def last_report(v: VesselReports, settings: EventSettings) -> LastReport:
+def last_report(v: VesselReports, rules: EventRules) -> LastReport:
     """The vessel's last report and its silence limit, by the gap kind's own rule
     (`aisdati.events.behaviour.gap_limit`)."""
     usual = float(np.median(v.dt_s)) if len(v) > 1 else np.nan
     limit = None
-    if len(v) >= 3 and v.sog[-1] >= settings.gap_under_way_kn:
-        limit = gap_limit(v, settings)
-    return LastReport(v.mmsi, float(v.time_s[-1]), float(v.lon[-1]), float(v.lat[-1]), limit, usual)
+    if len(v) >= 3 and v.sog[-1] >= rules.settings.gap_under_way_kn:
+        limit = gap_limit(v, rules.settings)
+    land = land_mask(v.positions(slice(-1, None)), rules.seen)
+    return LastReport(
+        v.mmsi, float(v.time_s[-1]), float(v.lon[-1]), float(v.lat[-1]), limit, usual,
+        land is not None and bool(land[0]),
+    )  # fmt: skip

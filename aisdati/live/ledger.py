@@ -16,12 +16,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
-from aisdati.events.find import EVENT_COLUMNS
+from aisdati.events.record import event_row
 from aisdati.events.settings import EventSettings
 from aisdati.live.judge import Judged, LastReport
-from aisdati.tracks.ashore import AshoreCheck
 
 COMPARED = ("start", "end", "n_reports", "strength", "evidence", "lon", "lat")
 """The fields whose change makes an event's new version (`extended` or `revised`)."""
@@ -97,18 +95,16 @@ class Ledger:
         self.known[mmsi] = [e for e in known if e.state == "open" or e.span_s[1] >= judged.first_s]
         return changes
 
-    def silent(
-        self, last: LastReport, clock_s: float, ashore: AshoreCheck, who: dict[str, Any]
-    ) -> Change | None:
-        """A gap opened for a vessel under way silent too long at sea (None: not one); `who`:
-        its name and ship type."""
+    def silent(self, last: LastReport, clock_s: float, who: dict[str, Any]) -> Change | None:
+        """A gap opened for a vessel under way silent too long at sea (None: not one; its last
+        report ashore is not at sea); `who`: its name and ship type."""
         silence = clock_s - last.time_s
         if last.limit_s is None or not last.limit_s < silence <= self.settings.gap_max_s:
             return None
         known = self.known.setdefault(last.mmsi, [])
         if any(e.overlaps("gap", last.time_s, last.time_s) for e in known):
             return None
-        if ashore.reports(np.array([[last.lon, last.lat]])).any():
+        if last.ashore:
             return None
         event = LiveEvent(self.new_id(), _gap_fields(last, silence, clock_s) | who)
         known.append(event)
@@ -148,19 +144,10 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
-def _utc(seconds: float) -> pd.Timestamp:
-    return pd.Timestamp(round(seconds * 1e6), unit="us", tz="UTC")
-
-
 def _gap_fields(last: LastReport, silence: float, clock_s: float) -> dict:
     """An open gap's fields: from the vessel's last report, to the feed's time it opened."""
-    row = dict.fromkeys(EVENT_COLUMNS)
-    row |= {
-        "mmsi": last.mmsi, "kind": "gap", "start": _utc(last.time_s), "end": _utc(clock_s),
-        "duration_s": silence, "n_reports": 1, "lon": last.lon, "lat": last.lat,
-        "strength": round(silence / float(last.limit_s), 3),
-        "evidence": f"silent {silence / 60:.0f} min at sea so far (usually every "
-        f"{last.usual_s:.0f} s)",
-        "lons": [last.lon], "lats": [last.lat],
-    }  # fmt: skip
-    return row
+    return event_row(
+        last.mmsi, "gap", (last.time_s, clock_s), 1, (last.lon, last.lat),
+        ([last.lon], [last.lat]), silence / float(last.limit_s),
+        f"silent {silence / 60:.0f} min at sea so far (usually every {last.usual_s:.0f} s)",
+    )  # fmt: skip

@@ -12,8 +12,7 @@ from typing import Any
 
 import pandas as pd
 
-from aisdati.events.budget import Thresholds
-from aisdati.events.settings import EventSettings
+from aisdati.events.rules import EventRules
 from aisdati.live.area import AreaJudge
 from aisdati.live.decode import Decoder
 from aisdati.live.judge import Judged, LastReport, judge
@@ -22,7 +21,6 @@ from aisdati.live.sources import Pacer
 from aisdati.live.store import Store
 from aisdati.live.vessels import Recent, Vessels
 from aisdati.preprocess.settings import IngestSettings
-from aisdati.tracks.ashore import AshoreCheck
 
 SCAN_S = 60.0
 """Feed seconds between two looks for silent vessels and vessels to forget."""
@@ -63,8 +61,7 @@ class Counters:
 class Watch:
     store: Store
     vessels: Vessels = field(default_factory=Vessels)
-    settings: EventSettings = field(default_factory=EventSettings)
-    thresholds: Thresholds = field(default_factory=Thresholds)
+    rules: EventRules = field(default_factory=EventRules)
     ingest: IngestSettings = field(default_factory=IngestSettings)
     pacer: Pacer | None = None
     emit: Callable[[list[Change]], None] = lambda changes: None
@@ -73,12 +70,11 @@ class Watch:
     ledger: Ledger = field(init=False)
     last: dict[int, LastReport] = field(default_factory=dict)
     scanned_s: float = 0.0
-    ashore: AshoreCheck = field(default_factory=AshoreCheck)
     area: AreaJudge | None = None
     """The area models judging each vessel's window every `area.EVERY` reports (None: none)."""
 
     def __post_init__(self) -> None:
-        self.ledger = Ledger(self.settings, new_id=self.store.new_id)
+        self.ledger = Ledger(self.rules.settings, new_id=self.store.new_id)
 
     def resume(self) -> int:
         """Pick up where the database left off: its open and recent events, and the vessels'
@@ -110,7 +106,7 @@ class Watch:
         """The vessels with new reports judged together, their changes in MMSI order."""
         new = {m: self.vessels.recent[m].new for m in dirty}
         windows = {m: (self.vessels.window(m), self.vessels.recent[m].identity) for m in dirty}
-        judged = judge(windows, self.settings, self.thresholds, self.ingest)
+        judged = judge(windows, self.rules, self.ingest)
         learned = self._learned(judged, new)
         changes = []
         for mmsi, one in judged.items():
@@ -142,7 +138,7 @@ class Watch:
         for mmsi, last in self.last.items():
             identity = self.vessels.recent[mmsi].identity
             who = {"name": identity.name, "ship_type": identity.ship_type}
-            if change := self.ledger.silent(last, clock_s, self.ashore, who):
+            if change := self.ledger.silent(last, clock_s, who):
                 changes.append(change)
         for mmsi in self.vessels.forget():
             self.last.pop(mmsi, None)

@@ -15,7 +15,7 @@ import sys
 import pandas as pd
 
 from aisdati.commands import watch as watch_command
-from aisdati.detection.events import event_thresholds
+from aisdati.detection.events import event_rules
 from aisdati.detectors import load_detectors
 from aisdati.events.budget import Thresholds
 from aisdati.live.decode import Decoder
@@ -143,11 +143,11 @@ def test_models_give_the_thresholds_they_calibrated(tmp_path, monkeypatch):
     drift, at its floor (AisAbnormal's definition) either way, is the same; a folder without
     models is one line."""
     world = train_ny_nearest(tmp_path)
-    calibrated = event_thresholds(load_detectors(world["models"], []))
+    calibrated = event_rules(load_detectors(world["models"], [])).thresholds
     assert calibrated != Thresholds() and calibrated.vessel_days
     used = []
     monkeypatch.setattr(
-        watch_command, "Watch", lambda *a, **k: used.append(k["thresholds"]) or Watch(*a, **k)
+        watch_command, "Watch", lambda *a, **k: used.append(k["rules"].thresholds) or Watch(*a, **k)
     )
     live = replayed(tmp_path / "models", FRIO, "--models", world["models"])
     assert used == [calibrated]

@@ -23,8 +23,8 @@ from aisdati.detectors import (
 )
 from aisdati.errors import UserError
 from aisdati.evaluation.inject import inject
-from aisdati.events.record import EVENT_COLUMNS
 from aisdati.events.kinds import KINDS
+from aisdati.events.record import EVENT_COLUMNS
 from aisdati.tracks.reports import read_reports, read_vessels
 from aisdati.tracks.store import load_tracks, read_track_table
 

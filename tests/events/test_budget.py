@@ -13,6 +13,7 @@ from aisdati.events.calibrate import calibration, is_calibrated, thresholds_of, 
 from aisdati.events.find import find_events
 from aisdati.events.kinds import ACTIVITY, ALERT, BUDGETED, KINDS
 from aisdati.events.reports import AT_ANCHOR, VesselReports, vessels
+from aisdati.events.rules import EventRules
 from aisdati.events.stretch import Found, merged
 from aisdati.geo import moved_m
 from aisdati.tracks.reports import read_reports, read_vessels
@@ -29,7 +30,7 @@ def august(kitimat) -> dict:
     recorded = calibration(vessels(training_period(reports[reports["time"] < AUGUST], july)))
     how = thresholds_of([recorded])
     later = reports[reports["time"] >= AUGUST]
-    events = model_free_events(later, read_vessels(kitimat), thresholds=how)
+    events = model_free_events(later, read_vessels(kitimat), EventRules(thresholds=how))
     ids = tracks.loc[tracks["start"] >= AUGUST, "track_id"].to_numpy()
     return {"how": how, "events": events, "rates": alert_rates(events, later, ids, 200)}
 

@@ -1,0 +1,31 @@
+"""What a vessel's reports are judged by, in one object, the same in `detect`, `evaluate` and
+`watch`: the finders' floors, the alert thresholds (`aisdati.events.budget`), where the area's
+training traffic reported ashore, and whether the reports' motion is their own (not derived
+from positions at ingest). `aisdati.detection.events.event_rules` makes it from models."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aisdati.events.budget import Thresholds
+from aisdati.events.find import find_events
+from aisdati.events.reports import VesselReports
+from aisdati.events.settings import EventSettings
+from aisdati.events.stretch import Found
+
+
+@dataclass(frozen=True, eq=False)
+class EventRules:
+    settings: EventSettings = field(default_factory=EventSettings)
+    thresholds: Thresholds = field(default_factory=Thresholds)
+    seen: np.ndarray | None = None
+    """[m, 2] lon/lat where the training traffic reported ashore (`aisdati.tracks.ashore`)."""
+    reported_motion: bool = True
+
+    def events(self, v: VesselReports, length_m: float = np.nan) -> list[Found]:
+        """The vessel's model-free events (`aisdati.events.find.find_events`)."""
+        return find_events(
+            v, self.thresholds, self.settings, length_m, self.seen, self.reported_motion
+        )
