@@ -42,6 +42,7 @@ def event_json(event_id: int, state: str, f: dict[str, Any]) -> dict[str, Any]:
     """An event as the page reads it."""
     return {
         "id": event_id, "state": state, "kind": f["kind"], "label": KINDS[f["kind"]].label,
+        "class": KINDS[f["kind"]].cls,
         "mmsi": int(f["mmsi"]), "name": f["name"], "ship_type": f["ship_type"],
         "start": f["start"].isoformat(), "end": f["end"].isoformat(),
         "strength": f["strength"], "evidence": f["evidence"], "lon": f["lon"], "lat": f["lat"],

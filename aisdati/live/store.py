@@ -25,16 +25,19 @@ import numpy as np
 import pandas as pd
 
 from aisdati.errors import UserError
+from aisdati.events.kinds import KINDS
 from aisdati.live.decode import Identity
 from aisdati.live.ledger import Change, LiveEvent
 from aisdati.live.vessels import FIELDS
 from aisdati.storage import first_line, without_password
 
 EVENT_FIELDS = (
-    "event_id", "mmsi", "name", "ship_type", "kind", "start_time", "end_time", "duration_s",
-    "n_reports", "lon", "lat", "strength", "evidence", "model", "state", "stopped_at",
-    "updated_at", "stretch",
+    "event_id", "mmsi", "name", "ship_type", "kind", "class", "start_time", "end_time",
+    "duration_s", "n_reports", "lon", "lat", "strength", "rarity_days", "evidence", "model",
+    "state", "stopped_at", "updated_at", "stretch",
 )  # fmt: skip
+"""events.parquet's fields (`aisdati.events.record`) as the live database keeps them, with the
+event's state; `stretch` its positions as JSON."""
 VESSEL_FIELDS = (
     "mmsi", "name", "ship_type", "length_m", "time", "lon", "lat", "sog", "cog", "heading",
     "status", "recent",
@@ -67,9 +70,9 @@ def schema(d: Dialect) -> list[str]:
     return [
         f"""CREATE TABLE IF NOT EXISTS events (
             event_id BIGINT PRIMARY KEY, mmsi BIGINT NOT NULL, name TEXT, ship_type TEXT,
-            kind TEXT NOT NULL, start_time {d.time} NOT NULL, end_time {d.time} NOT NULL,
-            duration_s {d.real}, n_reports BIGINT, lon {d.real}, lat {d.real},
-            strength {d.real}, evidence TEXT, model TEXT,
+            kind TEXT NOT NULL, class TEXT, start_time {d.time} NOT NULL,
+            end_time {d.time} NOT NULL, duration_s {d.real}, n_reports BIGINT, lon {d.real},
+            lat {d.real}, strength {d.real}, rarity_days {d.real}, evidence TEXT, model TEXT,
             state TEXT NOT NULL CHECK (state IN ('open', 'closed')),
             stopped_at {d.time}, updated_at {d.time} NOT NULL, stretch TEXT)""",
         "CREATE INDEX IF NOT EXISTS events_state ON events (state, end_time)",
@@ -80,6 +83,20 @@ def schema(d: Dialect) -> list[str]:
         "CREATE TABLE IF NOT EXISTS event_ids (id INTEGER PRIMARY KEY AUTOINCREMENT)"
         if d is SQLITE
         else "CREATE SEQUENCE IF NOT EXISTS event_ids",
+    ]
+
+
+ADDED = {"class": "TEXT", "rarity_days": "{real}"}
+"""Columns a database written before them lacks: added when it is opened."""
+
+
+def added(conn: Any, d: Dialect) -> list[str]:
+    """The ALTER TABLE statements that give an older events table the columns it lacks."""
+    have = {c[0] for c in conn.execute("SELECT * FROM events LIMIT 0").description}
+    return [
+        f"ALTER TABLE events ADD COLUMN {name} {kind.format(real=d.real)}"
+        for name, kind in ADDED.items()
+        if name not in have
     ]
 
 
@@ -124,7 +141,9 @@ class Store:
     ) -> None:
         self.conn, self.d, self.name, self.failures = conn, dialect, name, failures
         with self.transaction():
-            for statement in [*schema(dialect), id_floor(dialect)]:
+            for statement in schema(dialect):
+                self.conn.execute(statement)
+            for statement in [*added(self.conn, dialect), id_floor(dialect)]:
                 self.conn.execute(statement)
 
     @contextlib.contextmanager
@@ -154,11 +173,11 @@ class Store:
         f = e.fields
         stretch = json.dumps([np.round(f["lons"], 6).tolist(), np.round(f["lats"], 6).tolist()])
         return [
-            e.event_id, int(f["mmsi"]), f["name"], f["ship_type"], f["kind"],
+            e.event_id, int(f["mmsi"]), f["name"], f["ship_type"], f["kind"], f["class"],
             self.when(f["start"]), self.when(f["end"]), _number(f["duration_s"]),
             int(f["n_reports"]), _number(f["lon"]), _number(f["lat"]),
-            _number(f["strength"]), f["evidence"], f["model"], e.state, None,
-            self.when(now), stretch,
+            _number(f["strength"]), _number(f["rarity_days"]), f["evidence"], f["model"],
+            e.state, None, self.when(now), stretch,
         ]  # fmt: skip
 
     def write(self, changes: Sequence[Change], vessels: Sequence[dict[str, Any]]) -> None:
@@ -246,10 +265,12 @@ def _event_of(row: dict[str, Any]) -> LiveEvent:
     lons, lats = json.loads(row["stretch"])
     fields = {
         "mmsi": int(row["mmsi"]), "name": row["name"], "ship_type": row["ship_type"],
-        "kind": row["kind"], "start": _timestamp(row["start_time"]),
+        "kind": row["kind"], "class": KINDS[row["kind"]].cls,
+        "start": _timestamp(row["start_time"]),
         "end": _timestamp(row["end_time"]), "duration_s": row["duration_s"],
         "n_reports": row["n_reports"], "lon": row["lon"], "lat": row["lat"], "track_id": None,
-        "strength": row["strength"], "evidence": row["evidence"], "model": row["model"],
+        "strength": row["strength"], "rarity_days": row["rarity_days"],
+        "evidence": row["evidence"], "model": row["model"],
         "lons": lons, "lats": lats,
     }  # fmt: skip
     return LiveEvent(int(row["event_id"]), fields, row["state"])

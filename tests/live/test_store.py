@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sqlite3
 import subprocess
 import tempfile
 from collections.abc import Iterator
@@ -129,3 +130,38 @@ def test_the_postgresql_password_is_never_printed(postgres):
     got = run("watch", "--input", FRIO, "--db", unreachable)
     one_line_error(got, r"postgresql://ais:\*\*\*@127")
     assert "S3CRET" not in got.output
+
+
+def test_the_database_keeps_each_events_class(db):
+    """Both databases keep FRIO's drift as an alert (events.parquet's `class`)."""
+    watch = Watch(open_store(db))
+    for chunk in replay(recordings(FRIO), CHUNK_LINES):
+        watch.step(chunk)
+    watch.stop()
+    watch.store.close()
+    store = open_store(db)
+    try:
+        got = store.conn.execute("SELECT kind, class FROM events").fetchall()
+    finally:
+        store.close()
+    assert ("drift", "alert") in [tuple(r) for r in got]
+
+
+def test_an_events_table_from_before_the_class_gains_it(tmp_path):
+    path = tmp_path / "old.sqlite"
+    with sqlite3.connect(path) as conn:
+        conn.execute(
+            "CREATE TABLE events (event_id BIGINT PRIMARY KEY, mmsi BIGINT NOT NULL, name TEXT, "
+            "ship_type TEXT, kind TEXT NOT NULL, start_time TEXT NOT NULL, end_time TEXT NOT NULL, "
+            "duration_s REAL, n_reports BIGINT, lon REAL, lat REAL, strength REAL, "
+            "evidence TEXT, model TEXT, state TEXT NOT NULL, stopped_at TEXT, "
+            "updated_at TEXT NOT NULL, stretch TEXT)"
+        )
+    watch = Watch(open_store(str(path)))
+    for chunk in replay(recordings(FRIO), CHUNK_LINES):
+        watch.step(chunk)
+    watch.stop()
+    watch.store.close()
+    with sqlite3.connect(path) as conn:
+        got = conn.execute("SELECT kind, class, rarity_days FROM events").fetchall()
+    assert ("drift", "alert", None) in got
