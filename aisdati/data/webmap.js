@@ -53,16 +53,28 @@ L.geoJSON(L_.deviations, {
 overlays[D.names.flagged] = flagged;
 if (D.optional.stretches) overlays[D.names.stretches] = lines(D.optional.stretches,
   {color: '#ff7f0e', weight: 6, opacity: 0.8}, false);
-// alerts orange and solid, activity (loitering, gaps: listed, flagging nothing) blue and dashed
-const eventStyle = f => f.properties.class === 'alert'
-  ? {color: '#e6550d', weight: 7, opacity: 0.85}
+// alerts orange and solid, activity (loitering: listed, flagging nothing) blue and dashed; a gap
+// is no path sailed: a thin dotted link from the last report before it to the first after,
+// labelled with its duration
+const isGap = f => f.properties.kind === 'gap';
+const eventStyle = f => isGap(f) ? {color: '#3182bd', weight: 2, opacity: 0.9, dashArray: '2 6'}
+  : f.properties.class === 'alert' ? {color: '#e6550d', weight: 7, opacity: 0.85}
   : {color: '#3182bd', weight: 4, opacity: 0.7, dashArray: '6'};
+function duration(s) {
+  if (s < 120) return `${Math.round(s)} s`;
+  return s < 7200 ? `${Math.round(s / 60)} min` : `${(s / 3600).toFixed(1)} h`;
+}
 if (D.optional.events) overlays[D.names.events] = L.geoJSON(D.optional.events, {
   style: eventStyle,
   pointToLayer: (f, ll) => L.circleMarker(ll, {radius: 7, weight: 3, ...eventStyle(f)}),
   onEachFeature: (f, layer) => {
-    layer.bindTooltip(`${f.properties.class}, ${f.properties.label}: ${f.properties.mmsi} from ${f.properties.start}`, {sticky: true});
-    layer.bindPopup(() => table(f.properties));
+    const p = f.properties;
+    if (isGap(f)) {
+      layer.bindTooltip(`gap ${duration(p.duration_s)}`, {permanent: true, direction: 'center', className: 'aisdati-gap'});
+    } else {
+      layer.bindTooltip(`${p.class}, ${p.label}: ${p.mmsi} from ${p.start}`, {sticky: true});
+    }
+    layer.bindPopup(() => table(p));
   },
 });
 const boxes = L.layerGroup(D.regions.map(b => L.rectangle(b, {color: 'black', weight: 1, dashArray: '5', fill: false, interactive: false})));
@@ -82,7 +94,14 @@ bar.onAdd = () => {
   const [lo, hi] = D.legend.range;
   div.innerHTML = '<div>track score</div><div class="aisdati-bar"></div>' +
     `<div><span>${lo.toPrecision(3)}</span><span style="float:right">${hi.toPrecision(3)}</span></div>` +
-    '<div><span class="aisdati-swatch" style="background:#d62728"></span> flagged</div>';
+    '<div><span class="aisdati-swatch" style="background:#d62728"></span> flagged track</div>' +
+    '<div><span class="aisdati-line" style="border-top:2px solid #1f77b4"></span> what it was compared with</div>' +
+    '<div><span class="aisdati-dot"></span> largest deviation</div>' +
+    '<div><span class="aisdati-line" style="border-top:6px solid #ff7f0e"></span> stretch of largest deviation</div>' +
+    '<div><span class="aisdati-line" style="border-top:7px solid #e6550d"></span> alert</div>' +
+    '<div><span class="aisdati-line" style="border-top:4px dashed #3182bd"></span> activity (loitering)</div>' +
+    '<div><span class="aisdati-line" style="border-top:2px dotted #3182bd"></span> gap, labelled with its duration</div>' +
+    '<div><span class="aisdati-line" style="border-top:1px dashed black"></span> model region</div>';
   div.querySelector('.aisdati-bar').style.background =
     `linear-gradient(to right, ${D.legend.stops.join(', ')})`;
   return div;

@@ -8,9 +8,11 @@ flagged track, what it was compared with and its deviation profile, to say why i
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import matplotlib.dates as mdates
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
@@ -28,6 +30,9 @@ if TYPE_CHECKING:
 
 EVIDENCE_FIGURES = 20
 """At most this many flagged tracks (the highest ranked) get an evidence figure."""
+GAP_LABELS = 12
+"""map.png labels the longest this many gaps with their duration (a month of a busy area holds
+hundreds: their labels would hide the map); map.html labels every one."""
 MAP_UNFLAGGED_TRACKS = 5_000
 """At most this many unflagged tracks are drawn on map.png and map.html (evenly: every k-th in
 the scores' order); flagged tracks are always drawn, all of them. A month of a coast holds
@@ -41,6 +46,58 @@ def map_subset(flagged: np.ndarray, most: int) -> np.ndarray:
     normal = np.flatnonzero(~flagged)
     stride = -(-len(normal) // most) if len(normal) > most else 1
     return np.sort(np.r_[np.flatnonzero(flagged), normal[::stride]])
+
+
+@dataclass(frozen=True)
+class AlertMark:
+    """The alert an evidence figure marks: its kind and stretch, from when to when (UTC)."""
+
+    kind: str
+    start: pd.Timestamp
+    end: pd.Timestamp
+    strength: float
+
+    @property
+    def when(self) -> str:
+        """'2018-08-19 06:21 to 08:58 UTC' (the end's date too where it is another day)."""
+        end = (
+            f"{self.end:%H:%M}"
+            if self.end.date() == self.start.date()
+            else f"{self.end:%Y-%m-%d %H:%M}"
+        )
+        return f"{self.start:%Y-%m-%d %H:%M} to {end} UTC"
+
+
+def strongest_alert(events: pd.DataFrame, track_id: int) -> AlertMark | None:
+    """The track's strongest alert (None: it raised none)."""
+    if not len(events):
+        return None
+    mine = events[(events["class"] == ALERT) & (events["track_id"] == track_id)]
+    if not len(mine):
+        return None
+    e = mine.loc[mine["strength"].idxmax()]
+    return AlertMark(
+        str(e["kind"]), pd.Timestamp(e["start"]), pd.Timestamp(e["end"]), float(e["strength"])
+    )
+
+
+def gap_links(events: pd.DataFrame) -> list[tuple[np.ndarray, str]]:
+    """Each gap's link ([2, 2] lon/lat: the last report before it, the first after) and its
+    duration as the map labels it, longest first."""
+    if not len(events):
+        return []
+    gaps = events[events["kind"] == "gap"].sort_values("duration_s", ascending=False)
+    return [
+        (np.column_stack([lons, lats])[[0, -1]].astype(float), duration_text(seconds))
+        for lons, lats, seconds in zip(gaps["lons"], gaps["lats"], gaps["duration_s"], strict=True)
+    ]
+
+
+def duration_text(seconds: float) -> str:
+    """'45 s', '111 min', '19.7 h': a duration as a map labels it."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
 
 
 def places(events: pd.DataFrame, cls: str) -> np.ndarray:
@@ -60,11 +117,15 @@ def plot_detection_map(
     evidence_label: str = "nearest rollout",
     events: np.ndarray | None = None,
     activity: np.ndarray | None = None,
+    gaps: Sequence[tuple[np.ndarray, str]] = (),
 ) -> bytes:
     """map.png (its bytes): test tracks grey, flagged tracks red with their nearest rollout blue
     and a cross where they deviate most, alerts (`events`: [k, 2] lon/lat, where each is
     strongest) as orange diamonds, activity (loitering, gaps) as open blue circles, the models'
-    regions dashed, over the offline coastline
+    regions dashed, each gap (`gaps`: its [2, 2] link from the last report before it to the first
+    after, and its duration, longest first) a dotted blue link, the `GAP_LABELS` longest labelled
+    with their duration, over the offline
+    coastline
     (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
     stretched by 1/cos(latitude) so that shapes are true)."""
     from matplotlib.collections import LineCollection
@@ -84,6 +145,13 @@ def plot_detection_map(
     ax.plot(places[:, 0], places[:, 1], "D", color="tab:orange", mec="k", ms=6, zorder=5)
     done = np.empty((0, 2)) if activity is None else np.reshape(activity, (-1, 2))
     ax.plot(done[:, 0], done[:, 1], "o", mfc="none", mec="tab:blue", mew=1.5, ms=7, zorder=5)
+    for link, _ in gaps:
+        ax.plot(link[:, 0], link[:, 1], ":", color="tab:blue", lw=1.6, zorder=4)
+    for link, duration in gaps[:GAP_LABELS]:
+        ax.annotate(
+            duration, link.mean(axis=0), fontsize=7, color="tab:blue", ha="center",
+            va="bottom", zorder=6,
+        )  # fmt: skip
     for lo, hi in regions:
         ax.plot(
             [lo[0], hi[0], hi[0], lo[0], lo[0]],
@@ -104,6 +172,7 @@ def plot_detection_map(
         plt.Line2D([], [], color="k", marker="x", ls="", label="largest deviation"),
         plt.Line2D([], [], color="tab:orange", mec="k", marker="D", ls="", label="alert"),
         plt.Line2D([], [], mfc="none", mec="tab:blue", marker="o", ls="", label="activity"),
+        plt.Line2D([], [], color="tab:blue", ls=":", lw=1.6, label="gap (its duration)"),
         plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
     ]
     ax.legend(handles=handles, fontsize=8, loc="best")
@@ -136,8 +205,10 @@ def plot_track_evidence(
     pad_deg: float = 0.01,
     context: Sequence[np.ndarray] = (),
     evidence_label: str = "rollout",
+    start: pd.Timestamp | None = None,
+    alert: AlertMark | None = None,
 ) -> bytes:
-    """Why one track stands out, in two panels (a PNG's bytes).
+    """Why one track stands out, and when, in two panels (a PNG's bytes).
 
     Left, a map: the coastline (at the map's scale), other tracks for context (`context`, light
     grey), the track (black, a green dot at its start), its rollout (blue dashed, when given),
@@ -145,7 +216,9 @@ def plot_track_evidence(
     the track's and rollout's, padded by `pad_frac` of its span and at least `pad_deg` degrees.
     Right: `profile` ([n] metres, one value per track point: e.g. distance to the matched
     rollout point, a teacher-forced step error) against the point index, or against `hours`
-    ([n] hours since the start) when given, with the stretch shaded.
+    ([n] hours since the start) when given, with the stretch shaded: against the time of day
+    (UTC) when the track's `start` is given too. `alert` (the track's strongest,
+    `strongest_alert`) is drawn orange on both panels, from when to when.
 
     `stretch` is a Python slice (i0, i1): points i0..i1-1."""
     track = np.asarray(track, dtype=float)
@@ -162,6 +235,11 @@ def plot_track_evidence(
         i0, i1 = max(0, int(stretch[0])), min(n, int(stretch[1]))
         stretch = (i0, i1) if i1 > i0 else None
     peak = int(np.nanargmax(profile)) if np.isfinite(profile).any() else None
+    times = None
+    if start is not None and hours is not None:
+        # to the second: hours summed in floats put a report at 06:19:59.9999, before its alert
+        times = (pd.Timestamp(start) + pd.to_timedelta(x, unit="h")).tz_convert("UTC").round("s")
+    marked = alert_points(times, alert)
 
     fig, (ax, axp) = plt.subplots(1, 2, figsize=(13, 5.6), gridspec_kw={"width_ratios": [1.15, 1]})
     pts = [track] + ([np.asarray(rollout, dtype=float)] if rollout is not None else [])
@@ -171,12 +249,59 @@ def plot_track_evidence(
     pad = np.maximum((hi - lo) * pad_frac, pad_deg)
     lo, hi = _widen(lo - pad, hi + pad, ratio=1.25)
     _evidence_map(ax, track, rollout, profile, stretch, peak, context, evidence_label)
+    if marked is not None and alert is not None and times is not None:
+        _alert_on_map(ax, track, times, marked, alert)
     set_map_limits(ax, lo, hi)
     draw_land(ax)
     ax.legend(fontsize=8, loc="best")
-    _profile_panel(axp, x, profile, stretch, peak, profile_label, hours is None)
+    when = None if times is None else times.tz_localize(None).to_numpy()
+    _profile_panel(
+        axp, x if when is None else when, profile, stretch, peak, profile_label, hours is None
+    )
+    if marked is not None and alert is not None and when is not None:
+        axp.axvspan(
+            when[marked[0]], when[marked[1] - 1], color="tab:orange", alpha=0.3,
+            label=f"{alert.kind}: {alert.when}",
+        )  # fmt: skip
+        axp.legend(fontsize=8, loc="best")
+    if times is not None:
+        title += f"\n{times[0]:%Y-%m-%d %H:%M} to {times[-1]:%Y-%m-%d %H:%M} UTC"
     fig.suptitle(title)
     return drawn(fig)
+
+
+def alert_points(times: pd.DatetimeIndex | None, alert: AlertMark | None) -> tuple[int, int] | None:
+    """The points (a slice i0, i1) of the alert's stretch: those from its start to its end, or,
+    where none falls inside (a gap between two reports), the two about it."""
+    if times is None or alert is None or not len(times):
+        return None
+    inside = np.flatnonzero((times >= alert.start) & (times <= alert.end))
+    if len(inside):
+        return int(inside[0]), int(inside[-1]) + 1
+    after = int(np.clip(np.searchsorted(times, alert.start), 1, len(times) - 1))
+    return after - 1, after + 1
+
+
+def _alert_on_map(
+    ax: plt.Axes,
+    track: np.ndarray,
+    times: pd.DatetimeIndex,
+    marked: tuple[int, int],
+    alert: AlertMark,
+) -> None:
+    """The alert's stretch on the evidence map, orange, its ends labelled with their times."""
+    i0, i1 = marked
+    seg = track[i0 : max(i1, i0 + 2)]
+    ax.plot(
+        seg[:, 0], seg[:, 1], color="tab:orange", lw=5, alpha=0.85, zorder=3.5,
+        label=f"strongest alert, {alert.kind}: {alert.when}",
+    )  # fmt: skip
+    ends = {i0: (6, 6), min(i1, len(track)) - 1: (6, -14)}  # the end below: a track comes back
+    for k, offset in ends.items():
+        ax.annotate(
+            f"{times[k]:%H:%M}", track[k], xytext=offset, textcoords="offset points",
+            fontsize=8, color="tab:orange", fontweight="bold", zorder=7,
+        )  # fmt: skip
 
 
 def _evidence_map(
@@ -206,7 +331,14 @@ def _evidence_map(
     ax.plot(*track[0], "o", color="tab:green", ms=7, mec="black", zorder=5, label="start")
     if stretch is not None:
         seg = track[stretch[0] : max(stretch[1], stretch[0] + 2)]
-        ax.plot(seg[:, 0], seg[:, 1], color="tab:red", lw=3, zorder=4, label="stretch")
+        ax.plot(
+            seg[:, 0],
+            seg[:, 1],
+            color="tab:red",
+            lw=3,
+            zorder=4,
+            label="largest deviation's stretch",
+        )
     if peak is not None:
         ax.plot(
             *track[peak],
@@ -228,7 +360,8 @@ def _profile_panel(
     profile_label: str,
     by_index: bool,
 ) -> None:
-    """The evidence figure's deviation profile against the point index (`by_index`) or hours."""
+    """The evidence figure's deviation profile over time: against the point index (`by_index`),
+    hours, or times (`x` of datetime64)."""
     axp.plot(x, profile, color="black", lw=1.2)
     if stretch is not None:
         axp.axvspan(
@@ -236,14 +369,22 @@ def _profile_panel(
             x[stretch[1] - 1],
             color="tab:red",
             alpha=0.18,
-            label=f"stretch [{stretch[0]}, {stretch[1]})",
+            label=f"largest deviation's stretch [{stretch[0]}, {stretch[1]})",
         )
     if peak is not None:
         axp.plot(x[peak], profile[peak], "x", color="tab:red", ms=10, mew=2.2)
-    axp.set_xlabel("point index" if by_index else "hours since the start")
+    dated = np.issubdtype(x.dtype, np.datetime64)
+    axp.set_xlabel(
+        "time (UTC)" if dated else "point index" if by_index else "hours since the start"
+    )
     axp.set_ylabel(profile_label)
-    span = float(x[-1] - x[0]) or 1.0
-    axp.set_xlim(x[0] - 0.015 * span, x[-1] + 0.015 * span)
+    if dated:  # dates and times, none over another
+        locator = mdates.AutoDateLocator(maxticks=7)
+        axp.xaxis.set_major_locator(locator)
+        axp.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    else:
+        span = float(x[-1] - x[0]) or 1.0
+        axp.set_xlim(x[0] - 0.015 * span, x[-1] + 0.015 * span)
     axp.set_ylim(bottom=min(0.0, float(np.nanmin(profile))) if peak is not None else 0.0)
     axp.grid(alpha=0.3)
     if stretch is not None:
@@ -289,6 +430,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
                     "evidence_label": result.evidence_kind,
                     "events": places(result.events, ALERT),
                     "activity": places(result.events, ACTIVITY),
+                    "gaps": gap_links(result.events),
                 },
             ),
         ),
@@ -326,7 +468,8 @@ def evidence_figures(
     result: Detection, folder: Path, stretches: list[tuple[int, int]]
 ) -> list[tuple[Path, FigureJob]]:
     """evidence/track-<id>.png for the highest-ranked flagged tracks, to draw: the track, what
-    it was compared with, the stretch of largest deviation and the deviation profile along it."""
+    it was compared with, the stretch of largest deviation, its strongest alert from when to
+    when, and the deviation profile over time."""
     rows = result.scores[result.scores["flagged"]].sort_values("rank").head(EVIDENCE_FIGURES)
     index = {t.track_id: i for i, t in enumerate(result.tracks)}
     figures = []
@@ -342,6 +485,8 @@ def evidence_figures(
             "hours": np.r_[0.0, np.cumsum(track.dts)],
             "profile_label": result.profile_kind,
             "evidence_label": result.evidence_kind,
+            "start": track.start,
+            "alert": strongest_alert(result.events, int(row.track_id)),
         }
         path = folder / f"track-{int(row.track_id)}.png"
         figures.append((path, (plot_track_evidence, args, kwargs)))

@@ -322,10 +322,15 @@ PAGE = """<!DOCTYPE html>
 html, body, #map {{ height: 100%; margin: 0; }}
 .aisdati-title {{ position: absolute; top: 8px; left: 54px; z-index: 1000; background: white;
   padding: 2px 8px; font: 14px sans-serif; opacity: 0.9; border-radius: 3px; }}
-.aisdati-legend {{ background: white; padding: 4px 8px; font: 12px sans-serif; width: 140px;
+.aisdati-legend {{ background: white; padding: 4px 8px; font: 12px sans-serif; width: 190px;
   border-radius: 3px; opacity: 0.9; }}
 .aisdati-bar {{ height: 10px; margin: 2px 0; }}
 .aisdati-swatch {{ display: inline-block; width: 18px; height: 4px; vertical-align: middle; }}
+.aisdati-line {{ display: inline-block; width: 18px; height: 0; vertical-align: middle; }}
+.aisdati-dot {{ display: inline-block; width: 8px; height: 8px; border: 2px solid black;
+  border-radius: 50%; margin: 0 4px; vertical-align: middle; }}
+.aisdati-gap {{ background: white; border: 1px solid #3182bd; color: #3182bd; font: 11px sans-serif;
+  padding: 0 3px; box-shadow: none; }}
 .leaflet-popup-content td {{ padding: 0 6px 0 0; font: 12px sans-serif; }}
 </style>
 </head><body>

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from aisdati.plots import draw_land, grid, save, set_map_limits
 
@@ -56,6 +57,9 @@ def plot_injected_examples(
         ax.set_ylabel("")
         ax.set_title(title, fontsize=9)
         ax.tick_params(labelsize=7)
+        # a narrow panel of a long coast took a tick every 0.05 degrees, their labels overlapping
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.yaxis.set_major_locator(MaxNLocator(5))
     axes[0].legend(fontsize=7, loc="best")
     fig.suptitle("Top-scored injected anomaly of each kind")
     save(fig, path)

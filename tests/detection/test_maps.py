@@ -150,3 +150,50 @@ def test_a_detection_over_the_cap_says_how_many_tracks_its_maps_draw(cli, kitima
     assert len(layers["tracks"]["features"]) == 2
     assert len(layers["flagged"]["features"]) == int(scores["flagged"].sum())
     assert (out / "map.png").stat().st_size > 0
+
+
+def test_evidence_marks_the_strongest_alert_from_when_to_when():
+    """Issue 69, item 4: the figure says when: the strongest alert's stretch, its times, the
+    evidence over the time of day."""
+    track = _channel_tracks()[0]
+    hours = np.arange(len(track)) / 6
+    start = pd.Timestamp("2018-08-19 05:00", tz="UTC")
+    events = pd.DataFrame(
+        {
+            "class": ["alert", "alert", "activity"],
+            "track_id": [7, 7, 7],
+            "kind": ["drift", "position-jump", "gap"],
+            "start": pd.to_datetime(
+                ["2018-08-19 05:30", "2018-08-19 06:20", "2018-08-19 07:00"], utc=True
+            ),
+            "end": pd.to_datetime(
+                ["2018-08-19 05:40", "2018-08-19 08:07", "2018-08-19 09:00"], utc=True
+            ),
+            "strength": [1.2, 3.1, 9.0],
+        }
+    )
+    alert = maps.strongest_alert(events, 7)
+    assert alert is not None and alert.kind == "position-jump"
+    assert alert.when == "2018-08-19 06:20 to 08:07 UTC"
+    assert maps.strongest_alert(events, 8) is None
+    times = (start + pd.to_timedelta(hours, unit="h")).round("s")
+    assert maps.alert_points(times, alert) == (8, 19)  # 06:20 .. 08:00, every 10 min
+    profile = np.linspace(0, 0.03, len(track)) * 66_000
+    png = plot_track_evidence(
+        track, None, profile, (25, 35), "t", hours=hours, start=start, alert=alert
+    )
+    assert png.startswith(b"\x89PNG")
+
+
+def test_a_gap_is_a_link_labelled_with_its_duration():
+    events = pd.DataFrame(
+        {
+            "kind": ["gap", "loitering", "gap"],
+            "lons": [[-129.0, -128.5], [-129.0], [-129.2, -129.1]],
+            "lats": [[53.0, 53.2], [53.0], [53.1, 53.3]],
+            "duration_s": [6660.0, 100.0, 70_800.0],
+        }
+    )
+    links = maps.gap_links(events)
+    assert [label for _, label in links] == ["19.7 h", "111 min"]  # longest first
+    assert links[1][0].tolist() == [[-129.0, 53.0], [-128.5, 53.2]]
