@@ -589,8 +589,17 @@ class WatchOptions:
         str | None,
         typer.Option(
             "--models",
-            help="Model folder or URL (as `detect --models`): judge with the event thresholds "
-            "its models calibrated on their area's traffic instead of the defaults.",
+            help="Model folder or URL (as `detect --models`): judge with the alert budget "
+            "its models calibrated on their training period and the water their traffic "
+            "sailed, instead of the defaults.",
             show_default=False,
         ),
     ] = None
+    alerts_per_1000: Annotated[
+        float,
+        typer.Option(
+            "--alerts-per-1000",
+            help="With --models: the alert budget, as `detect --alerts-per-1000` (the alerts "
+            "per 1,000 vessel-days the models' training period would have raised).",
+        ),
+    ] = ALERTS_PER_1000

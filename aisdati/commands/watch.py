@@ -15,6 +15,7 @@ from aisdati.commands.options import WatchOptions
 from aisdati.detection.events import event_rules, uncalibrated_note
 from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
+from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.kinds import KINDS
 from aisdati.events.rules import EventRules
 from aisdati.live.area import AreaJudge
@@ -70,12 +71,16 @@ def check(o: WatchOptions) -> float:
         raise UserError(f"--speed must be a finite number > 0, got {o.speed}")
     if o.max_vessels < 1:
         raise UserError(f"--max-vessels must be an integer >= 1, got {o.max_vessels}")
+    if not Range(low=0.0, low_open=True).accepts(o.alerts_per_1000):
+        raise UserError(f"--alerts-per-1000 must be a finite number > 0, got {o.alerts_per_1000}")
     if o.speed is not None and (o.source == "-" or "://" in o.source):
         raise UserError("--speed replays a file or folder; a live source comes at its own pace")
     return parse_duration(o.window, "--window")
 
 
-def judging(models_dir: str | None) -> tuple[EventRules, AreaJudge | None]:
+def judging(
+    models_dir: str | None, budget: float = ALERTS_PER_1000
+) -> tuple[EventRules, AreaJudge | None]:
     """What the watch judges by: the event rules (the defaults, or the alert budget the models
     of `models_dir` calibrated on their training period and the water their traffic sailed
     ashore, as `detect` judges with them; a model from before the budget says so and keeps the
@@ -90,7 +95,7 @@ def judging(models_dir: str | None) -> tuple[EventRules, AreaJudge | None]:
     area = AreaJudge.of(models)
     judged = f"; {len(area.models)} area model(s) judge the vessels' windows" if area else ""
     say(f"event thresholds of {len(models)} model(s) in {models_dir}{judged}")
-    return event_rules(models), area
+    return event_rules(models, budget), area
 
 
 def summary(w: Watch) -> str:
@@ -103,7 +108,7 @@ def summary(w: Watch) -> str:
 
 def run(o: WatchOptions) -> None:
     window_s = check(o)
-    rules, area = judging(o.models_dir)
+    rules, area = judging(o.models_dir, o.alerts_per_1000)
     chunks = open_source(o.source, say, paced=o.speed is not None)
     state, show, db = LiveState(), printer(o.as_json), without_password(o.db)
 

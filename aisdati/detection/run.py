@@ -57,6 +57,7 @@ from aisdati.errors import UserError
 from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.rules import EventRules
 from aisdati.execution import Runner
+from aisdati.options import Range
 from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
 from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
@@ -250,8 +251,10 @@ def check_settings(settings: DetectSettings) -> None:
         raise UserError(f"--contamination must be in (0, 1), got {settings.contamination:g}")
     if settings.top_percent is not None and settings.threshold is not None:
         raise UserError("give --threshold or --top-percent, not both")
-    if not settings.alerts_per_1000 > 0:
-        raise UserError(f"--alerts-per-1000 must be positive, got {settings.alerts_per_1000:g}")
+    if not Range(low=0.0, low_open=True).accepts(settings.alerts_per_1000):
+        raise UserError(
+            f"--alerts-per-1000 must be a finite number > 0, got {settings.alerts_per_1000:g}"
+        )
     if not settings.near_km > 0:
         raise UserError(f"--near-km must be positive, got {settings.near_km:g}")
     if settings.score is not None and settings.score not in SCORES:

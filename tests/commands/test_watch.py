@@ -135,6 +135,9 @@ def test_option_mistakes_are_one_line(tmp_path):
     one_line_error(run("watch", "--input", tmp_path / "none.ais", "--db", db), "not found")
     one_line_error(run("watch", "--input", FRIO, "--serve", "nope", "--db", db), "HOST:PORT")
     one_line_error(run("watch", "--input", FRIO, "--window", "x", "--db", db), "--window")
+    one_line_error(
+        run("watch", "--input", FRIO, "--alerts-per-1000", "0", "--db", db), "--alerts-per-1000"
+    )
 
 
 def test_models_give_the_thresholds_they_calibrated(tmp_path, monkeypatch):
@@ -151,6 +154,9 @@ def test_models_give_the_thresholds_they_calibrated(tmp_path, monkeypatch):
     )
     live = replayed(tmp_path / "models", FRIO, "--models", world["models"])
     assert used == [calibrated]
+    used.clear()  # a budget a hundred times larger lowers (never raises) every threshold
+    replayed(tmp_path / "loose", FRIO, "--models", world["models"], "--alerts-per-1000", "1000")
+    assert all(used[0].of(k) <= calibrated.of(k) for k in calibrated.minimum)
     pd.testing.assert_frame_equal(live, replayed(tmp_path / "defaults", FRIO))
     got = run("watch", "--input", FRIO, "--models", world["models"], "--db", tmp_path / "w.db")
     assert "event thresholds of 1 model(s)" in " ".join(got.stderr.split())
