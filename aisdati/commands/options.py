@@ -557,6 +557,16 @@ class WatchOptions:
             show_default=False,
         ),
     ] = None
+    notify: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--notify",
+            help="POST each alert as it opens and as it closes, as one JSON object, to this "
+            "http(s) URL (a webhook; repeatable). Tried 3 times, never holding up the watch; "
+            "failures are counted on stderr.",
+            show_default=False,
+        ),
+    ] = None
     speed: Annotated[
         float | None,
         typer.Option(

@@ -16,11 +16,12 @@ from aisdati.detection.events import event_rules, uncalibrated_note
 from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
 from aisdati.events.budget import ALERTS_PER_1000
-from aisdati.events.kinds import KINDS
+from aisdati.events.kinds import ALERT, KINDS
 from aisdati.events.rules import EventRules
 from aisdati.live.area import AreaJudge
 from aisdati.live.ledger import Change
 from aisdati.live.loop import Watch
+from aisdati.live.notify import DRAIN_S, Notifier
 from aisdati.live.serve import LiveState, start_server
 from aisdati.live.sources import Pacer, open_source
 from aisdati.live.store import open_store
@@ -31,6 +32,8 @@ from aisdati.storage import fetched_models, without_password
 
 PROGRESS_S = 5.0
 """Wall seconds between two progress lines on stderr."""
+PUSHED = ("opened", "closed")
+"""The changes of an alert that `--notify` posts."""
 
 
 def say(message: str) -> None:
@@ -98,23 +101,40 @@ def judging(
     return event_rules(models, budget), area
 
 
-def summary(w: Watch) -> str:
-    return (
+def summary(w: Watch, notifiers: list[Notifier]) -> str:
+    return "; ".join([
         f"{w.counters.lines:,} lines ({w.counters.rate():,.0f}/s), {w.counters.reports:,} "
         f"reports, {len(w.vessels.recent):,} vessels ({w.vessels.forgotten:,} forgotten), "
-        f"{len(w.ledger.open_events())} open events, {w.decoder.rejected:,} rejected"
-    )
+        f"{len(w.ledger.open_events())} open events, {w.decoder.rejected:,} rejected",
+        *(n.summary() for n in notifiers),
+    ])  # fmt: skip
+
+
+def pusher(notifiers: list[Notifier]) -> Callable[[list[Change]], None]:
+    """Where an alert's opening and closing go: each endpoint's queue (never waiting)."""
+
+    def push(changes: list[Change]) -> None:
+        for c in changes:
+            if c.what in PUSHED and c.event.fields["class"] == ALERT:
+                record = change_record(c)
+                for n in notifiers:
+                    n.post(record)
+
+    return push
 
 
 def run(o: WatchOptions) -> None:
     window_s = check(o)
+    notifiers = [Notifier(url) for url in o.notify or []]
     rules, area = judging(o.models_dir, o.alerts_per_1000)
     chunks = open_source(o.source, say, paced=o.speed is not None)
     state, show, db = LiveState(), printer(o.as_json), without_password(o.db)
+    push = pusher(notifiers)
 
     def emit(changes: list[Change]) -> None:
         show(changes)
         state.record(changes)
+        push(changes)
 
     with contextlib.ExitStack() as held:
         if o.serve:  # before the database: a port in use leaves no database file behind
@@ -130,21 +150,34 @@ def run(o: WatchOptions) -> None:
                 say(f"resumed {resumed} open event(s) from {db}")
             if o.serve:
                 say(f"live page at http://{o.serve}/")
-            follow(watch, chunks, state)
+            follow(watch, chunks, state, notifiers)
         finally:
             left = watch.stop()
-            say(f"stopped; {left} open event(s) kept open in {db}")
+            delivered(notifiers)
+            say("; ".join([f"stopped; {left} open event(s) kept open in {db}",
+                           *(n.summary() for n in notifiers)]))  # fmt: skip
     sys.stdout.flush()
 
 
-def follow(watch: Watch, chunks: Iterator[list[bytes]], state: LiveState) -> None:
+def delivered(notifiers: list[Notifier]) -> None:
+    """The alerts still queued given their bounded time to go out (said when there are some)."""
+    if waiting := sum(n.pending for n in notifiers):
+        say(f"waiting up to {DRAIN_S:.0f} s for {waiting} alert(s) to be posted")
+    deadline = time.monotonic() + DRAIN_S
+    for n in notifiers:
+        n.close(deadline)
+
+
+def follow(
+    watch: Watch, chunks: Iterator[list[bytes]], state: LiveState, notifiers: list[Notifier]
+) -> None:
     """The feed through the watch, to its end, a progress line every `PROGRESS_S`."""
     shown = time.monotonic()
     for lines in chunks:
         watch.step(lines)
         state.refresh(watch)
         if time.monotonic() - shown >= PROGRESS_S:
-            say(summary(watch))
+            say(summary(watch, notifiers))
             shown = time.monotonic()
     state.refresh(watch, force=True)
-    say(f"feed ended: {summary(watch)}")
+    say(f"feed ended: {summary(watch, notifiers)}")
