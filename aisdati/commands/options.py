@@ -552,8 +552,9 @@ class WatchOptions:
         str | None,
         typer.Option(
             "--serve",
-            help="Serve the live page (offline map, vessels, open and recent events, the feed's "
-            "summary) at HOST:PORT, e.g. 127.0.0.1:8080.",
+            help="Serve the live page (offline coastline, vessels with their course, open and "
+            "recent events with filters, the feed's health) at HOST:PORT, e.g. 127.0.0.1:8080; "
+            "after a replay it keeps the final state until Ctrl-C.",
             show_default=False,
         ),
     ] = None

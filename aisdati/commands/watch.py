@@ -22,7 +22,7 @@ from aisdati.live.area import AreaJudge
 from aisdati.live.ledger import Change
 from aisdati.live.loop import Watch
 from aisdati.live.notify import DRAIN_S, Notifier
-from aisdati.live.serve import LiveState, start_server
+from aisdati.live.serve import REFRESH_S, LiveState, start_server
 from aisdati.live.sources import Pacer, open_source
 from aisdati.live.store import open_store
 from aisdati.live.vessels import Vessels
@@ -151,6 +151,9 @@ def run(o: WatchOptions) -> None:
             if o.serve:
                 say(f"live page at http://{o.serve}/")
             follow(watch, chunks, state, notifiers)
+            if o.serve:
+                say(f"the live page at http://{o.serve}/ keeps the final state; Ctrl-C stops")
+                keep_serving(watch, state)
         finally:
             left = watch.stop()
             delivered(notifiers)
@@ -166,6 +169,14 @@ def delivered(notifiers: list[Notifier]) -> None:
     deadline = time.monotonic() + DRAIN_S
     for n in notifiers:
         n.close(deadline)
+
+
+def keep_serving(watch: Watch, state: LiveState) -> None:
+    """The feed ended (a replay, stdin closed): the page keeps its final state until Ctrl-C,
+    still answering what it asks (a vessel's last reports)."""
+    while True:
+        time.sleep(REFRESH_S)
+        state.refresh(watch, force=True)
 
 
 def follow(

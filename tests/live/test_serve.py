@@ -2,7 +2,9 @@
 map's test is): served by a watch reading FRIO's recording from a real TCP feed, drawn on the
 package's own Leaflet with every other host unresolvable, it shows the vessel, the drift with
 its popup's fields, and the feed's summary, polled without a reload; a vessel's name is shown
-as text, never run as HTML."""
+as text, never run as HTML. A replay keeps its final page until Ctrl-C: the coastline, the
+vessel chosen with its last reports and events, the drift's row, which the class filter hides;
+its screenshot is docs/live_page.png."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import http.server
 import json
 import re
 import shutil
+import signal
 import subprocess
 import threading
 import urllib.request
@@ -18,7 +21,7 @@ import urllib.request
 import pytest
 from pyais.encode import encode_dict
 
-from tests.helpers.live import FRIO, Feed, free_port, poll, stopped, watch
+from tests.helpers.live import FRIO, ROOT, Feed, free_port, poll, stopped, watch
 
 
 def browser() -> str | None:
@@ -33,16 +36,28 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def dom(url: str, profile) -> str:
-    """The page's DOM after Chromium ran it for a few (virtual) seconds, offline but for
-    127.0.0.1."""
+def chromium(profile, *args: str) -> str:
+    """Chromium run on the page for a few (virtual) seconds, offline but for 127.0.0.1; what
+    it printed."""
     cmd = [
         str(browser()), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
         "--disable-background-networking", "--disable-component-update", "--disable-sync",
         f"--user-data-dir={profile}", "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
-        "--virtual-time-budget=4000", "--dump-dom", url,
+        "--virtual-time-budget=6000", *args,
     ]  # fmt: skip
     return subprocess.run(cmd, check=True, capture_output=True, text=True, timeout=120).stdout
+
+
+def dom(url: str, profile) -> str:
+    """The page's DOM after Chromium ran it."""
+    return chromium(profile, "--dump-dom", url)
+
+
+def row(page: str, kind: str) -> str:
+    """The events list's row of the (only) event of this kind, as the DOM has it."""
+    listed = page[page.index('<table id="events">') :]
+    (found,) = re.findall(rf'<tr class="event [^"]*"[^>]*data-kind="{kind}"[^>]*>.*?</tr>', listed)
+    return found
 
 
 def state(url: str) -> dict:
@@ -66,7 +81,9 @@ def test_the_live_page_shows_vessels_events_and_the_feed(tmp_path):
     assert "leaflet-container" in page  # the package's Leaflet ran
     assert 'data-vessels="1"' in page and 'data-open_events="0"' in page
     assert 'data-rejected="5332"' in page  # the tag blocks on lines of their own
-    assert "closed drift: FRIO since 2014-09-28 16:37:54" in page
+    assert "<td>not_ais</td><td>5,332</td>" in page  # the rejected lines by reason
+    drift_row = row(page, "drift")
+    assert "closed" in drift_row and ">FRIO<" in drift_row and "09-28 16:37:54" in drift_row
     assert "data-polled" in page and "data-error" not in page
     assert (drift["name"], drift["label"], drift["start"]) == (
         "FRIO",
@@ -147,5 +164,36 @@ def test_a_vessel_name_is_shown_as_text_never_run(tmp_path):
     found = re.search(r'data-tooltips="([^"]*)"', page)
     assert found, page[-2000:]
     tips = dict(json.loads(html.unescape(found[1])))
-    assert tips == {f"{NAME} 219000009": 0, "FRIO 538004030": 0}  # its text, and no <img>
+    assert tips == {f"{NAME} 219000009 · Cargo": 0, "FRIO 538004030 · Tanker": 0}  # no <img>
     assert "data-error" not in page
+
+
+def test_a_replay_keeps_its_final_page_until_ctrl_c(tmp_path):
+    port = free_port()
+    url = f"http://127.0.0.1:{port}/"
+    proc = watch("--input", FRIO, "--db", tmp_path / "w.sqlite", "--serve", f"127.0.0.1:{port}",
+                 out=tmp_path / "watch")  # fmt: skip
+    err = tmp_path / "watch" / "stderr"
+    try:
+        poll(lambda: "keeps the final state" in err.read_text(), 60, "the replay's end")
+        chosen = dom(f"{url}#vessel=538004030", tmp_path / "profile")
+        filtered = dom(f"{url}#class=activity", tmp_path / "profile")
+        shot = ROOT / "docs" / "live_page.png"
+        chromium(tmp_path / "profile", "--window-size=1400,850", f"--screenshot={shot}",
+                 f"{url}#vessel=538004030")  # fmt: skip
+        assert proc.poll() is None  # still serving
+    finally:
+        code = stopped(proc, signal.SIGINT)
+    assert code == 130 and "stopped; 0 open event(s)" in err.read_text()
+    assert "data-error" not in chosen and "data-error" not in filtered
+    coast = re.search(r'data-coast="(\d+)"', chosen)
+    assert coast and int(coast[1]) >= 1  # the coastline layer drawn around FRIO
+    assert 'data-vessels="1"' in chosen and "FRIO · MMSI 538004030" in chosen
+    assert "Tanker · last heard 2014-09-28 18:29:54 UTC" in chosen
+    reports = re.search(r'<table id="reports">(.*?)</table>', chosen)[1]
+    assert reports.count("<tr>") == 1 + 12  # the heading and the last 12 reports
+    assert "<td>18:29:54</td><td>57.755N 11.387E</td>" in reports
+    drift_row = row(chosen, "drift")
+    assert "hidden" not in drift_row and "20 min" in drift_row and "57.817N 11.309E" in drift_row
+    assert "hidden" in row(filtered, "drift")  # the filter (class activity) hides it
+    assert shot.stat().st_size > 50_000
