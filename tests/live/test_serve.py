@@ -4,13 +4,14 @@ package's own Leaflet with every other host unresolvable, it shows the vessel, t
 its popup's fields, and the feed's summary, polled without a reload; a vessel's name is shown
 as text, never run as HTML. A replay keeps its final page until Ctrl-C: the coastline, the
 vessel chosen with its last reports and events, the drift's row, which the class filter hides;
-its screenshot is docs/live_page.png."""
+its screenshot is docs/live_page.png (`AISDATI_DOCS_SCREENSHOTS=1` rewrites it)."""
 
 from __future__ import annotations
 
 import html
 import http.server
 import json
+import os
 import re
 import shutil
 import signal
@@ -22,6 +23,10 @@ import pytest
 from pyais.encode import encode_dict
 
 from tests.helpers.live import FRIO, ROOT, Feed, free_port, poll, stopped, watch
+
+DOCS_SHOTS = "AISDATI_DOCS_SCREENSHOTS"
+"""Set (to anything) to write the page's screenshot to docs/live_page.png, as the docs show it;
+otherwise it goes to the test's own folder and the work tree is left as it was."""
 
 
 def browser() -> str | None:
@@ -178,13 +183,14 @@ def test_a_replay_keeps_its_final_page_until_ctrl_c(tmp_path):
         poll(lambda: "keeps the final state" in err.read_text(), 60, "the replay's end")
         chosen = dom(f"{url}#vessel=538004030", tmp_path / "profile")
         filtered = dom(f"{url}#class=activity", tmp_path / "profile")
-        shot = ROOT / "docs" / "live_page.png"
+        shot = (ROOT / "docs" if os.environ.get(DOCS_SHOTS) else tmp_path) / "live_page.png"
         chromium(tmp_path / "profile", "--window-size=1400,850", f"--screenshot={shot}",
                  f"{url}#vessel=538004030")  # fmt: skip
         assert proc.poll() is None  # still serving
     finally:
         code = stopped(proc, signal.SIGINT)
     assert code == 130 and "stopped; 0 open event(s)" in err.read_text()
+    assert shot.stat().st_size > 10_000  # a picture of the page, not a blank
     assert "data-error" not in chosen and "data-error" not in filtered
     coast = re.search(r'data-coast="(\d+)"', chosen)
     assert coast and int(coast[1]) >= 1  # the coastline layer drawn around FRIO

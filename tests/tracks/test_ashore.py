@@ -116,10 +116,10 @@ def test_a_stretch_moved_inland_flags_its_track_and_ranks_it_first(
     alone = model.scores.set_index("track_id")
     cut = model.models[0].threshold(settings.how_for(model.models[0]), 0.05)
     assert (alone["ashore_reports"] == 0).all()
-    assert (alone["flagged"] == ((alone["score"] > cut) | (alone["events"] > 0))).all()
+    assert (alone["flagged"] == ((alone["score"] > cut) | (alone["alerts"] > 0))).all()
     # the rule adds its flag to the model's and leaves every score as the model gave it
     assert np.allclose(ruled["score"], alone.loc[ruled.index, "score"])
-    by_rule = (ruled["ashore_reports"] >= 2) | (ruled["events"] > 0)
+    by_rule = (ruled["ashore_reports"] >= 2) | (ruled["alerts"] > 0)
     assert (ruled["flagged"] == (alone.loc[ruled.index, "flagged"] | by_rule)).all()
 
 
