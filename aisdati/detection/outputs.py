@@ -50,6 +50,7 @@ SCORES_SCHEMA = pa.schema(
         ("max_dev_index", pa.int64()),
         ("ashore_reports", pa.int64()),
         ("events", pa.int64()),
+        ("alerts", pa.int64()),
         ("event_kinds", pa.string()),
         ("name", pa.string()),
         ("ship_type", pa.string()),
@@ -61,7 +62,8 @@ name; threshold: what flags it, in the same unit (the model's calibrated thresho
 batch-relative one asked for); max_dev_*: the track point with the largest local deviation;
 ashore_reports: reports well inland (`aisdati.tracks.ashore`; 0 with --no-ashore), which flag
 the track from `AshoreCheck.min_reports` on and rank it above every track at sea; events,
-event_kinds: the track's events (events.parquet), any of which flags it; name, ship_type: its
+alerts, event_kinds: the track's events (events.parquet) and how many are alerts, any of which
+flags it (an activity flags nothing); name, ship_type: its
 vessel's, where ingest saw its static messages (vessels.parquet)."""
 
 
@@ -151,6 +153,7 @@ def anomalies_geojson(result: Detection) -> dict[str, Any]:
             "name": row.name,
             "ship_type": row.ship_type,
             "event_kinds": row.event_kinds,
+            "alerts": int(row.alerts),
             "model": row.model,
             "rank": int(row.rank),
             "score": float(row.score),

@@ -378,7 +378,7 @@ def judged_tracks(
 SCORE_COLUMNS = (
     "track_id", "mmsi", "model", "n_points", "score", "threshold", "flagged", "rank",
     "max_dev_m", "max_dev_lon", "max_dev_lat", "max_dev_index", "ashore_reports", "events",
-    "event_kinds", "name", "ship_type",
+    "alerts", "event_kinds", "name", "ship_type",
 )  # fmt: skip
 """scores.parquet's columns (`aisdati.detection.outputs.SCORES_SCHEMA`)."""
 
