@@ -12,7 +12,6 @@ import select
 import socket
 import sys
 import time
-import zipfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -22,7 +21,7 @@ from aisdati.preprocess.inputs import (
     NMEA_SUFFIXES,
     Archive,
     Source,
-    check_member,
+    archive_members,
     describe_read_error,
 )
 from aisdati.preprocess.nmea import MAX_LINE_BYTES, read_lines
@@ -174,17 +173,7 @@ def recordings(path: Path) -> list[Source]:
 def zip_members(path: Path) -> list[Source]:
     """The NMEA members of a zip archive (`.nmea`, `.ais`, `.txt`), in name order."""
     archive = Archive(path)
-    try:
-        members = sorted(
-            (i for i in archive.zip.infolist() if i.filename.lower().endswith(PLAIN_NMEA)),
-            key=lambda i: i.filename,
-        )
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise UserError(f"{path}: not a readable zip archive ({exc})") from None
-    if not members:
-        raise UserError(f"{path}: the zip archive holds no {', '.join(PLAIN_NMEA)} file")
-    for info in members:
-        check_member(path, info)
+    members = sorted(archive_members(path, archive, PLAIN_NMEA), key=lambda i: i.filename)
     return [Source(path, info.filename, archive) for info in members]
 
 

@@ -210,15 +210,23 @@ def sources_of(path: Path) -> list[Source]:
     if not path.name.lower().endswith(".zip"):
         return [Source(path)]
     archive = Archive(path)
+    return group_small_members(archive, archive_members(path, archive, (".csv",)))
+
+
+def archive_members(
+    path: Path, archive: Archive, suffixes: tuple[str, ...]
+) -> list[zipfile.ZipInfo]:
+    """The members of a zip archive whose names end with `suffixes`, in the archive's order,
+    each checked (`check_member`); an unreadable archive, or one with none, is one line."""
     try:
-        members = [i for i in archive.zip.infolist() if i.filename.lower().endswith(".csv")]
+        members = [i for i in archive.zip.infolist() if i.filename.lower().endswith(suffixes)]
     except (zipfile.BadZipFile, OSError) as exc:
         raise UserError(f"{path}: not a readable zip archive ({exc})") from None
     if not members:
-        raise UserError(f"{path}: the zip archive holds no .csv file")
+        raise UserError(f"{path}: the zip archive holds no {', '.join(suffixes)} file")
     for info in members:
         check_member(path, info)
-    return group_small_members(archive, members)
+    return members
 
 
 def group_small_members(archive: Archive, members: list[zipfile.ZipInfo]) -> list[Source]:
