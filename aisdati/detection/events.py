@@ -23,6 +23,7 @@ from aisdati.detectors import Detector
 from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.calibrate import is_calibrated, thresholds_of
 from aisdati.events.find import placed
+from aisdati.events.fleet import Fleet, fleet_events
 from aisdati.events.kinds import ALERT
 from aisdati.events.record import EVENT_COLUMNS, event_row
 from aisdati.events.reports import vessels
@@ -102,15 +103,17 @@ def within(
 def model_free_events(
     reports: pd.DataFrame, identity: pd.DataFrame, rules: EventRules = EventRules()
 ) -> pd.DataFrame:
-    """Every model-free event of every vessel of `reports` by `rules` (`identity`:
-    vessels.parquet by MMSI)."""
-    frames = []
+    """Every model-free event of every vessel of `reports` by `rules`, the one-vessel kinds and
+    the fleet kinds (`aisdati.events.fleet`) (`identity`: vessels.parquet by MMSI)."""
+    frames, fleet = [], Fleet({}, {})
     for v in vessels(reports):
         who = _who(identity, v.mmsi)
+        fleet.vessels[v.mmsi], fleet.identity[v.mmsi] = v, who
         found = rules.events(v, who["length_m"])
         if found:
             frames.append(placed(v, found, who, rules.thresholds))
-    return pd.concat(frames, ignore_index=True) if frames else empty_events()
+    own = pd.concat(frames, ignore_index=True) if frames else empty_events()
+    return fleet_events(fleet, rules, own)
 
 
 def _who(identity: pd.DataFrame, mmsi: int) -> dict:

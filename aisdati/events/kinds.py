@@ -31,6 +31,12 @@ class EventKind:
     definition: str
     follows: str
     """Whose definition it follows, and where ours differs."""
+    fleet: bool = False
+    """Whether it is found across vessels (`aisdati.events.fleet`: an encounter names two, an
+    interference an area and its vessels), not from one vessel's reports alone."""
+    folds: tuple[str, ...] = ()
+    """The one-vessel kinds it explains: those events of the vessels it names, within its time
+    span, are folded into it, not raised one by one."""
 
 
 KINDS: dict[str, EventKind] = {
@@ -106,14 +112,46 @@ KINDS: dict[str, EventKind] = {
             "reception); ours is for terrestrial receivers hearing a vessel every few minutes, "
             "and scales with the vessel's own interval",
         ),
+        EventKind(
+            "encounter", "encounter at sea", ACTIVITY, False, None,
+            "two vessels within 500 m of each other for at least 2 hours, both under 2 kn "
+            "(by position), at least 10 km from every port and anchorage",
+            "Global Fishing Watch's encounters", fleet=True,
+        ),
+        EventKind(
+            "port-visit", "port visit", ACTIVITY, False, None,
+            "a vessel's stay at a port or anchorage learned from where many vessels stop "
+            "(or given as GeoJSON): its arrival, departure and duration",
+            "Global Fishing Watch's port visits (anchorages built from the traffic)", fleet=True,
+        ),
+        EventKind(
+            "identity-conflict", "one MMSI, two transmitters", ALERT, False, None,
+            "one MMSI whose positions alternate between places no vessel could join in the "
+            "time between them: two transmitters sharing an identity",
+            "Global Fishing Watch's segmenter splits such MMSIs; ours raises it", fleet=True,
+        ),
+        EventKind(
+            "identity-change", "identity changed", ALERT, False, None,
+            "a vessel whose reported name, type, size or call sign changes, with before and after",
+            "ours", fleet=True,
+        ),
+        EventKind(
+            "gnss-interference", "positions displaced over an area", ALERT, False, None,
+            "many vessels displaced at once (position jumps, reports on land or on a common "
+            "point or circle) within minutes in one area: one event with its area, time span "
+            "and vessels; their own jumps are folded into it",
+            "ours", fleet=True, folds=("position-jump", "ashore"),
+        ),
     )
 }  # fmt: skip
-MODEL_FREE = tuple(name for name, kind in KINDS.items() if not kind.needs_model)
-"""The kinds found from the reports alone, with no trained model."""
+MODEL_FREE = tuple(n for n, k in KINDS.items() if not k.needs_model and not k.fleet)
+"""The kinds found from one vessel's reports alone, with no trained model."""
+FLEET = tuple(n for n, k in KINDS.items() if k.fleet)
+"""The kinds found across vessels (`aisdati.events.fleet`)."""
 READ_REPORTED_MOTION = ("speed-inconsistent", "course-inconsistent", "sudden-speed-change", "drift")
 """The kinds that judge what a vessel reports of its motion: not looked for where ingest derived
 SOG and COG from positions (a positions-only file), whose "reported" motion is the positions'."""
-BUDGETED = tuple(n for n, k in KINDS.items() if k.cls == ALERT and not k.needs_model)
+BUDGETED = tuple(n for n in MODEL_FREE if KINDS[n].cls == ALERT)
 """The alert kinds whose thresholds the alert budget sets (the learned kinds are bounded by
 their model's track-level contamination instead)."""
 

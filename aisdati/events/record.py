@@ -4,6 +4,7 @@ for every kind, model-free, learned or live."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from typing import Any
 
@@ -32,6 +33,8 @@ EVENTS_SCHEMA = pa.schema(
         ("rarity_days", pa.float64()),
         ("evidence", pa.string()),
         ("model", pa.string()),
+        ("others", pa.string()),
+        ("coverage", pa.string()),
         ("geometry", pa.binary()),
     ]
 )
@@ -40,7 +43,10 @@ last report; `lon`/`lat` the report where it is strongest; `track_id` that repor
 (null: a report in no track, e.g. a slow one); `class` alert or activity; `strength` how far
 over its threshold (1 = at it); `rarity_days` an alert as strong came once in so many
 vessel-days of the training period (null: not calibrated, or an activity); `model` the model of
-a learned event; `geometry` the stretch."""
+a learned event; `others` the other vessels a fleet event names (`aisdati.events.fleet`), as
+JSON: a list of {mmsi, name, ship_type} (null: the event is one vessel's); `coverage` whether a
+gap's area kept being heard ("heard": others near its ends kept reporting; "quiet": the area
+went silent too; null: not judged); `geometry` the stretch (an area event: its outline)."""
 EVENT_COLUMNS = (
     *[n for n in EVENTS_SCHEMA.names if n not in ("event_id", "geometry")],
     "lons",
@@ -63,11 +69,14 @@ def event_row(
     track_id: int | None = None,
     rarity_days: float | None = None,
     model: str | None = None,
+    others: Sequence[dict] | None = None,
+    coverage: str | None = None,
 ) -> dict[str, Any]:
     """An event as a record of `EVENT_COLUMNS`: its vessel (`identity`: name, ship_type), kind
-    and class, first and last report times (seconds since the epoch, kept to the microsecond as
-    reports are), where it is strongest (`place`: lon, lat), its stretch's positions, the track
-    of its strongest report, its strength over its threshold, its rarity and evidence."""
+        and class, first and last report times (seconds since the epoch, kept to the microsecond as
+        reports are), where it is strongest (`place`: lon, lat), its stretch's positions, the track
+        of its strongest report, its strength over its threshold, its rarity and evidence; a fleet
+    event's other vessels (`others`: mmsi, name, ship_type each) and a gap's `coverage`."""
     identity = identity or {}
     start, end = times_s
     return {
@@ -76,8 +85,16 @@ def event_row(
         "duration_s": float(end - start), "n_reports": int(n_reports),
         "lon": float(place[0]), "lat": float(place[1]), "track_id": track_id,
         "strength": round(float(strength), 3), "rarity_days": rarity_days, "evidence": evidence,
-        "model": model, "lons": list(stretch[0]), "lats": list(stretch[1]),
+        "model": model, "others": _others(others), "coverage": coverage,
+        "lons": list(stretch[0]), "lats": list(stretch[1]),
     }  # fmt: skip
+
+
+def _others(others: Sequence[dict] | None) -> str | None:
+    if not others:
+        return None
+    keys = ("mmsi", "name", "ship_type")
+    return json.dumps([{k: o.get(k) for k in keys} for o in others])
 
 
 def utc(seconds: float) -> pd.Timestamp:

@@ -34,7 +34,7 @@ from aisdati.storage import first_line, without_password
 EVENT_FIELDS = (
     "event_id", "mmsi", "name", "ship_type", "kind", "class", "start_time", "end_time",
     "duration_s", "n_reports", "lon", "lat", "strength", "rarity_days", "evidence", "model",
-    "state", "stopped_at", "updated_at", "stretch",
+    "others", "coverage", "state", "stopped_at", "updated_at", "stretch",
 )  # fmt: skip
 """events.parquet's fields (`aisdati.events.record`) as the live database keeps them, with the
 event's state; `stretch` its positions as JSON."""
@@ -73,7 +73,7 @@ def schema(d: Dialect) -> list[str]:
             kind TEXT NOT NULL, class TEXT, start_time {d.time} NOT NULL,
             end_time {d.time} NOT NULL, duration_s {d.real}, n_reports BIGINT, lon {d.real},
             lat {d.real}, strength {d.real}, rarity_days {d.real}, evidence TEXT, model TEXT,
-            state TEXT NOT NULL CHECK (state IN ('open', 'closed')),
+            others TEXT, coverage TEXT, state TEXT NOT NULL CHECK (state IN ('open', 'closed')),
             stopped_at {d.time}, updated_at {d.time} NOT NULL, stretch TEXT)""",
         "CREATE INDEX IF NOT EXISTS events_state ON events (state, end_time)",
         f"""CREATE TABLE IF NOT EXISTS vessels (
@@ -86,7 +86,7 @@ def schema(d: Dialect) -> list[str]:
     ]
 
 
-ADDED = {"class": "TEXT", "rarity_days": "{real}"}
+ADDED = {"class": "TEXT", "rarity_days": "{real}", "others": "TEXT", "coverage": "TEXT"}
 """Columns a database written before them lacks: added when it is opened."""
 
 
@@ -177,7 +177,7 @@ class Store:
             self.when(f["start"]), self.when(f["end"]), _number(f["duration_s"]),
             int(f["n_reports"]), _number(f["lon"]), _number(f["lat"]),
             _number(f["strength"]), _number(f["rarity_days"]), f["evidence"], f["model"],
-            e.state, None, self.when(now), stretch,
+            f.get("others"), f.get("coverage"), e.state, None, self.when(now), stretch,
         ]  # fmt: skip
 
     def write(self, changes: Sequence[Change], vessels: Sequence[dict[str, Any]]) -> None:
@@ -271,7 +271,7 @@ def _event_of(row: dict[str, Any]) -> LiveEvent:
         "n_reports": row["n_reports"], "lon": row["lon"], "lat": row["lat"], "track_id": None,
         "strength": row["strength"], "rarity_days": row["rarity_days"],
         "evidence": row["evidence"], "model": row["model"],
-        "lons": lons, "lats": lats,
+        "others": row["others"], "coverage": row["coverage"], "lons": lons, "lats": lats,
     }  # fmt: skip
     return LiveEvent(int(row["event_id"]), fields, row["state"])
 

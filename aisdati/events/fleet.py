@@ -1,0 +1,73 @@
+"""Events across vessels (`aisdati.events.kinds.FLEET`): what no vessel's reports show alone.
+
+A fleet finder reads the reports of every vessel judged together (`Fleet`) and returns its
+events as records of `aisdati.events.record.EVENT_COLUMNS`, each naming its other vessels in
+`others`. `fleet_events` runs them all after the one-vessel kinds and folds into each fleet
+event the one-vessel events it explains (`EventKind.folds`): a jammed area is one event, not
+a position jump per vessel. detect, evaluate and watch all call it, so the same reports give
+the same fleet events in each. To add a kind: its line in `aisdati.events.kinds` (fleet=True),
+its finder in `FLEET_FINDERS`."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import pandas as pd
+
+from aisdati.events.kinds import KINDS
+from aisdati.events.record import EVENT_COLUMNS
+from aisdati.events.reports import VesselReports
+from aisdati.events.rules import EventRules
+
+
+@dataclass(frozen=True)
+class Fleet:
+    """The vessels judged together: each one's reports (cleaned, as the one-vessel finders read
+    them) and identity (vessels.parquet's row as a dict: name, ship_type, length_m, ...)."""
+
+    vessels: dict[int, VesselReports]
+    identity: dict[int, dict[str, Any]] = field(default_factory=dict)
+
+    def who(self, mmsi: int) -> dict[str, Any]:
+        """The vessel's identity as an event names it (mmsi, name, ship_type)."""
+        known = self.identity.get(mmsi, {})
+        return {"mmsi": int(mmsi), "name": known.get("name"), "ship_type": known.get("ship_type")}
+
+
+FleetFinder = Callable[[Fleet, EventRules], list[dict[str, Any]]]
+FLEET_FINDERS: dict[str, FleetFinder] = {}
+"""Each fleet kind's finder: (the fleet, the rules) -> its events, records of EVENT_COLUMNS."""
+
+
+def fleet_events(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFrame:
+    """`own` (the one-vessel events of the fleet's vessels) with every fleet kind's events
+    added and the one-vessel events they fold removed."""
+    found = [row for find in FLEET_FINDERS.values() for row in find(fleet, rules)]
+    if not found:
+        return own
+    fleet_rows = pd.DataFrame(found, columns=list(EVENT_COLUMNS))
+    return pd.concat([folded(own, fleet_rows), fleet_rows], ignore_index=True)
+
+
+def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
+    """`own` less the events a fleet event explains: of a kind it folds, of a vessel it names,
+    overlapping its time span."""
+    if not len(own):
+        return own
+    drop = pd.Series(False, index=own.index)
+    start, end = pd.to_datetime(own["start"], utc=True), pd.to_datetime(own["end"], utc=True)
+    for e in fleet_rows.itertuples(index=False):
+        kinds = KINDS[e.kind].folds
+        if not kinds:
+            continue
+        named = {int(e.mmsi)} | {int(o["mmsi"]) for o in json.loads(e.others or "[]")}
+        drop |= (
+            own["kind"].isin(kinds)
+            & own["mmsi"].isin(named)
+            & (start <= pd.Timestamp(e.end))
+            & (end >= pd.Timestamp(e.start))
+        )
+    return own[~drop]
