@@ -1,0 +1,51 @@
+"""Constructed cases of the fleet kinds (`aisdati.events.kinds.FLEET`): real traffic with one
+known case written into it (two real tracks brought together at sea, two vessels' reports
+under one MMSI, a name changed, a block of vessels displaced together, a vessel silenced while
+its neighbours keep reporting), so that recall is measured on the reports an analyst has, not
+on synthetic tracks. Each kind's constructor is declared once in `CONSTRUCTORS`; `found` says
+whether an events table finds a case (its kind, overlapping its time, naming its vessels)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+
+@dataclass(frozen=True)
+class Case:
+    """One constructed case: the kind that should find it, the vessels it must name, and the
+    time it spans (UTC)."""
+
+    kind: str
+    mmsis: tuple[int, ...]
+    start: pd.Timestamp
+    end: pd.Timestamp
+
+
+Constructor = Callable[
+    [pd.DataFrame, pd.DataFrame, np.random.Generator],
+    "tuple[pd.DataFrame, pd.DataFrame, Case] | None",
+]
+"""(reports: reports.parquet's rows, identity: vessels.parquet's by MMSI, rng) -> the reports
+and identity with one case written in, and the case; None where the traffic offers no place
+for one (e.g. no vessel long enough at sea)."""
+CONSTRUCTORS: dict[str, Constructor] = {}
+
+
+def named(event: pd.Series) -> set[int]:
+    """The vessels an event names: its own and its others'."""
+    others = json.loads(event["others"]) if isinstance(event["others"], str) else []
+    return {int(event["mmsi"])} | {int(o["mmsi"]) for o in others}
+
+
+def found(case: Case, events: pd.DataFrame) -> bool:
+    """Whether `events` hold an event of the case's kind that overlaps its time and names
+    every vessel it involves."""
+    mine = events[events["kind"] == case.kind]
+    start, end = pd.to_datetime(mine["start"], utc=True), pd.to_datetime(mine["end"], utc=True)
+    mine = mine[(start <= case.end) & (end >= case.start)]
+    return any(set(case.mmsis) <= named(e) for _, e in mine.iterrows())
