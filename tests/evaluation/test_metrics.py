@@ -6,12 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
+import pytest
+from sklearn.metrics import roc_auc_score
 
 from aisdati.evaluation.inject import inject
 from aisdati.evaluation.metrics import EVENT_FIELDS, event_metrics
 from aisdati.events.find import find_events
 from aisdati.events.reports import VesselReports
-from aisdati.metrics import interval
+from aisdati.metrics import interval, roc_auc
 
 
 def _reports(frame, got=None):
@@ -68,3 +70,16 @@ def test_interval_brackets_the_statistic_and_is_none_without_values():
     low, high = interval(lambda k: float(x[k].mean()), len(x))
     assert low < 49.5 < high
     assert interval(lambda k: None, 5) == (None, None)
+
+
+def test_roc_auc_is_scikit_learns_with_ties_and_none_for_one_class():
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        n = int(rng.integers(2, 200))
+        y = rng.integers(0, 2, n)
+        score = np.round(rng.normal(size=n), int(rng.integers(0, 3)))  # rounding: many ties
+        if y.min() == y.max():
+            assert roc_auc(y, score) is None
+        else:
+            assert roc_auc(y, score) == pytest.approx(roc_auc_score(y, score), abs=1e-12)
+    assert roc_auc(np.zeros(5), np.arange(5)) is None
