@@ -37,6 +37,7 @@ RIVER_HALF_WIDTH_M = 1000.0
 of its lines (a few hundred metres); narrower rivers are given the same, wider ones are not."""
 
 M_PER_DEG = EARTH_RADIUS_M * math.pi / 180.0
+POLYGON = int(shapely.GeometryType.POLYGON)
 BBox = tuple[float, float, float, float]
 
 
@@ -64,7 +65,7 @@ def _layer() -> _Layer:
     return _Layer(lakes, rivers, shapely.STRtree(lakes), shapely.STRtree(rivers))
 
 
-def water(bbox: BBox) -> BaseGeometry:
+def water(bbox: BBox) -> shapely.MultiPolygon:
     """The inland water inside a lon/lat box (lon_min, lat_min, lon_max, lat_max), clipped to
     it: lakes, and rivers widened to `RIVER_HALF_WIDTH_M` on either side. Meant for boxes of a
     degree or so (the rivers are widened in a flat frame at the box's middle latitude)."""
@@ -78,7 +79,10 @@ def water(bbox: BBox) -> BaseGeometry:
     parts = list(shapely.clip_by_rect(shapely.make_valid(lakes), *bbox))
     if len(near):
         parts.append(shapely.clip_by_rect(_widened(near, wide, half_deg), *bbox))
-    return shapely.union_all(parts) if parts else shapely.Polygon()
+    if not parts:
+        return shapely.MultiPolygon()
+    pieces = shapely.get_parts(shapely.union_all(parts))  # clipping may leave edges: areas only
+    return shapely.MultiPolygon(list(pieces[shapely.get_type_id(pieces) == POLYGON]))
 
 
 def _widened(lines: np.ndarray, wide: BBox, half_deg: float) -> BaseGeometry:

@@ -54,7 +54,7 @@ def test_river_and_lake_traffic_is_ashore_on_the_coastline_alone_and_not_with_in
 
 
 def test_land_away_from_rivers_stays_land_and_far_inland_is_ashore():
-    # Kansas farmland 20 km from the Kansas River; the middle of Lake Michigan; the Mississippi
+    # Kansas farmland 15 km from the Kansas River; the middle of Lake Michigan; the Mississippi
     # at New Orleans' French Quarter, where the coastline alone puts it on land.
     lon, lat = np.array([-96.0, -87.0, -90.06]), np.array([39.3, 43.5, 29.955])
     assert coastline.on_land(lon, lat).tolist() == [True, False, False]
