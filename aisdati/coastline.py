@@ -3,9 +3,11 @@
 Source: the OpenStreetMap land polygons that the `roaring-landmask` wheel ships (a dependency
 of aisdati; nothing is downloaded at run time). They resolve the coast to about 100-200 m
 between vertices, enough for fjords and harbour channels (the Kitimat arm, the Hudson and the
-East River, the Kill van Kull). OSM's coastline stops at the tidal limit: lakes (the Great
-Lakes included) and rivers above it count as land. Attribution: © OpenStreetMap contributors,
-ODbL (`source().attribution`).
+East River, the Kill van Kull). OSM's coastline stops at the tidal limit, so the point test
+(`on_land`) takes the lakes and rivers of `aisdati.inland_water` (Natural Earth 1:10m, shipped)
+out of the land: the Great Lakes, the Mississippi and the Columbia are water to it. Maps
+(`land`) draw the coastline's land alone. Attribution: © OpenStreetMap contributors, ODbL
+(`source().attribution`); Natural Earth is public domain.
 
 The first use on a machine converts the package's polygons (about 9 million vertices) into
 flat arrays under the user cache folder (`$AISDATI_CACHE_DIR`, else `$XDG_CACHE_HOME/aisdati`,
@@ -38,6 +40,8 @@ from pathlib import Path
 import numpy as np
 import shapely
 from shapely.geometry import MultiPolygon, Polygon
+
+from aisdati.inland_water import water
 
 log = logging.getLogger(__name__)
 
@@ -275,14 +279,18 @@ def _block(bx: int, by: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @lru_cache(maxsize=256)
-def _tile(ix: int, iy: int) -> Polygon | MultiPolygon | bool:
-    """Land of one tile: False (all water), True (all land) or a prepared geometry."""
+def _tile(ix: int, iy: int, inland_water: bool) -> Polygon | MultiPolygon | bool:
+    """Land of one tile, less its inland water (`aisdati.inland_water`) if asked: False (all
+    water), True (all land) or a prepared geometry."""
     x0, y0 = -180.0 + ix * TILE_DEG, -90.0 + iy * TILE_DEG
     box = (x0, y0, x0 + TILE_DEG, y0 + TILE_DEG)
     per_block = round(BLOCK_DEG / TILE_DEG)
     polys, b = _block(ix // per_block, iy // per_block)
     near = (b[:, 0] <= box[2]) & (b[:, 2] >= box[0]) & (b[:, 1] <= box[3]) & (b[:, 3] >= box[1])
-    geom = MultiPolygon(_clip(polys[near], box))
+    dry = np.asarray(_clip(polys[near], box), dtype=object)
+    if inland_water and dry.size:
+        dry = shapely.difference(dry, water(box))
+    geom = MultiPolygon(_only_polygons(dry))
     if geom.is_empty:
         return False
     if (
@@ -294,8 +302,11 @@ def _tile(ix: int, iy: int) -> Polygon | MultiPolygon | bool:
     return geom
 
 
-def on_land(lon: np.ndarray | float, lat: np.ndarray | float) -> np.ndarray:
-    """Whether each point is on land (True) or in the sea (False), vectorised.
+def on_land(
+    lon: np.ndarray | float, lat: np.ndarray | float, inland_water: bool = True
+) -> np.ndarray:
+    """Whether each point is on land (True) or on water (False), vectorised: the sea, and with
+    `inland_water` the lakes and rivers of `aisdati.inland_water` (False: the coastline alone).
 
     Longitudes wrap into [-180, 180); points exactly on the coastline count as land; NaN or
     infinite coordinates give False. Returns a bool array of the broadcast shape of lon, lat.
@@ -323,7 +334,7 @@ def on_land(lon: np.ndarray | float, lat: np.ndarray | float) -> np.ndarray:
         groups = np.split(ok[order], cut)
         keys = [int(k) for k in sk[np.concatenate([[0], cut])]]
     for k, idx in zip(keys, groups, strict=True):
-        tile = _tile(k // ny, k % ny)
+        tile = _tile(k // ny, k % ny, inland_water)
         if tile is True:
             out[idx] = True
         elif tile is not False:

@@ -14,12 +14,15 @@ berths, and GPS error: a moored vessel reports a few tens of metres from its qua
 with at least `min_reports` reports ashore is flagged whatever its score, and ranks above every
 track at sea (`ranked`), the ones with the larger share of reports ashore first.
 
-Water the coastline misses: OpenStreetMap's land polygons end at the coastline, so narrow
-tidal creeks, rivers and basins mapped as water areas inside the land (NY Harbor's Newtown
-Creek, the Raritan, the Bronx River) count as land, and their everyday traffic would be
-flagged. A model's card records where its training tracks reported ashore (`seen`,
-`DataCard.ashore_points`, on a `SEEN_GRID_DEG` grid); a report within `margin_m` of one of them
-is water the area's own traffic sails, not ashore. Cards from before this record have none.
+Water the coastline misses: OpenStreetMap's land polygons end at the coastline. Lakes and
+rivers above the tidal limit are water by `aisdati.inland_water` (Natural Earth 1:10m: the
+Great Lakes, the Mississippi, the Columbia; `inland_water=False` judges by the coastline alone).
+Narrower water still counts as land: tidal creeks, channels, marinas and basins the coastline
+leaves out (NY Harbor's Newtown Creek, the Houston Ship Channel, Marina del Rey), and their
+everyday traffic would be flagged. A model's card records where its training tracks reported
+ashore (`seen`, `DataCard.ashore_points`, on a `SEEN_GRID_DEG` grid); a report within
+`margin_m` of one of them is water the area's own traffic sails, not ashore. Cards from before
+this record have none.
 
 The calibrated thresholds stay the models' (the share of normal traffic a model flags); the
 rule flags on its own and its false alarms are counted with the others (`aisdati evaluate`).
@@ -58,6 +61,8 @@ class AshoreCheck:
 
     margin_m: float = 400.0
     min_reports: int = 2
+    inland_water: bool = True
+    """Lakes and rivers are water (`aisdati.inland_water`); False: the coastline alone."""
 
     @staticmethod
     def available() -> bool:
@@ -73,13 +78,13 @@ class AshoreCheck:
         from aisdati.coastline import on_land
 
         p = np.asarray(positions, np.float64).reshape(-1, 2)
-        out = on_land(p[:, 0], p[:, 1])
+        out = on_land(p[:, 0], p[:, 1], self.inland_water)
         idx = np.flatnonzero(out)
         if idx.size == 0:
             return out
         bearing = np.arange(PROBES)[None, :] * 360.0 / PROBES
         lon, lat = moved_m(p[idx, 0, None], p[idx, 1, None], bearing, self.margin_m)
-        out[idx] = on_land(lon, lat).all(axis=1)
+        out[idx] = on_land(lon, lat, self.inland_water).all(axis=1)
         if seen is not None and len(seen):
             idx = np.flatnonzero(out)
             out[idx] = ~self.near(p[idx], np.asarray(seen, np.float64).reshape(-1, 2))

@@ -10,7 +10,13 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "aisdati"
 MAX_FUNCTION_LINES = 80
-KERNELS = {"aisdati.geo", "aisdati.dtw", "aisdati.coastline", "aisdati.errors"}
+KERNELS = {
+    "aisdati.geo",
+    "aisdati.dtw",
+    "aisdati.coastline",
+    "aisdati.inland_water",
+    "aisdati.errors",
+}
 ABOVE_MODEL = (
     "aisdati.ais",
     "aisdati.selftest",
