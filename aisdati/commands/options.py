@@ -49,6 +49,16 @@ ASHORE = typer.Option(
 )
 
 
+PORTS = typer.Option(
+    "--ports",
+    help="Ports and anchorages as GeoJSON (Points; Polygons for port areas; a `name` names the "
+    "port): where a vessel is not at sea, for port visits and encounters. Default: learned from "
+    "the --data traffic, where 3 or more vessels stopped in a 0.5 km cell; the ones used are "
+    "written to anchorages.geojson in --out (edit it and give it back here).",
+    show_default=False,
+)
+
+
 WORKERS = typer.Option(
     "--workers",
     envvar="AISDATI_WORKERS",
@@ -508,6 +518,7 @@ class DetectOptions:
             "--near-km", help="Test tracks start within this distance of a training start."
         ),
     ] = 10.0
+    ports: Annotated[Path | None, PORTS] = None
     workers: Annotated[str, WORKERS] = "1"
     device: Annotated[str, DEVICE] = "cpu"
     labels: Annotated[
