@@ -29,7 +29,6 @@ from aisdati.detection.events import model_free_events
 from aisdati.evaluation.alerts import alert_rates
 from aisdati.evaluation.constructed import CONSTRUCTORS, Case, found
 from aisdati.events.anchorages import learned_from
-from aisdati.events.kinds import FLEET
 from aisdati.events.rules import EventRules
 from aisdati.metrics import interval
 from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
@@ -81,7 +80,7 @@ def area(folder: Path, args: argparse.Namespace, report: Report, rates, hits: li
     untouched = later(reports)
     events = judged(untouched, identity, reported)
     counted = alert_rates(events, untouched, np.empty(0, np.int64), args.resamples)
-    for kind in FLEET:
+    for kind in args.kinds:
         got = counted["by_kind"].get(kind, {"events": 0, "per_1000": 0.0, "per_1000_ci": (0, 0)})
         lo, hi = got["per_1000_ci"]
         rates.row(
@@ -118,7 +117,7 @@ def main() -> None:
         report.say(f"load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
         rates = report.table(
             ["area", "kind", "vessel-days", "events", "per 1,000 vessel-days [95 %]"],
-            title="Untouched traffic: every event of the fleet kinds (no case written)",
+            title="Untouched traffic: every event of the kinds asked (no case written)",
         )
         hits: list[tuple[str, int, str, bool]] = []
         for folder in args.areas:

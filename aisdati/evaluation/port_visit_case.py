@@ -1,10 +1,11 @@
 """A constructed port visit: a real vessel that sailed past a port or anchorage stops there.
 
 Vessel V's report nearest an anchorage the traffic shows (`aisdati.events.anchorages`), on a
-pass within `PASS_M` of it under way and not in one of its real visits, is where V stops: a real stop of another vessel B (its
-report times and its small movement about its middle, its reported speed and course) is laid
-there for `HOURS`, and V's later reports are retimed by as much, so V then sails on along its
-real route. The deceleration and acceleration are not modelled (V stops at one report)."""
+pass within `PASS_M` of it under way and not in one of its real visits, is where V stops: a
+real stop of another vessel B (its report times and its small movement about its middle, its
+reported speed and course) is laid there for `HOURS`, and V's later reports are retimed by as
+much, so V then sails on along its real route. The deceleration and acceleration are not
+modelled (V stops at one report)."""
 
 from __future__ import annotations
 

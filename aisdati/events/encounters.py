@@ -118,8 +118,8 @@ def meetings(pairs: pd.DataFrame, s: EventSettings) -> list[pd.DataFrame]:
 
 def encounter_row(fleet: Fleet, g: pd.DataFrame, s: EventSettings) -> dict[str, Any]:
     """One meeting as an event of its first vessel naming the second (`others`): from its
-    first to its last close step, placed where the two came closest, its stretch the first
-    vessel's reports in it, its strength its length over `encounter_min_s`."""
+    first to its last close step, placed where the two came closest, its stretch each vessel's
+    reports in it (a MultiLineString of two), its strength its length over `encounter_min_s`."""
     a, b = int(g["a"].iloc[0]), int(g["b"].iloc[0])
     start, end = g["step"].iloc[0] * s.encounter_step_s, g["step"].iloc[-1] * s.encounter_step_s
     va, vb = fleet.vessels[a], fleet.vessels[b]
@@ -137,7 +137,8 @@ def encounter_row(fleet: Fleet, g: pd.DataFrame, s: EventSettings) -> dict[str, 
     return event_row(
         a, "encounter", (float(start), float(end)), int(mine.sum() + theirs.sum()),
         (float(closest["lon"]), float(closest["lat"])),
-        (va.lon[mine].tolist(), va.lat[mine].tolist()), (end - start) / s.encounter_min_s,
+        ([*va.lon[mine], np.nan, *vb.lon[theirs]], [*va.lat[mine], np.nan, *vb.lat[theirs]]),
+        (end - start) / s.encounter_min_s,
         said, identity=fleet.who(a), track_id=int(tracks[0]) if len(tracks) else None,
         others=[other],
     )  # fmt: skip

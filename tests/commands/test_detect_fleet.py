@@ -1,7 +1,8 @@
 """`detect --models none` on real Kitimat traffic with one encounter constructed in it (two
 real vessels' real reports brought together at sea for hours): the encounter is found from the
-command line, naming both vessels; the anchorages it judged by are written and read back by
-`--ports` to the same events; a bad `--ports` file is one line."""
+command line, naming both vessels and drawn as both vessels' stretches; the anchorages it
+judged by are written and read back by `--ports` to the same events; a bad `--ports` file is
+one line."""
 
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ def test_detect_without_models_finds_a_constructed_encounter_naming_both(kitimat
     others = json.loads(meeting["others"].iloc[0])
     assert {int(meeting["mmsi"].iloc[0]), others[0]["mmsi"]} == set(case.mmsis)
     assert "encounter" in got.output  # the terminal's table lists it
+    drawn = json.loads((tmp_path / "out" / "events.geojson").read_text())["features"]
+    lines = [f["geometry"] for f in drawn if f["properties"]["kind"] == "encounter"
+             and f["properties"]["mmsi"] == int(meeting["mmsi"].iloc[0])]  # fmt: skip
+    assert lines[0]["type"] == "MultiLineString" and len(lines[0]["coordinates"]) == 2  # both
     ports = tmp_path / "out" / "anchorages.geojson"
     assert json.loads(ports.read_text())["features"]
     again = run("detect", "--data", data, "--models", "none", "--ports", ports,
