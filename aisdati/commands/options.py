@@ -53,8 +53,9 @@ PORTS = typer.Option(
     "--ports",
     help="Ports and anchorages as GeoJSON (Points; Polygons for port areas; a `name` names the "
     "port): where a vessel is not at sea, for port visits and encounters. Default: learned from "
-    "the --data traffic, where 3 or more vessels stopped in a 0.5 km cell; the ones used are "
-    "written to anchorages.geojson in --out (edit it and give it back here).",
+    "the traffic, 0.5 km cells where 3 or more vessels stopped (detect: every report of --data, "
+    "written to anchorages.geojson in --out, to edit and give back here; watch: the vessels' "
+    "recent reports).",
     show_default=False,
 )
 
@@ -625,3 +626,4 @@ class WatchOptions:
             "per 1,000 vessel-days the models' training period would have raised).",
         ),
     ] = ALERTS_PER_1000
+    ports: Annotated[Path | None, PORTS] = None
