@@ -29,6 +29,8 @@ from aisdati.detection.events import model_free_events
 from aisdati.evaluation.alerts import alert_rates
 from aisdati.evaluation.constructed import CONSTRUCTORS, Case, found
 from aisdati.events.anchorages import learned_from
+from aisdati.events.fleet import FLEET_FINDERS, Fleet
+from aisdati.events.reports import vessels
 from aisdati.events.rules import EventRules
 from aisdati.metrics import interval
 from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
@@ -73,11 +75,25 @@ def constructed(
     return traffic, cases
 
 
-def area(folder: Path, args: argparse.Namespace, report: Report, rates, hits: list) -> None:
+def speed(name: str, traffic: pd.DataFrame, kinds: list[str], table) -> None:
+    """Seconds each fleet finder asked takes over every vessel of `traffic`, alone."""
+    fleet = Fleet({v.mmsi: v for v in vessels(traffic)}, {})
+    rules = EventRules(ports=learned_from(traffic))
+    for kind in kinds:
+        t0 = time.perf_counter()
+        got = FLEET_FINDERS[kind](fleet, rules)
+        took = time.perf_counter() - t0
+        table.row([name, kind, f"{len(fleet.vessels):,}", f"{len(traffic):,}", len(got),
+                   f"{took:.2f}"], {"area": name, "kind": kind, "vessels": len(fleet.vessels),
+                   "reports": len(traffic), "events": len(got), "seconds": took})  # fmt: skip
+
+
+def area(folder: Path, args: argparse.Namespace, report: Report, rates, hits: list, speeds) -> None:
     t0 = time.perf_counter()
     reports, identity = read_reports(folder), read_vessels(folder)
     reported = not motion_derived(folder)
     untouched = later(reports)
+    speed(folder.name, untouched, args.kinds, speeds)
     events = judged(untouched, identity, reported)
     counted = alert_rates(events, untouched, np.empty(0, np.int64), args.resamples)
     for kind in args.kinds:
@@ -119,9 +135,13 @@ def main() -> None:
             ["area", "kind", "vessel-days", "events", "per 1,000 vessel-days [95 %]"],
             title="Untouched traffic: every event of the kinds asked (no case written)",
         )
+        speeds = report.table(
+            ["kind", "vessels", "reports", "events", "seconds"],
+            title="Each fleet finder alone over an area's untouched traffic",
+        )
         hits: list[tuple[str, int, str, bool]] = []
         for folder in args.areas:
-            area(folder, args, report, rates, hits)
+            area(folder, args, report, rates, hits, speeds)
         recall = report.table(["kind", "cases", "areas", "found", "recall [95 %]"],
                               title="Constructed cases found")  # fmt: skip
         frame = pd.DataFrame(hits, columns=["area", "seed", "kind", "found"])

@@ -127,12 +127,16 @@ def encounter_row(fleet: Fleet, g: pd.DataFrame, s: EventSettings) -> dict[str, 
     theirs = (vb.time_s >= start) & (vb.time_s <= end)
     closest = g.loc[g["metres"].idxmin()]
     tracks = va.track_id[mine][va.track_id[mine] >= 0]
-    other = fleet.who(b)
+    other, port_m = fleet.who(b), float(g["port_m"].min())
+    away = (
+        f"{port_m / 1000:.0f} km or more from any port or anchorage"
+        if np.isfinite(port_m)
+        else "no port or anchorage known"
+    )
     said = (
         f"within {g['metres'].median():.0f} m (closest {closest['metres']:.0f} m) of "
         f"{other['name'] or b} for {(end - start) / 3600:.1f} h, both under "
-        f"{s.encounter_kn:g} kn, {g['port_m'].min() / 1000:.0f} km or more from any port or "
-        "anchorage"
+        f"{s.encounter_kn:g} kn, {away}"
     )
     return event_row(
         a, "encounter", (float(start), float(end)), int(mine.sum() + theirs.sum()),
