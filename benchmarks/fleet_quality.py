@@ -136,7 +136,7 @@ def main() -> None:
             title="Untouched traffic: every event of the kinds asked (no case written)",
         )
         speeds = report.table(
-            ["kind", "vessels", "reports", "events", "seconds"],
+            ["area", "kind", "vessels", "reports", "events", "seconds"],
             title="Each fleet finder alone over an area's untouched traffic",
         )
         hits: list[tuple[str, int, str, bool]] = []
