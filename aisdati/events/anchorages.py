@@ -26,7 +26,7 @@ from shapely.geometry.base import BaseGeometry
 from aisdati.errors import UserError
 from aisdati.events.reports import M_PER_DEG
 from aisdati.events.settings import EventSettings
-from aisdati.geo import arc_m, unit_vectors
+from aisdati.geo import EARTH_RADIUS_M, arc_m, unit_vectors
 from aisdati.tracks.reports import REPORTS, has_reports
 
 FILL_M = 250.0
@@ -45,6 +45,8 @@ class Anchorages:
     port: tuple[str | None, ...]
     source: str
     """Where they come from: "learned from N reports" or the file given."""
+    stoppers: tuple[frozenset[int], ...] = ()
+    """The vessels stopped at each learned point (none where given)."""
 
     def __len__(self) -> int:
         return len(self.lon)
@@ -54,6 +56,28 @@ class Anchorages:
         if not len(self):
             return None
         return cKDTree(unit_vectors(np.column_stack([self.lon, self.lat])))
+
+    def subset(self, keep: np.ndarray) -> Anchorages:
+        """The points `keep` (a mask) selects."""
+        pick = np.flatnonzero(keep)
+        stoppers = tuple(self.stoppers[i] for i in pick) if self.stoppers else ()
+        port = tuple(self.port[i] for i in pick)
+        return Anchorages(
+            self.lon[pick], self.lat[pick], self.vessels[pick], port, self.source, stoppers
+        )
+
+    def fragile(self, spare: int, min_vessels: int) -> np.ndarray:
+        """[n] which learned points would stop being anchorages without `spare` of the vessels
+        stopped at them (given points never)."""
+        learned = self.vessels > 0
+        return learned & (self.vessels < min_vessels + spare)
+
+    def within(self, lon: float, lat: float, metres: float) -> list[int]:
+        """The points within `metres` of a position."""
+        if self._tree is None:
+            return []
+        chord = 2 * np.sin(metres / (2 * EARTH_RADIUS_M))
+        return list(self._tree.query_ball_point(unit_vectors(np.array([lon, lat])), chord))
 
     def nearest(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each position's distance (m) to the nearest anchorage point and that point's index
@@ -92,7 +116,7 @@ def learn(
     col = np.floor(np.asarray(lon, np.float64) / lon_step)
     cells = pd.DataFrame({"mmsi": mmsi, "row": row, "col": col, "lon_step": lon_step})
     per = cells.groupby(["row", "col"]).agg(
-        vessels=("mmsi", "nunique"), lon_step=("lon_step", "first")
+        vessels=("mmsi", "nunique"), lon_step=("lon_step", "first"), who=("mmsi", frozenset)
     )
     per = per[per["vessels"] >= s.anchorage_min_vessels].reset_index()
     return Anchorages(
@@ -101,6 +125,7 @@ def learn(
         per["vessels"].to_numpy(np.int64),
         (None,) * len(per),
         f"learned from {len(cells):,} stopped reports",
+        tuple(frozenset(int(m) for m in w) for w in per["who"]),
     )
 
 

@@ -27,6 +27,10 @@ if TYPE_CHECKING:  # the fleet module registers this finder
     from aisdati.events.fleet import Fleet
     from aisdati.events.rules import EventRules
 
+NOT_A_VESSEL = ("0", "111", "8", "9")
+"""MMSI prefixes of what is not a vessel (ITU-R M.585): coast stations and groups (0), search
+and rescue aircraft (111), handheld radios (8), SARTs, man-overboard and EPIRB devices, craft
+of a parent ship, aids to navigation and the fishing-gear buoys that borrow 9xx numbers (9)."""
 ALLOWED_MISSING_STEPS = 1
 """Time steps a pair may miss inside one encounter (a sample a few metres too far, or lost)."""
 
@@ -148,12 +152,41 @@ def encounter_row(fleet: Fleet, g: pd.DataFrame, s: EventSettings) -> dict[str, 
     )  # fmt: skip
 
 
+def away_from_others_ports(pairs: pd.DataFrame, doubtful: Anchorages, s: EventSettings):
+    """[n] whether each of `close_pairs`' rows is `encounter_port_m` or more from every learned
+    anchorage that vessels other than its two make: two vessels meeting at sea do not make the
+    place an anchorage (with one more vessel once stopped there, they would reach
+    `anchorage_min_vessels`). `doubtful`: the points with fewer than two vessels to spare."""
+    keep = np.ones(len(pairs), bool)
+    if not len(doubtful) or not len(pairs):
+        return keep
+    metres, _ = doubtful.nearest(pairs["lon"].to_numpy(), pairs["lat"].to_numpy())
+    for i in np.flatnonzero(metres < s.encounter_port_m):
+        row = pairs.iloc[i]
+        two = {int(row["a"]), int(row["b"])}
+        near = doubtful.within(float(row["lon"]), float(row["lat"]), s.encounter_port_m)
+        keep[i] = all(len(doubtful.stoppers[k] - two) < s.anchorage_min_vessels for k in near)
+    return keep
+
+
+def is_vessel(mmsi: int) -> bool:
+    """Whether an MMSI may be a vessel's (not of `NOT_A_VESSEL`; 9 digits, as the anonymised
+    ids of some public data sets are too)."""
+    return not f"{int(mmsi):09d}".startswith(NOT_A_VESSEL)
+
+
 def encounters(fleet: Fleet, rules: EventRules) -> list[dict[str, Any]]:
-    """Every encounter between the fleet's vessels, one event per pair and meeting."""
+    """Every encounter between the fleet's vessels (`is_vessel`: a buoy or a SART beside its
+    ship is none), one event per pair and meeting. Samples are
+    judged at sea by the anchorages that stay so whatever two vessels are left out; those that
+    two vessels could make are judged for each pair (`away_from_others_ports`)."""
     s, ports = rules.settings, fleet.anchorages(rules)
-    samples = [slow_samples(v, s, ports) for v in fleet.vessels.values()]
+    doubtful = ports.fragile(2, s.anchorage_min_vessels)
+    firm = ports.subset(~doubtful)
+    samples = [slow_samples(v, s, firm) for m, v in fleet.vessels.items() if is_vessel(m)]
     samples = [x for x in samples if len(x)]
     if len(samples) < 2:
         return []
     pairs = close_pairs(pd.concat(samples, ignore_index=True), s)
+    pairs = pairs[away_from_others_ports(pairs, ports.subset(doubtful), s)]
     return [encounter_row(fleet, g, s) for g in meetings(pairs, s)]
