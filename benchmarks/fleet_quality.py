@@ -36,6 +36,8 @@ from aisdati.metrics import interval
 from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
 
 LONG_DAYS = 28
+TRIES = 3
+"""Draws in a row that make no case before a kind's batch is taken as full."""
 
 
 def later(reports: pd.DataFrame) -> pd.DataFrame:
@@ -63,15 +65,18 @@ def constructed(
     cases: list[Case] = []
     used: set[int] = set()
     for kind in kinds:
-        for _ in range(n):
+        misses = 0
+        while sum(c.kind == kind for c in cases) < n and misses < TRIES:
             free = traffic["mmsi"].isin(used)
             made = CONSTRUCTORS[kind](traffic[~free], identity, rng)
             if made is None:
-                break  # the traffic offers no more places for one
+                misses += 1  # none this draw (e.g. no stop as long to lend); the next may
+                continue
             out, identity, case = made
             traffic = pd.concat([traffic[free], out], ignore_index=True)
             used |= set(case.mmsis)
             cases.append(case)
+            misses = 0
     return traffic, cases
 
 
