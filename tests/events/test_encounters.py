@@ -53,12 +53,16 @@ def test_two_real_vessels_brought_together_at_sea_are_one_encounter_naming_both(
     assert far[0] >= EventSettings().encounter_port_m
 
 
-def test_every_encounter_is_slow_long_close_and_away_from_ports(meeting):
+def test_every_encounter_is_long_and_away_from_the_ports_others_make(meeting):
+    """Each encounter lasts 2 h and lies 10 km from every anchorage point that vessels other
+    than its two make (two vessels meeting do not make the place a port)."""
     _reports, _, _, ports, events = meeting
     s = EventSettings()
     for e in events[events["kind"] == "encounter"].itertuples():
         assert e.duration_s >= s.encounter_min_s
-        far, _ = ports.nearest(np.array([e.lon]), np.array([e.lat]))
+        two = named(pd.Series(e._asdict()))
+        others = np.array([len(w - two) >= s.anchorage_min_vessels for w in ports.stoppers])
+        far, _ = ports.subset(others).nearest(np.array([e.lon]), np.array([e.lat]))
         assert far[0] >= s.encounter_port_m - s.encounter_m
 
 
