@@ -83,7 +83,7 @@ def run_events_only(o: DetectOptions) -> None:
         staged_outputs(out, OUTPUTS, REPORT) as outputs,
     ):
         with spinner(console, "finding events", show=shows_progress(o.as_json)):
-            result = events_only(o.data)
+            result = events_only(o.data, o.ports)
             files = [outputs.final(f) for f in write_event_outputs(result, outputs.folder)]
         outputs.commit()
     if o.as_json:
@@ -126,6 +126,7 @@ def detect_settings(o: DetectOptions) -> DetectSettings:
         contamination=o.contamination,
         near_km=o.near_km,
         alerts_per_1000=o.alerts_per_1000,
+        ports=o.ports,
         labels=o.labels,
         device=resolve_device(o.device),
     )

@@ -49,6 +49,17 @@ ASHORE = typer.Option(
 )
 
 
+PORTS = typer.Option(
+    "--ports",
+    help="Ports and anchorages as GeoJSON (Points; Polygons for port areas; a `name` names the "
+    "port): where a vessel is not at sea, for port visits and encounters. Default: learned from "
+    "the traffic, 0.5 km cells where 3 or more vessels stopped (detect: every report of --data, "
+    "written to anchorages.geojson in --out, to edit and give back here; watch: the vessels' "
+    "recent reports).",
+    show_default=False,
+)
+
+
 WORKERS = typer.Option(
     "--workers",
     envvar="AISDATI_WORKERS",
@@ -508,6 +519,7 @@ class DetectOptions:
             "--near-km", help="Test tracks start within this distance of a training start."
         ),
     ] = 10.0
+    ports: Annotated[Path | None, PORTS] = None
     workers: Annotated[str, WORKERS] = "1"
     device: Annotated[str, DEVICE] = "cpu"
     labels: Annotated[
@@ -614,3 +626,4 @@ class WatchOptions:
             "per 1,000 vessel-days the models' training period would have raised).",
         ),
     ] = ALERTS_PER_1000
+    ports: Annotated[Path | None, PORTS] = None

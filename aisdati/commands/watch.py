@@ -8,6 +8,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from typing import Any
 
 from aisdati.commands.common import err_console
@@ -15,6 +16,7 @@ from aisdati.commands.options import WatchOptions
 from aisdati.detection.events import event_rules, uncalibrated_note
 from aisdati.detectors import load_detectors
 from aisdati.errors import UserError
+from aisdati.events.anchorages import read_ports
 from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.kinds import ALERT, KINDS
 from aisdati.events.rules import EventRules
@@ -127,6 +129,8 @@ def run(o: WatchOptions) -> None:
     window_s = check(o)
     notifiers = [Notifier(url) for url in o.notify or []]
     rules, area = judging(o.models_dir, o.alerts_per_1000)
+    if o.ports is not None:
+        rules = replace(rules, ports=read_ports(o.ports))
     chunks = open_source(o.source, say, paced=o.speed is not None)
     state, show, db = LiveState(), printer(o.as_json), without_password(o.db)
     push = pusher(notifiers)

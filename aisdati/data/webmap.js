@@ -64,6 +64,10 @@ function duration(s) {
   if (s < 120) return `${Math.round(s)} s`;
   return s < 7200 ? `${Math.round(s / 60)} min` : `${(s / 3600).toFixed(1)} h`;
 }
+// the vessels an event names: its own, and a fleet event's others (an encounter's two, drawn
+// as one line each)
+const named = p => [p.name || p.mmsi,
+  ...(p.others ? JSON.parse(p.others).map(o => o.name || o.mmsi) : [])].join(' and ');
 if (D.optional.events) overlays[D.names.events] = L.geoJSON(D.optional.events, {
   style: eventStyle,
   pointToLayer: (f, ll) => L.circleMarker(ll, {radius: 7, weight: 3, ...eventStyle(f)}),
@@ -72,7 +76,7 @@ if (D.optional.events) overlays[D.names.events] = L.geoJSON(D.optional.events, {
     if (isGap(f)) {
       layer.bindTooltip(`gap ${duration(p.duration_s)}`, {permanent: true, direction: 'center', className: 'aisdati-gap'});
     } else {
-      layer.bindTooltip(`${p.class}, ${p.label}: ${p.mmsi} from ${p.start}`, {sticky: true});
+      layer.bindTooltip(`${p.class}, ${p.label}: ${named(p)} from ${p.start}`, {sticky: true});
     }
     layer.bindPopup(() => table(p));
   },

@@ -20,6 +20,7 @@ import pandas as pd
 
 from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
+from aisdati.events.anchorages import Anchorages
 from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.calibrate import is_calibrated, thresholds_of
 from aisdati.events.find import placed
@@ -39,16 +40,21 @@ exceed."""
 
 
 def event_rules(
-    models: Sequence[Detector], budget: float = ALERTS_PER_1000, reported_motion: bool = True
+    models: Sequence[Detector],
+    budget: float = ALERTS_PER_1000,
+    reported_motion: bool = True,
+    ports: Anchorages | None = None,
 ) -> EventRules:
     """What the judging models' areas judge reports by: the alert thresholds of `budget`
     calibrated on their training periods (`aisdati.events.calibrate`; the defaults for models
-    from before the budget) and the water their training traffic sailed ashore."""
+    from before the budget), the water their training traffic sailed ashore, and the area's
+    ports and anchorages (`ports`; None: learned from the reports judged)."""
     seen = [np.asarray(m.card.data.ashore, np.float64).reshape(-1, 2) for m in models]
     return EventRules(
         thresholds=thresholds_of([m.card.calibration for m in models], budget),
         seen=np.concatenate(seen) if seen else None,
         reported_motion=reported_motion,
+        ports=ports,
     )
 
 

@@ -23,6 +23,7 @@ OUTPUTS = (
     "anomalies.geojson",
     "events.parquet",
     "events.geojson",
+    "anchorages.geojson",
     "map.png",
     "map.html",
     "metrics.json",
@@ -90,6 +91,7 @@ def write_outputs(result: Detection, out: Path, runner: Runner | None = None) ->
     atomic_write_bytes(path, json.dumps(anomalies_geojson(result)).encode())
     files.append(path)
     files += write_events(result.events, out)
+    files += ports_file(result, out)
     files += write_maps(result, out, runner)
     if result.metrics is not None:
         path = out / "metrics.json"
@@ -101,12 +103,22 @@ def write_outputs(result: Detection, out: Path, runner: Runner | None = None) ->
     return files
 
 
+def ports_file(result: Detection, out: Path) -> list[Path]:
+    """anchorages.geojson: the ports and anchorages the events were judged by (what `--ports`
+    reads back), where there were any."""
+    if result.ports is None or not len(result.ports):
+        return []
+    path = out / "anchorages.geojson"
+    atomic_write_bytes(path, json.dumps(result.ports.geojson()).encode())
+    return [path]
+
+
 def write_event_outputs(result: Detection, out: Path) -> list[Path]:
     """What `detect --models none` writes: the events, a map of them and report.json."""
     from aisdati.detection.webmap import html_detection_map
 
     out.mkdir(parents=True, exist_ok=True)
-    files = write_events(result.events, out)
+    files = write_events(result.events, out) + ports_file(result, out)
     page = out / "map.html"
     title = f"aisdati: {len(result.events)} event(s), no model"
     html_detection_map(

@@ -54,6 +54,7 @@ from aisdati.detection.routing import Coverage, check_region, route_test_tracks
 from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detectors
 from aisdati.detectors.base import DEFAULT_CONTAMINATION, score_each
 from aisdati.errors import UserError
+from aisdati.events.anchorages import Anchorages, area_ports
 from aisdati.events.budget import ALERTS_PER_1000
 from aisdati.events.rules import EventRules
 from aisdati.execution import Runner
@@ -101,6 +102,9 @@ class DetectSettings:
     alerts_per_1000: float = ALERTS_PER_1000
     """The alert budget (`aisdati.events.budget`): the model-free alerts per 1,000
     vessel-days the models' training periods would have raised."""
+    ports: Path | None = None
+    """Ports and anchorages as GeoJSON (`aisdati.events.anchorages.read_ports`); None: learned
+    from `data_dir`'s traffic."""
 
     @property
     def models_named(self) -> str | Path | None:
@@ -141,6 +145,8 @@ class Detection:
     events: pd.DataFrame = field(default_factory=empty_events)
     """What happened (`aisdati.detection.events`): one row per event, `EVENT_COLUMNS`."""
     reports_judged: int = 0
+    ports: Anchorages | None = None
+    """The ports and anchorages the events were judged by (anchorages.geojson)."""
 
     @property
     def score(self) -> str:
@@ -296,7 +302,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     scores = score_table(tracks, names, raw, threshold, profiles, ashore)
     t2 = time.perf_counter()
     identity = read_vessels(settings.data_dir)
-    events, judged = _events(settings, models, tracks, scores, profiles, coverage, identity)
+    events, judged, ports = _events(settings, models, tracks, scores, profiles, coverage, identity)
     scores = with_identity(with_events(scores, events), identity)
     timings["events_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
@@ -304,7 +310,7 @@ def detect(settings: DetectSettings, runner: Runner | None = None) -> Detection:
     notes = [small_batch_note(len(tracks), settings), uncalibrated_note(judging)]
     result = Detection(
         scores, tracks, evidence, models, profiles, timings, settings, coverage=coverage,
-        notes=[n for n in notes if n], events=events, reports_judged=judged,
+        notes=[n for n in notes if n], events=events, reports_judged=judged, ports=ports,
     )  # fmt: skip
     if settings.labels is not None:
         result.metrics = evaluate_labels(scores, tracks, settings.labels)
@@ -319,14 +325,17 @@ def _events(
     profiles: Sequence[np.ndarray],
     coverage: Coverage,
     identity: pd.DataFrame,
-) -> tuple[pd.DataFrame, int]:
-    """The detection's events (`aisdati.detection.events`) and the reports they judged
-    (`identity`: vessels.parquet)."""
+) -> tuple[pd.DataFrame, int, Anchorages]:
+    """The detection's events (`aisdati.detection.events`), the reports they judged
+    (`identity`: vessels.parquet) and the ports and anchorages they were judged by."""
     every = settings.cluster == AREA and not settings.track_ids
     windows = judged_windows(tracks, every)
     reports = judged_reports(settings.data_dir, windows)
     judging = [m for m in models if m.name in set(scores["model"])]
-    rules = event_rules(judging, settings.alerts_per_1000, not motion_derived(settings.data_dir))
+    rules = event_rules(
+        judging, settings.alerts_per_1000, not motion_derived(settings.data_dir),
+        area_ports(settings.data_dir, settings.ports),
+    )  # fmt: skip
     free = model_free_events(reports, identity, rules)
     free = within(free, windows, coverage.training)
     if not settings.ashore:
@@ -335,21 +344,27 @@ def _events(
     unseen = unseen_route_events(tracks, scores, models, identity, settings.near_km)
     judged = within(reports.assign(start=reports["time"], end=reports["time"]), windows,
                     coverage.training)  # fmt: skip
-    return all_events([learned, unseen, free]), len(judged)
+    return all_events([learned, unseen, free]), len(judged), rules.ports
 
 
-def events_only(data_dir: Path) -> Detection:
-    """The events that need no model (`aisdati.events.kinds.MODEL_FREE`) over every report of
-    an ingest output: `detect --models none`."""
+def events_only(data_dir: Path, ports: Path | None = None) -> Detection:
+    """The events that need no model (`aisdati.events.kinds.MODEL_FREE` and `FLEET`) over
+    every report of an ingest output: `detect --models none` (`ports`: GeoJSON of its ports
+    and anchorages; None: learned from its traffic)."""
     t0 = time.perf_counter()
     reports = read_reports(data_dir)
-    rules = EventRules(reported_motion=not motion_derived(data_dir))
+    rules = EventRules(
+        reported_motion=not motion_derived(data_dir), ports=area_ports(data_dir, ports)
+    )
     free = model_free_events(reports, read_vessels(data_dir), rules)
     events = all_events([free])
     scores = pd.DataFrame(columns=list(SCORE_COLUMNS))
     timings = {"events_s": time.perf_counter() - t0, "score_s": 0.0}
     judged = len(reports)
-    return Detection(scores, [], [], [], timings=timings, events=events, reports_judged=judged)
+    return Detection(
+        scores, [], [], [], timings=timings, events=events, reports_judged=judged,
+        ports=rules.ports,
+    )  # fmt: skip
 
 
 def judged_tracks(

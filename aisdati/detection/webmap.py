@@ -26,6 +26,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
+from shapely.geometry import shape
 
 LAYER_COAST = "coastline (offline)"
 LAYER_TRACKS = "test tracks"
@@ -219,7 +221,7 @@ def map_data(
     stretch_lines = _labelled(stretches or [], "stretch")
     medoid_lines = _labelled(medoids or [], "route")
     corners = [np.stack([lo, hi]) for lo, hi in regions]
-    places = [np.reshape(f["geometry"]["coordinates"], (-1, 2)) for f in _features(events)]
+    places = [shapely.get_coordinates(shape(f["geometry"])) for f in _features(events)]
     lines = [xy for _, xy in (*stretch_lines, *medoid_lines)]
     extent = _extent([tracks, lines + places, corners])
     optional = _optional_layers(

@@ -49,3 +49,10 @@ def found(case: Case, events: pd.DataFrame) -> bool:
     start, end = pd.to_datetime(mine["start"], utc=True), pd.to_datetime(mine["end"], utc=True)
     mine = mine[(start <= case.end) & (end >= case.start)]
     return any(set(case.mmsis) <= named(e) for _, e in mine.iterrows())
+
+
+# each kind's constructor, registered by its own module (which reads `Case` from here)
+from aisdati.evaluation import encounter_case, port_visit_case  # noqa: E402
+
+CONSTRUCTORS["encounter"] = encounter_case.construct_encounter
+CONSTRUCTORS["port-visit"] = port_visit_case.construct_port_visit

@@ -15,9 +15,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
+from aisdati.events.anchorages import Anchorages, learn
+from aisdati.events.encounters import encounters
 from aisdati.events.kinds import KINDS
+from aisdati.events.port_visits import port_visits
 from aisdati.events.record import EVENT_COLUMNS
 from aisdati.events.reports import VesselReports
 from aisdati.events.rules import EventRules
@@ -36,9 +40,22 @@ class Fleet:
         known = self.identity.get(mmsi, {})
         return {"mmsi": int(mmsi), "name": known.get("name"), "ship_type": known.get("ship_type")}
 
+    def anchorages(self, rules: EventRules) -> Anchorages:
+        """Where the fleet's vessels are not at sea: the rules' ports, or where none are given,
+        the anchorages of the fleet's own stopped reports (`aisdati.events.anchorages.learn`)."""
+        if rules.ports is not None:
+            return rules.ports
+        s = rules.settings
+        stopped = [(v.mmsi, v.lon[v.sog < s.stopped_kn], v.lat[v.sog < s.stopped_kn])
+                   for v in self.vessels.values()]  # fmt: skip
+        mmsi = np.concatenate([np.full(len(x), m) for m, x, _ in stopped] or [np.empty(0)])
+        lon = np.concatenate([x for _, x, _ in stopped] or [np.empty(0)])
+        lat = np.concatenate([y for _, _, y in stopped] or [np.empty(0)])
+        return learn(mmsi, lon, lat, s)
+
 
 FleetFinder = Callable[[Fleet, EventRules], list[dict[str, Any]]]
-FLEET_FINDERS: dict[str, FleetFinder] = {}
+FLEET_FINDERS: dict[str, FleetFinder] = {"encounter": encounters, "port-visit": port_visits}
 """Each fleet kind's finder: (the fleet, the rules) -> its events, records of EVENT_COLUMNS."""
 
 
@@ -63,7 +80,8 @@ def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
         kinds = KINDS[e.kind].folds
         if not kinds:
             continue
-        named = {int(e.mmsi)} | {int(o["mmsi"]) for o in json.loads(e.others or "[]")}
+        others = json.loads(e.others) if isinstance(e.others, str) else []  # null: NaN or None
+        named = {int(e.mmsi)} | {int(o["mmsi"]) for o in others}
         drop |= (
             own["kind"].isin(kinds)
             & own["mmsi"].isin(named)

@@ -114,15 +114,24 @@ KINDS: dict[str, EventKind] = {
         ),
         EventKind(
             "encounter", "encounter at sea", ACTIVITY, False, None,
-            "two vessels within 500 m of each other for at least 2 hours, both under 2 kn "
-            "(by position), at least 10 km from every port and anchorage",
-            "Global Fishing Watch's encounters", fleet=True,
+            "two vessels within 500 m of each other for at least 2 hours, both under 2 kn by "
+            "their positions (sampled every 10 minutes), at least 10 km from every port and "
+            "anchorage; one event per pair, naming both",
+            "Global Fishing Watch's encounters (the same numbers); ours is between any two "
+            "vessels (theirs: fishing vessels and carriers), its ports and anchorages are "
+            "learned from the area's own traffic (theirs: years of the world's), and it "
+            "interpolates across silences of at most an hour",
+            fleet=True,
         ),
         EventKind(
             "port-visit", "port visit", ACTIVITY, False, None,
-            "a vessel's stay at a port or anchorage learned from where many vessels stop "
-            "(or given as GeoJSON): its arrival, departure and duration",
-            "Global Fishing Watch's port visits (anchorages built from the traffic)", fleet=True,
+            "a vessel's stay within 3 km of a port or anchorage, until it is 4 km or more from "
+            "every one, in which it stopped (under 0.5 kn) and which lasted at least 3 hours: "
+            "its arrival, departure and duration; anchorages are learned from where at least 3 "
+            "vessels stopped in a cell of 0.5 km, or given as GeoJSON (--ports)",
+            "Global Fishing Watch's port visits (3 km in, 4 km out, a stop, 3 hours or more); "
+            "theirs stops under 0.2 kn and their anchorages need 20 vessels over years",
+            fleet=True, folds=("loitering",),
         ),
         EventKind(
             "identity-conflict", "one MMSI, two transmitters", ALERT, False, None,

@@ -52,7 +52,8 @@ EVENT_COLUMNS = (
     "lons",
     "lats",
 )
-"""An event's fields before it is numbered and drawn (`lons`/`lats`: its stretch's positions)."""
+"""An event's fields before it is numbered and drawn (`lons`/`lats`: its stretch's positions;
+a fleet event's, each vessel's stretch in turn, separated by NaN: a MultiLineString)."""
 
 
 def event_row(

@@ -67,6 +67,27 @@ class EventSettings:
     gap_min_s: float = 1800.0
     gap_max_s: float = 86400.0
     gap_under_way_kn: float = 1.0
+    # ports and anchorages (after Global Fishing Watch's anchorages: `aisdati.events.anchorages`)
+    stopped_kn: float = 0.5
+    """A report under this speed is a vessel stopped (GFW: 0.5 kn for anchorages)."""
+    anchorage_cell_m: float = 500.0
+    """The side of the grid's cells (GFW: S2 cells of level 14, about 0.5 km)."""
+    anchorage_min_vessels: int = 3
+    """Distinct vessels stopped in a cell that make it an anchorage (GFW: 20, over years of
+    the world's traffic; ours judges days to months of one area)."""
+    # port visit (GFW: within 3 km of an anchorage and stopped; out beyond 4 km; 3 h or more)
+    port_entry_m: float = 3000.0
+    port_exit_m: float = 4000.0
+    port_min_s: float = 3 * 3600.0
+    # encounter (GFW: within 500 m for 2 h or more, under 2 kn, 10 km or more from anchorages)
+    encounter_m: float = 500.0
+    encounter_min_s: float = 2 * 3600.0
+    encounter_kn: float = 2.0
+    encounter_port_m: float = 10_000.0
+    encounter_step_s: float = 600.0
+    """Each vessel's position is interpolated every this many seconds (GFW: 10 minutes)."""
+    encounter_max_gap_s: float = 3600.0
+    """The longest silence a slow vessel's position is interpolated across."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

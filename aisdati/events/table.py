@@ -21,7 +21,14 @@ GEO_METADATA = geo_metadata("LineString", "Point")
 
 
 def _shape(lons: list[float], lats: list[float]) -> shapely.Geometry:
+    """A stretch as a Point, a LineString, or where NaN separates parts (a fleet event's
+    vessels: `aisdati.events.record.EVENT_COLUMNS`) a MultiLineString."""
     xy = np.round(np.column_stack([lons, lats]), 6)
+    gaps = np.flatnonzero(np.isnan(xy[:, 0]))
+    if gaps.size:
+        parts = [part[~np.isnan(part[:, 0])] for part in np.split(xy, gaps)]
+        parts = [p for p in parts if len(p)]
+        return shapely.MultiLineString([p if len(p) > 1 else np.repeat(p, 2, 0) for p in parts])
     return shapely.Point(xy[0]) if len(xy) == 1 else shapely.LineString(xy)
 
 

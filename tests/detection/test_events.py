@@ -17,6 +17,8 @@ from aisdati.detection.events import (
     within,
 )
 from aisdati.detectors import load_detector
+from aisdati.events.anchorages import of_area
+from aisdati.events.rules import EventRules
 from aisdati.geo import moved_m
 from aisdati.tracks.reports import read_reports, read_vessels
 from aisdati.tracks.store import load_tracks, read_track_table
@@ -40,24 +42,30 @@ def test_a_track_bound_where_no_training_track_went_is_an_event(months, kitimat,
     assert (row["lon"], row["lat"]) == (far.positions[-1, 0], far.positions[-1, 1])
 
 
+def _own(events: pd.DataFrame) -> pd.DataFrame:
+    return events[events["kind"] != "encounter"]
+
+
 def _events_of(frame: pd.DataFrame) -> set[tuple]:
     return {(int(e.mmsi), e.kind, e.start, e.end, e.strength) for e in frame.itertuples()}
 
 
 @pytest.mark.parametrize("area", ["kitimat", "processed"])
 def test_a_vessels_events_are_its_own_alone_in_any_batch_and_any_chunking(area, request):
-    """Kitimat's two months and the NY Harbor hour: each vessel's events are the same found
-    with every vessel, with half of them, and alone; a track judged alone (`--track`) keeps
-    exactly the batch's events that overlap it."""
+    """Kitimat's two months and the NY Harbor hour, judged by the area's ports and anchorages
+    (as detect judges): each vessel's events are the same found with every vessel, with half
+    of them, and alone; a track judged alone (`--track`) keeps exactly the batch's events that
+    overlap it. Encounters are left out: one needs the other vessel."""
     data = request.getfixturevalue(area)
     reports, identity = read_reports(data), read_vessels(data)
-    every = model_free_events(reports, identity)
+    rules = EventRules(ports=of_area(data))
+    every = _own(model_free_events(reports, identity, rules))
     assert len(every)
     mmsis = sorted(reports["mmsi"].unique())
-    half = model_free_events(reports[reports["mmsi"].isin(mmsis[::2])], identity)
+    half = _own(model_free_events(reports[reports["mmsi"].isin(mmsis[::2])], identity, rules))
     assert _events_of(half) == _events_of(every[every["mmsi"].isin(mmsis[::2])])
     for mmsi in every["mmsi"].unique()[:5]:
-        alone = model_free_events(reports[reports["mmsi"] == mmsi], identity)
+        alone = model_free_events(reports[reports["mmsi"] == mmsi], identity, rules)
         assert _events_of(alone) == _events_of(every[every["mmsi"] == mmsi])
     tracks = load_tracks(data, read_track_table(data)["track_id"].tolist())
     batch = within(every, judged_windows(tracks, every=True))
@@ -65,7 +73,7 @@ def test_a_vessels_events_are_its_own_alone_in_any_batch_and_any_chunking(area, 
         windows = judged_windows([track], every=False)
         own = judged_reports(data, windows)
         assert set(own["mmsi"]) == {track.mmsi}
-        alone = within(model_free_events(own, identity), windows)
+        alone = within(model_free_events(own, identity, rules), windows)
         start, end = windows.loc[0, "start"], windows.loc[0, "end"]
         mine = batch[(batch["mmsi"] == track.mmsi) & (batch["start"] <= end)
                      & (batch["end"] >= start)]  # fmt: skip
