@@ -60,7 +60,7 @@ from aisdati.execution import Runner
 from aisdati.options import Range
 from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
-from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
+from aisdati.tracks.reports import motion_derived, read_identities, read_reports, read_vessels
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -327,7 +327,7 @@ def _events(
     reports = judged_reports(settings.data_dir, windows)
     judging = [m for m in models if m.name in set(scores["model"])]
     rules = event_rules(judging, settings.alerts_per_1000, not motion_derived(settings.data_dir))
-    free = model_free_events(reports, identity, rules)
+    free = model_free_events(reports, identity, rules, read_identities(settings.data_dir))
     free = within(free, windows, coverage.training)
     if not settings.ashore:
         free = free[free["kind"] != "ashore"]
@@ -344,7 +344,7 @@ def events_only(data_dir: Path) -> Detection:
     t0 = time.perf_counter()
     reports = read_reports(data_dir)
     rules = EventRules(reported_motion=not motion_derived(data_dir))
-    free = model_free_events(reports, read_vessels(data_dir), rules)
+    free = model_free_events(reports, read_vessels(data_dir), rules, read_identities(data_dir))
     events = all_events([free])
     scores = pd.DataFrame(columns=list(SCORE_COLUMNS))
     timings = {"events_s": time.perf_counter() - t0, "score_s": 0.0}

@@ -67,6 +67,9 @@ class EventSettings:
     gap_min_s: float = 1800.0
     gap_max_s: float = 86400.0
     gap_under_way_kn: float = 1.0
+    # identity change
+    identity_repeats: int = 3
+    """Reports a new identity needs before its change is raised (a one-message typo is not)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

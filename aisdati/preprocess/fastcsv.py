@@ -104,12 +104,13 @@ class ParsedBlock:
     def rows(self) -> int:
         return len(self.slow)
 
-    def static_tally(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def static_tally(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The distinct static hashes of the plain rows (0 aside), sorted (the tally looks them
-        up among those it knows in one sweep), how many rows have each, and the last of them."""
-        keys, counts, last = tally_keys(self.keys, self.slow)
+        up among those it knows in one sweep), how many rows have each, and the first and last
+        of them."""
+        keys, counts, first, last = tally_keys(self.keys, self.slow)
         order = np.argsort(keys)
-        return keys[order], counts[order], last[order]
+        return keys[order], counts[order], first[order], last[order]
 
     def lines(self, block: bytes | memoryview, rows: np.ndarray) -> bytes:
         """The text of these rows of `block` (parsed into this), each ended by a line end."""
@@ -256,7 +257,7 @@ def _row_key(static, mmsi):  # pragma: no cover - compiled
 @numba.njit(nogil=True, cache=True)
 def tally_keys(keys, slow):  # pragma: no cover - compiled
     """The distinct nonzero `keys` of the rows that are not `slow`, in the order first met,
-    with the rows that have each and the last such row: one pass over an open-addressing
+    with the rows that have each and the first and last such row: one pass over an open-addressing
     table (a sort of the block's keys took 5 times as long)."""
     n = keys.shape[0]
     size = 16
@@ -265,6 +266,7 @@ def tally_keys(keys, slow):  # pragma: no cover - compiled
     where = np.full(size, -1, np.int64)
     found = np.empty(n, np.int64)
     counts = np.zeros(n, np.int64)
+    first = np.empty(n, np.int64)
     last = np.empty(n, np.int64)
     m = 0
     for i in range(n):
@@ -277,10 +279,11 @@ def tally_keys(keys, slow):  # pragma: no cover - compiled
         if where[h] < 0:
             where[h] = m
             found[m] = key
+            first[m] = i
             m += 1
         counts[where[h]] += 1
         last[where[h]] = i
-    return found[:m], counts[:m], last[:m]
+    return found[:m], counts[:m], first[:m], last[:m]
 
 
 @numba.njit(nogil=True, cache=True, inline="always")

@@ -64,7 +64,7 @@ class PlainRows(NamedTuple):
     parsed: ParsedBlock
     table: pa.Table
     codes: np.ndarray
-    tally: tuple[np.ndarray, np.ndarray, np.ndarray]
+    tally: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 class TableReader(Protocol):
@@ -248,7 +248,8 @@ class SourceReader:
         """The vessels of a batch's rows read the usual way (`table`: them made canonical), at
         `rows` from `_position` on."""
         statics = {key: batch.column(self.columns[key]) for key in STATIC if key in self.columns}
-        self.vessels.add(table.column("mmsi").to_numpy(), statics, self._position + rows)
+        mmsi, time_us = table.column("mmsi").to_numpy(), time_of(table)
+        self.vessels.add(mmsi, statics, self._position + rows, time_us)
 
     def _segments(self) -> Iterator[tuple[LineGuard, list[str], dict[str, str]]]:
         """The CSV's stretches under each header line: the guarded stream, positioned at the
@@ -398,7 +399,7 @@ class SourceReader:
             self._tally(usual, table, np.arange(usual.num_rows))
             self._position += parsed.rows
             return table, codes
-        self._tally_plain(block, parsed, tally, names, columns)
+        self._tally_plain(block, (parsed, time_of(table)), tally, names, columns)
         if not len(slow):
             self._position += parsed.rows
             return table, codes
@@ -418,14 +419,16 @@ class SourceReader:
     def _tally_plain(
         self,
         block: bytes | memoryview,
-        parsed: ParsedBlock,
-        tally: tuple[np.ndarray, np.ndarray, np.ndarray],
+        rows_at: tuple[ParsedBlock, np.ndarray],
+        tally: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
         names: list[str],
         columns: dict[str, str],
     ) -> None:
-        """The vessels of a block's plain rows, from their static hashes (`tally`): the text of
-        one row of each hash not met before read the usual way, then the counts."""
-        keys, counts, last = tally
+        """The vessels of a block's plain rows (`rows_at`: as parsed, and each row's time), from
+        their static hashes (`tally`): the text of one row of each hash not met before read the
+        usual way, then the counts and times."""
+        parsed, time_us = rows_at
+        keys, counts, first, last = tally
         if not len(keys):
             return
         numbers = self.vessels.numbers(keys)
@@ -436,7 +439,8 @@ class SourceReader:
             usual = self._read_usual(pa.py_buffer(text), names, columns, numbered=False)
             statics = {k: usual.column(self.columns[k]) for k in STATIC if k in self.columns}
             numbers[new] = self.vessels.know(keys[new], parsed.mmsi[rows], statics)
-        self.vessels.add_counts(numbers, counts, self._position + last)
+        times = (time_us[first], time_us[last])
+        self.vessels.add_counts(numbers, counts, self._position + last, times)
 
     def _read_usual(
         self, text: pa.Buffer, names: list[str], columns: dict[str, str], numbered: bool
@@ -524,3 +528,8 @@ def check_parquet_types(schema: pa.Schema, columns: dict[str, str], label: str) 
                 )
         elif not _holds_numbers(kind):
             raise UserError(f"{label}: column {name} has type {kind}, expected numbers")
+
+
+def time_of(table: pa.Table) -> np.ndarray:
+    """A canonical table's times, microseconds since the epoch (NaT: the int64 minimum)."""
+    return table.column("time").to_numpy().view(np.int64)

@@ -1,0 +1,140 @@
+"""One MMSI heard from two transmitters at once: two vessels configured with the same MMSI (a
+copied or default number), or a spoofer. Their reports alternate between places no vessel
+could join in the time between them. The implied-speed check (`aisdati.preprocess.clean`)
+would keep one transmitter and drop the other's reports as position outliers; instead they are
+told apart here, before it, and the second transmitter's reports are kept under a vessel id of
+their own (`aisdati.tracks.schema.TRANSMITTER_STEP`), so each transmitter's track is whole and
+no track jumps between them. Global Fishing Watch's segmenter splits such MMSIs the same way
+(a report joins the segment it can be reached from); `aisdati.events.identity` raises the
+`identity-conflict` alert from the split.
+
+The rule, per MMSI in time order: a report joins the transmitter whose last report it can be
+reached from at `max_speed_kn` (plus the GPS tolerance; the nearer one where both could); one
+that neither can reach starts the second transmitter (replacing a second transmitter of one
+report, which was an outlier). The MMSI is split only where each transmitter has at least
+`MIN_REPORTS` reports, the reports switch between them at least `MIN_SWITCHES` times (two
+transmitters interleave; a vessel whose first fix was wrong, or that jumped once, does not),
+and the second's positions are not the first's own track at shifted times (`ON_TRACK_M`: a
+receiver's clock gone wrong, as in the DMA's recording of FRIO); else nothing changes and the
+implied-speed check judges the reports as before."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pyarrow as pa
+
+from aisdati.geo import haversine_one_m
+from aisdati.tracks.schema import TRANSMITTER_STEP
+
+MIN_REPORTS = 10
+"""Reports each transmitter needs: fewer is an outlier or two, for the implied-speed check."""
+MIN_SWITCHES = 4
+"""Switches between the two in time order: A B A B A at least, so that both report at once."""
+ON_TRACK_M = 200.0
+ON_TRACK_S = 600.0
+"""A second transmitter whose positions lie (median) within this of the first's own positions
+of the minutes around is the first's track with times gone wrong (a receiver's clock, a
+relayed copy), not a second vessel: nothing is split."""
+
+
+@numba.njit(cache=True)
+def _gap_m(i, j, time_us, lon, lat, max_mps, tolerance_m, reset_us):
+    """How far report j is beyond reach of report i (<= 0: reachable; a gap longer than
+    `reset_us` reaches anywhere)."""
+    dt_us = abs(time_us[j] - time_us[i])
+    if dt_us > reset_us:
+        return -1.0
+    dist = haversine_one_m(lon[i], lat[i], lon[j], lat[j])
+    return dist - (max_mps * dt_us / 1e6 + tolerance_m)
+
+
+@numba.njit(cache=True)
+def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
+    """One vessel's reports (time order) as two chains: 0, 1, or -1 (reached by neither)."""
+    n = time_us.shape[0]
+    chain = np.full(n, -1, np.int8)
+    if n == 0:
+        return chain
+    head0, head1, size1 = 0, -1, 0
+    chain[0] = 0
+    for i in range(1, n):
+        gap0 = _gap_m(head0, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
+        gap1 = 1.0
+        if head1 >= 0:
+            gap1 = _gap_m(head1, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
+        if gap0 <= 0 and (gap1 > 0 or gap0 <= gap1):
+            chain[i], head0 = 0, i
+        elif gap1 <= 0:
+            chain[i], head1 = 1, i
+            size1 += 1
+        elif size1 <= 1:
+            if head1 >= 0:
+                chain[head1] = -1
+            chain[i], head1, size1 = 1, i, 1
+    return chain
+
+
+@numba.njit(cache=True)
+def _on_track(chain, time_us, lon, lat):
+    """Whether chain 1's positions lie, median, within `ON_TRACK_M` of chain 0's positions of
+    `ON_TRACK_S` around."""
+    first = np.flatnonzero(chain == 0)
+    times = time_us[first]
+    second = np.flatnonzero(chain == 1)
+    nearest = np.full(len(second), np.inf)
+    for k, j in enumerate(second):
+        lo = np.searchsorted(times, time_us[j] - ON_TRACK_S * 1e6)
+        hi = np.searchsorted(times, time_us[j] + ON_TRACK_S * 1e6, side="right")
+        for i in first[lo:hi]:
+            nearest[k] = min(nearest[k], haversine_one_m(lon[i], lat[i], lon[j], lat[j]))
+    return np.median(nearest) <= ON_TRACK_M
+
+
+@numba.njit(cache=True)
+def second_transmitter(mmsi, time_us, lon, lat, max_mps, tolerance_m, reset_us):
+    """Which reports (sorted by MMSI, then time) are a second transmitter's: those of chain 1
+    of each MMSI below `TRANSMITTER_STEP` that is split (see the module's rule)."""
+    n = mmsi.shape[0]
+    second = np.zeros(n, np.bool_)
+    lo = 0
+    while lo < n:
+        hi = lo
+        while hi < n and mmsi[hi] == mmsi[lo]:
+            hi += 1
+        if hi - lo >= 2 * MIN_REPORTS and 0 < mmsi[lo] < TRANSMITTER_STEP:
+            chain = _chains(time_us[lo:hi], lon[lo:hi], lat[lo:hi], max_mps, tolerance_m, reset_us)
+            n0, n1, switches, prev = 0, 0, 0, -1
+            for c in chain:
+                if c < 0:
+                    continue
+                if c == 0:
+                    n0 += 1
+                else:
+                    n1 += 1
+                if prev >= 0 and c != prev:
+                    switches += 1
+                prev = c
+            apart = n0 >= MIN_REPORTS and n1 >= MIN_REPORTS and switches >= MIN_SWITCHES
+            if apart and not _on_track(chain, time_us[lo:hi], lon[lo:hi], lat[lo:hi]):
+                for k in range(hi - lo):
+                    second[lo + k] = chain[k] == 1
+        lo = hi
+    return second
+
+
+def split_transmitters(
+    table: pa.Table, max_mps: float, tolerance_m: float, reset_us: int
+) -> pa.Table:
+    """The table (sorted by MMSI, then time) with each second transmitter's reports under its
+    own id (MMSI + `TRANSMITTER_STEP`), sorted again; the same table where none is found."""
+    mmsi = table.column("mmsi").to_numpy()
+    time_us = table.column("time").to_numpy().view(np.int64)
+    lon, lat = (table.column(c).to_numpy() for c in ("lon", "lat"))
+    second = second_transmitter(mmsi, time_us, lon, lat, max_mps, tolerance_m, reset_us)
+    if not second.any():
+        return table
+    ids = np.where(second, mmsi + TRANSMITTER_STEP, mmsi)
+    order = np.lexsort((time_us, ids))
+    table = table.set_column(0, table.schema.field(0), pa.array(ids, pa.int64()))
+    return table.take(pa.array(order))
