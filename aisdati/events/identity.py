@@ -4,7 +4,7 @@ and `identity-change` (a vessel that reports a new name, type or size, from the 
 history: identities.parquet, `aisdati.tracks.schema.IDENTITY_SCHEMA`). Both are fleet kinds
 (`aisdati.events.fleet`): a conflict names two vessel ids, a change needs the history, not one
 vessel's positions. The live watch raises the same events by the same functions
-(`conflict_row`, `identity_changes`)."""
+(`conflict_rows`, `identity_changes`)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from aisdati.events.record import event_row
 from aisdati.events.reports import VesselReports
 from aisdati.events.rules import EventRules
 from aisdati.geo import haversine_m
+from aisdati.preprocess.transmitters import MIN_REPORTS
 from aisdati.tracks.schema import KNOT_MPS, VESSEL_COLUMNS, is_second_transmitter, mmsi_of
 
 REACH_KN = 50.0
@@ -25,25 +26,46 @@ REACH_KN = 50.0
 its switches between the two places are beyond reach at it."""
 LENGTH_TOLERANCE_M = 1.0
 """Lengths that differ by less are the same (sources round them differently)."""
+STRETCH_GAP_S = 3600.0
+"""A silence of both transmitters this long ends a conflict's stretch (a new one begins when
+they report again): an analyst reads a day's conflict, not a month's."""
 FIELDS = {"name": "name", "ship_type": "type", "length_m": "length"}
 """The fields of an identity compared, and how the evidence calls them."""
 
 
-def conflict_row(
+def conflict_rows(
     first: VesselReports,
     second: VesselReports,
     who: tuple[dict[str, Any], dict[str, Any]],
-) -> dict[str, Any] | None:
-    """The `identity-conflict` of an MMSI's two transmitters (`first` under the MMSI, `second`
-    under its second transmitter's id; `who`: each one's identity as events name it): over the
-    time both report, placed at the first's median position, its stretch the line between the
-    two places; strength, the median of how far each switch between them is beyond reach (1:
-    at reach). None where they never report at once (nothing left to judge)."""
-    start = max(first.time_s[0], second.time_s[0])
-    end = min(first.time_s[-1], second.time_s[-1])
-    if start > end:
-        return None
-    a, b = _within(first, start, end), _within(second, start, end)
+) -> list[dict[str, Any]]:
+    """The `identity-conflict`s of an MMSI's two transmitters (`first` under the MMSI, `second`
+    under its second transmitter's id; `who`: each one's identity as events name it): one per
+    stretch in which both report (their reports together, cut where neither reports for
+    `STRETCH_GAP_S`; each needing `MIN_REPORTS` of both), over the time both report in it,
+    placed at the first's median position there, its stretch the line between the two places;
+    strength, the median of how far each switch between them is beyond reach (1: at reach)."""
+    times = np.sort(np.r_[first.time_s, second.time_s])
+    cuts = np.flatnonzero(np.diff(times) > STRETCH_GAP_S)
+    starts, ends = np.r_[times[:1], times[cuts + 1]], np.r_[times[cuts], times[-1:]]
+    rows = []
+    for lo, hi in zip(starts, ends, strict=True):
+        a, b = _within(first, lo, hi), _within(second, lo, hi)
+        if a.sum() < MIN_REPORTS or b.sum() < MIN_REPORTS:
+            continue
+        start = max(first.time_s[a][0], second.time_s[b][0])
+        end = min(first.time_s[a][-1], second.time_s[b][-1])
+        if start <= end:
+            rows.append(_conflict_row(first, second, who, (start, end)))
+    return rows
+
+
+def _conflict_row(
+    first: VesselReports,
+    second: VesselReports,
+    who: tuple[dict[str, Any], dict[str, Any]],
+    span: tuple[float, float],
+) -> dict[str, Any]:
+    a, b = _within(first, *span), _within(second, *span)
     here = (float(np.median(first.lon[a])), float(np.median(first.lat[a])))
     there = (float(np.median(second.lon[b])), float(np.median(second.lat[b])))
     apart_km = float(haversine_m(*here, *there)) / 1000.0
@@ -54,7 +76,7 @@ def conflict_row(
         f"interleaved; the second transmitter is kept as {second.mmsi}"
     )
     return event_row(
-        first.mmsi, "identity-conflict", (start, end), int(a.sum() + b.sum()), here,
+        first.mmsi, "identity-conflict", span, int(a.sum() + b.sum()), here,
         ([here[0], there[0]], [here[1], there[1]]), strength, evidence,
         identity=who[0], others=[who[1]],
     )  # fmt: skip
@@ -95,9 +117,7 @@ def find_conflicts(fleet: Fleet, rules: EventRules) -> list[dict[str, Any]]:
         if not is_second_transmitter(vessel) or first is None:
             continue
         who = fleet.who(first.mmsi)
-        row = conflict_row(first, second, (who, {**who, "mmsi": vessel}))
-        if row is not None:
-            rows.append(row)
+        rows += conflict_rows(first, second, (who, {**who, "mmsi": vessel}))
     return rows
 
 
@@ -141,7 +161,7 @@ def change_evidence(before: dict, after: dict) -> str:
     said = [
         f"{FIELDS[f]} {_shown(before[f])} -> {_shown(after[f])}" for f in differs(before, after)
     ]
-    return "; ".join(said) + f" ({int(after['reports'])} reports of the new identity)"
+    return "; ".join(said)
 
 
 def _shown(value: object) -> str:

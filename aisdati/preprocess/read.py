@@ -64,7 +64,7 @@ class PlainRows(NamedTuple):
     parsed: ParsedBlock
     table: pa.Table
     codes: np.ndarray
-    tally: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    tally: tuple[np.ndarray, ...]
 
 
 class TableReader(Protocol):
@@ -370,7 +370,7 @@ class SourceReader:
         parsed = parse_block(block, slots)
         batch = typed_batch(parsed, slots, self.columns)
         table, codes = to_canonical(batch, self.columns, src)
-        return PlainRows(parsed, table, codes, parsed.static_tally())
+        return PlainRows(parsed, table, codes, parsed.static_tally(time_of(table)))
 
     def _block_table(
         self,
@@ -399,7 +399,7 @@ class SourceReader:
             self._tally(usual, table, np.arange(usual.num_rows))
             self._position += parsed.rows
             return table, codes
-        self._tally_plain(block, (parsed, time_of(table)), tally, names, columns)
+        self._tally_plain(block, parsed, tally, names, columns)
         if not len(slow):
             self._position += parsed.rows
             return table, codes
@@ -419,16 +419,15 @@ class SourceReader:
     def _tally_plain(
         self,
         block: bytes | memoryview,
-        rows_at: tuple[ParsedBlock, np.ndarray],
-        tally: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        parsed: ParsedBlock,
+        tally: tuple[np.ndarray, ...],
         names: list[str],
         columns: dict[str, str],
     ) -> None:
-        """The vessels of a block's plain rows (`rows_at`: as parsed, and each row's time), from
-        their static hashes (`tally`): the text of one row of each hash not met before read the
+        """The vessels of a block's plain rows, from their static hashes (`tally`,
+        `ParsedBlock.static_tally`): the text of one row of each hash not met before read the
         usual way, then the counts and times."""
-        parsed, time_us = rows_at
-        keys, counts, first, last = tally
+        keys, counts, last, first_us, last_us = tally
         if not len(keys):
             return
         numbers = self.vessels.numbers(keys)
@@ -439,8 +438,7 @@ class SourceReader:
             usual = self._read_usual(pa.py_buffer(text), names, columns, numbered=False)
             statics = {k: usual.column(self.columns[k]) for k in STATIC if k in self.columns}
             numbers[new] = self.vessels.know(keys[new], parsed.mmsi[rows], statics)
-        times = (time_us[first], time_us[last])
-        self.vessels.add_counts(numbers, counts, self._position + last, times)
+        self.vessels.add_counts(numbers, counts, self._position + last, (first_us, last_us))
 
     def _read_usual(
         self, text: pa.Buffer, names: list[str], columns: dict[str, str], numbered: bool

@@ -12,8 +12,9 @@ The rule, per MMSI in time order: a report joins the transmitter whose last repo
 reached from at `max_speed_kn` (plus the GPS tolerance; the nearer one where both could); one
 that neither can reach starts the second transmitter (replacing a second transmitter of one
 report, which was an outlier). The MMSI is split only where each transmitter has at least
-`MIN_REPORTS` reports, the reports switch between them at least `MIN_SWITCHES` times (two
-transmitters interleave; a vessel whose first fix was wrong, or that jumped once, does not),
+`MIN_REPORTS` reports, the reports switch between them at least `MIN_SWITCHES` times out of
+reach of the other's last report (two transmitters interleave; a vessel whose first fix was
+wrong, or that jumped once, does not; two vessels within reach of each other prove nothing),
 and the second's positions are not the first's own track at shifted times (`ON_TRACK_M`: a
 receiver's clock gone wrong, as in the DMA's recording of FRIO); else nothing changes and the
 implied-speed check judges the reports as before."""
@@ -32,7 +33,7 @@ MIN_REPORTS = 10
 MIN_SWITCHES = 4
 """Switches between the two in time order: A B A B A at least, so that both report at once."""
 ON_TRACK_M = 200.0
-ON_TRACK_S = 600.0
+ON_TRACK_S = 120.0
 """A second transmitter whose positions lie (median) within this of the first's own positions
 of the minutes around is the first's track with times gone wrong (a receiver's clock, a
 relayed copy), not a second vessel: nothing is split."""
@@ -51,11 +52,13 @@ def _gap_m(i, j, time_us, lon, lat, max_mps, tolerance_m, reset_us):
 
 @numba.njit(cache=True)
 def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
-    """One vessel's reports (time order) as two chains: 0, 1, or -1 (reached by neither)."""
+    """One vessel's reports (time order) as two chains: 0, 1, or -1 (reached by neither); and
+    whether each is out of reach of the other chain's last report (a switch to it is forced)."""
     n = time_us.shape[0]
     chain = np.full(n, -1, np.int8)
+    forced = np.zeros(n, np.bool_)
     if n == 0:
-        return chain
+        return chain, forced
     head0, head1, size1 = 0, -1, 0
     chain[0] = 0
     for i in range(1, n):
@@ -64,15 +67,15 @@ def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
         if head1 >= 0:
             gap1 = _gap_m(head1, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
         if gap0 <= 0 and (gap1 > 0 or gap0 <= gap1):
-            chain[i], head0 = 0, i
+            chain[i], head0, forced[i] = 0, i, gap1 > 0
         elif gap1 <= 0:
-            chain[i], head1 = 1, i
+            chain[i], head1, forced[i] = 1, i, gap0 > 0
             size1 += 1
         elif size1 <= 1:
             if head1 >= 0:
                 chain[head1] = -1
-            chain[i], head1, size1 = 1, i, 1
-    return chain
+            chain[i], head1, size1, forced[i] = 1, i, 1, True
+    return chain, forced
 
 
 @numba.njit(cache=True)
@@ -103,16 +106,19 @@ def second_transmitter(mmsi, time_us, lon, lat, max_mps, tolerance_m, reset_us):
         while hi < n and mmsi[hi] == mmsi[lo]:
             hi += 1
         if hi - lo >= 2 * MIN_REPORTS and 0 < mmsi[lo] < TRANSMITTER_STEP:
-            chain = _chains(time_us[lo:hi], lon[lo:hi], lat[lo:hi], max_mps, tolerance_m, reset_us)
+            chain, forced = _chains(
+                time_us[lo:hi], lon[lo:hi], lat[lo:hi], max_mps, tolerance_m, reset_us
+            )
             n0, n1, switches, prev = 0, 0, 0, -1
-            for c in chain:
+            for k in range(hi - lo):
+                c = chain[k]
                 if c < 0:
                     continue
                 if c == 0:
                     n0 += 1
                 else:
                     n1 += 1
-                if prev >= 0 and c != prev:
+                if prev >= 0 and c != prev and forced[k]:
                     switches += 1
                 prev = c
             apart = n0 >= MIN_REPORTS and n1 >= MIN_REPORTS and switches >= MIN_SWITCHES
