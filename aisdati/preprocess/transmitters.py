@@ -40,20 +40,19 @@ relayed copy), not a second vessel: nothing is split."""
 
 
 @numba.njit(cache=True)
-def _gap_m(i, j, time_us, lon, lat, max_mps, tolerance_m, reset_us):
-    """How far report j is beyond reach of report i (<= 0: reachable; a gap longer than
+def _distance_m(i, j, time_us, lon, lat, max_mps, tolerance_m, reset_us):
+    """How far report j is from report i, and whether it is within reach (a gap longer than
     `reset_us` reaches anywhere)."""
     dt_us = abs(time_us[j] - time_us[i])
-    if dt_us > reset_us:
-        return -1.0
     dist = haversine_one_m(lon[i], lat[i], lon[j], lat[j])
-    return dist - (max_mps * dt_us / 1e6 + tolerance_m)
+    return dist, dt_us > reset_us or dist <= max_mps * dt_us / 1e6 + tolerance_m
 
 
 @numba.njit(cache=True)
 def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
     """One vessel's reports (time order) as two chains: 0, 1, or -1 (reached by neither); and
-    whether each is out of reach of the other chain's last report (a switch to it is forced)."""
+    whether each is out of reach of the other chain's last report (a switch to it is forced).
+    A report both could reach joins the nearer."""
     n = time_us.shape[0]
     chain = np.full(n, -1, np.int8)
     forced = np.zeros(n, np.bool_)
@@ -62,14 +61,14 @@ def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
     head0, head1, size1 = 0, -1, 0
     chain[0] = 0
     for i in range(1, n):
-        gap0 = _gap_m(head0, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
-        gap1 = 1.0
+        d0, in0 = _distance_m(head0, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
+        d1, in1 = np.inf, False
         if head1 >= 0:
-            gap1 = _gap_m(head1, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
-        if gap0 <= 0 and (gap1 > 0 or gap0 <= gap1):
-            chain[i], head0, forced[i] = 0, i, gap1 > 0
-        elif gap1 <= 0:
-            chain[i], head1, forced[i] = 1, i, gap0 > 0
+            d1, in1 = _distance_m(head1, i, time_us, lon, lat, max_mps, tolerance_m, reset_us)
+        if in0 and (not in1 or d0 <= d1):
+            chain[i], head0, forced[i] = 0, i, not in1
+        elif in1:
+            chain[i], head1, forced[i] = 1, i, not in0
             size1 += 1
         elif size1 <= 1:
             if head1 >= 0:
