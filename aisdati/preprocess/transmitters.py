@@ -15,7 +15,7 @@ report, which was an outlier). The MMSI is split only where each transmitter has
 `MIN_REPORTS` reports, the reports switch between them at least `MIN_SWITCHES` times out of
 reach of the other's last report (two transmitters interleave; a vessel whose first fix was
 wrong, or that jumped once, does not; two vessels within reach of each other prove nothing),
-and the second's positions are not the first's own track at shifted times (`ON_TRACK_M`: a
+and the second's positions are not copies of the first's at other times (`ON_TRACK_M`: a
 receiver's clock gone wrong, as in the DMA's recording of FRIO); else nothing changes and the
 implied-speed check judges the reports as before."""
 
@@ -32,11 +32,12 @@ MIN_REPORTS = 10
 """Reports each transmitter needs: fewer is an outlier or two, for the implied-speed check."""
 MIN_SWITCHES = 4
 """Switches between the two in time order: A B A B A at least, so that both report at once."""
-ON_TRACK_M = 200.0
-ON_TRACK_S = 120.0
-"""A second transmitter whose positions lie (median) within this of the first's own positions
-of the minutes around is the first's track with times gone wrong (a receiver's clock, a
-relayed copy), not a second vessel: nothing is split."""
+ON_TRACK_M = 10.0
+ON_TRACK_S = 3600.0
+"""A second transmitter whose positions are (median) copies, within this, of the first's own
+positions of the hour around is the first relayed with wrong times (a receiver's clock off:
+the DMA's recording of FRIO has its positions again 17 minutes late), not a second vessel:
+nothing is split. Two vessels' fixes are metres apart even on one lane."""
 
 
 @numba.njit(cache=True)
@@ -79,8 +80,8 @@ def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
 
 @numba.njit(cache=True)
 def _on_track(chain, time_us, lon, lat):
-    """Whether chain 1's positions lie, median, within `ON_TRACK_M` of chain 0's positions of
-    `ON_TRACK_S` around."""
+    """Whether chain 1's positions are, median, within `ON_TRACK_M` of chain 0's positions of
+    `ON_TRACK_S` around (copies at other times)."""
     first = np.flatnonzero(chain == 0)
     times = time_us[first]
     second = np.flatnonzero(chain == 1)
