@@ -128,9 +128,10 @@ KINDS: dict[str, EventKind] = {
             "identity-conflict", "one MMSI, two transmitters", ALERT, False, None,
             "one MMSI whose positions alternate between places no vessel could join in the time "
             "between them (at --max-speed, 50 kn): two transmitters, each of at least 10 reports,"
-            " that switch at least 4 times; ingest keeps the second's reports as vessel MMSI + "
-            "1000000000 (not dropped as outliers) and the event names both, over the time both "
-            "report",
+            " whose reports switch at least 4 times out of reach of each other (not copies of one"
+            " another: a receiver's clock); ingest keeps the second's reports as vessel MMSI + "
+            "1000000000 (not dropped as outliers); one event per stretch in which both report (a "
+            "silence of an hour ends one), naming both and their places",
             "Global Fishing Watch's segmenter (a report joins the segment it can be reached from;"
             " one MMSI becomes several segments); ours also raises it, and keeps each transmitter"
             " whole",
