@@ -46,6 +46,16 @@ def summary_table(counts: IngestCounts) -> Table:
         f"[bold]{counts.reports_kept:,}",
         "judged, slow or not (reports.parquet)",
     )
+    if shared := counts.two_transmitters:
+        table.add_row(
+            "vessel",
+            "two_transmitters",
+            f"{len(shared):,}",
+            escape(
+                f"MMSIs heard from two transmitters, each kept: {', '.join(map(str, shared[:5]))}"
+            )
+            + ("..." if len(shared) > 5 else ""),
+        )
     total = sum(counts.tracks.values())
     table.add_row(
         "[bold]cluster",

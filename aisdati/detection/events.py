@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+import aisdati.events.identity  # noqa: F401  (registers its fleet finders)
 from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
 from aisdati.events.anchorages import Anchorages
@@ -107,11 +108,15 @@ def within(
 
 
 def model_free_events(
-    reports: pd.DataFrame, identity: pd.DataFrame, rules: EventRules = EventRules()
+    reports: pd.DataFrame,
+    identity: pd.DataFrame,
+    rules: EventRules = EventRules(),
+    history: pd.DataFrame | None = None,
 ) -> pd.DataFrame:
     """Every model-free event of every vessel of `reports` by `rules`, the one-vessel kinds and
-    the fleet kinds (`aisdati.events.fleet`) (`identity`: vessels.parquet by MMSI)."""
-    frames, fleet = [], Fleet({}, {})
+    the fleet kinds (`aisdati.events.fleet`) (`identity`: vessels.parquet by MMSI; `history`:
+    identities.parquet, None where the ingest has none)."""
+    frames, fleet = [], Fleet({}, {}, history)
     for v in vessels(reports):
         who = _who(identity, v.mmsi)
         fleet.vessels[v.mmsi], fleet.identity[v.mmsi] = v, who

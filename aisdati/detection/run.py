@@ -61,7 +61,7 @@ from aisdati.execution import Runner
 from aisdati.options import Range
 from aisdati.scores import NEAREST, SCORES, Score, score
 from aisdati.tracks.ashore import AshoreCheck, ashore_counts
-from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
+from aisdati.tracks.reports import motion_derived, read_identities, read_reports, read_vessels
 from aisdati.tracks.schema import AREA
 from aisdati.tracks.store import Track, load_tracks, read_track_table, select_cluster
 
@@ -336,7 +336,7 @@ def _events(
         judging, settings.alerts_per_1000, not motion_derived(settings.data_dir),
         area_ports(settings.data_dir, settings.ports),
     )  # fmt: skip
-    free = model_free_events(reports, identity, rules)
+    free = model_free_events(reports, identity, rules, read_identities(settings.data_dir))
     free = within(free, windows, coverage.training)
     if not settings.ashore:
         free = free[free["kind"] != "ashore"]
@@ -356,7 +356,7 @@ def events_only(data_dir: Path, ports: Path | None = None) -> Detection:
     rules = EventRules(
         reported_motion=not motion_derived(data_dir), ports=area_ports(data_dir, ports)
     )
-    free = model_free_events(reports, read_vessels(data_dir), rules)
+    free = model_free_events(reports, read_vessels(data_dir), rules, read_identities(data_dir))
     events = all_events([free])
     scores = pd.DataFrame(columns=list(SCORE_COLUMNS))
     timings = {"events_s": time.perf_counter() - t0, "score_s": 0.0}

@@ -24,7 +24,7 @@ from aisdati.detection.events import (
 from aisdati.detectors import Detector
 from aisdati.evaluation.alerts import alert_rates
 from aisdati.evaluation.metrics import EVENT_FIELDS
-from aisdati.tracks.reports import motion_derived, read_reports, read_vessels
+from aisdati.tracks.reports import motion_derived, read_identities, read_reports, read_vessels
 from aisdati.tracks.store import Track, read_track_table
 
 TOLERANCE_US = 1000
@@ -55,7 +55,8 @@ def forward_alerts(
     reports = read_reports(data)
     later = reports[reports["time"] >= before]
     rules = event_rules(detectors, reported_motion=not motion_derived(data))
-    events = model_free_events(later, read_vessels(data), rules)
+    events = model_free_events(later, read_vessels(data), rules, read_identities(data))
+    events = events[pd.to_datetime(events["end"], utc=True) >= before]  # (a change before it)
     tracks = read_track_table(data)
     ids = tracks.loc[tracks["start"] >= before, "track_id"].to_numpy()
     return alert_rates(events, later, ids, resamples) | {"budget": rules.thresholds.budget}

@@ -30,10 +30,13 @@ from aisdati.events.rules import EventRules
 @dataclass(frozen=True)
 class Fleet:
     """The vessels judged together: each one's reports (cleaned, as the one-vessel finders read
-    them) and identity (vessels.parquet's row as a dict: name, ship_type, length_m, ...)."""
+    them), identity (vessels.parquet's row as a dict: name, ship_type, length_m, ...) and the
+    history of the identities each reported (identities.parquet's rows, `aisdati.tracks.schema.
+    IDENTITY_SCHEMA`; None where unknown)."""
 
     vessels: dict[int, VesselReports]
     identity: dict[int, dict[str, Any]] = field(default_factory=dict)
+    history: pd.DataFrame | None = None
 
     def who(self, mmsi: int) -> dict[str, Any]:
         """The vessel's identity as an event names it (mmsi, name, ship_type)."""

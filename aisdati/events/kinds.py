@@ -135,14 +135,26 @@ KINDS: dict[str, EventKind] = {
         ),
         EventKind(
             "identity-conflict", "one MMSI, two transmitters", ALERT, False, None,
-            "one MMSI whose positions alternate between places no vessel could join in the "
-            "time between them: two transmitters sharing an identity",
-            "Global Fishing Watch's segmenter splits such MMSIs; ours raises it", fleet=True,
+            "one MMSI whose positions alternate between places no vessel could join in the time "
+            "between them (at --max-speed, 50 kn): two transmitters, each of at least 10 reports,"
+            " whose reports switch at least 4 times out of reach of each other (not copies of one"
+            " another: a receiver's clock); ingest keeps the second's reports as vessel MMSI + "
+            "1000000000 (not dropped as outliers); one event per stretch in which both report (a "
+            "silence of an hour ends one), naming both and their places",
+            "Global Fishing Watch's segmenter (a report joins the segment it can be reached from;"
+            " one MMSI becomes several segments); ours also raises it, and keeps each transmitter"
+            " whole",
+            fleet=True,
         ),
         EventKind(
             "identity-change", "identity changed", ALERT, False, None,
-            "a vessel whose reported name, type, size or call sign changes, with before and after",
-            "ours", fleet=True,
+            "a vessel whose reported name, ship type or length (by 1 m or more) changes to a "
+            "value given by at least 3 reports, at the time the new one is first reported, with "
+            "before and after (identities.parquet: each identity's first and last time); a value "
+            "a message leaves out is no change; call sign and IMO are not read yet",
+            "ours (Global Fishing Watch's vessel identity keeps each identity's first and last "
+            "time)",
+            fleet=True,
         ),
         EventKind(
             "gnss-interference", "positions displaced over an area", ALERT, False, None,

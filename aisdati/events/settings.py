@@ -88,6 +88,9 @@ class EventSettings:
     """Each vessel's position is interpolated every this many seconds (GFW: 10 minutes)."""
     encounter_max_gap_s: float = 3600.0
     """The longest silence a slow vessel's position is interpolated across."""
+    # identity change
+    identity_repeats: int = 3
+    """Reports a new identity needs before its change is raised (a one-message typo is not)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

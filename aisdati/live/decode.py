@@ -7,15 +7,16 @@ is counted by reason, never fatal; a report far ahead of the feed's clock is hel
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 
 from aisdati.live.future import FutureGuard
 from aisdati.preprocess.clean import check_values
 from aisdati.preprocess.convert import to_canonical
-from aisdati.preprocess.nmea import COLUMNS, NmeaDecoder, RecentMessages
+from aisdati.preprocess.nmea import COLUMNS, NmeaDecoder, RecentMessages, static_times_us
 from aisdati.preprocess.report import CODE
 from aisdati.preprocess.vessels import PADDING, length_of, ship_type_of
 
@@ -25,13 +26,48 @@ QUIET = frozenset({"not_position", "duplicate_reception"})
 but not among the rejected sentences the page shows."""
 
 
+Seen = tuple[str | None, str | None, float, int, int, int]
+"""An identity a vessel's static messages gave: (name, ship type, length, first and last time
+in microseconds since the epoch, messages), as a row of identities.parquet holds it."""
+
+
 @dataclass(frozen=True)
 class Identity:
-    """Who a vessel says it is (its latest static message)."""
+    """Who a vessel says it is (its latest static message), and every identity its static
+    messages gave (`history`, as ingest's identities.parquet keeps it: each message's own
+    fields, a message in two parts two identities)."""
 
     name: str | None = None
     ship_type: str | None = None
     length_m: float = np.nan
+    history: tuple[Seen, ...] = ()
+
+    def heard(self, said: tuple[str | None, str | None, float], time_us: int) -> Identity:
+        """The history with one more static message (its own name, type and length)."""
+        rows, same = list(self.history), None
+        for k, (name, kind, length, *_) in enumerate(rows):
+            if (name, kind) == said[:2] and (
+                length == said[2] or (np.isnan(length) and np.isnan(said[2]))
+            ):
+                same = k
+                break
+        if same is None:
+            rows.append((*said, time_us, time_us, 1))
+        else:
+            name, kind, length, first, last, n = rows[same]
+            rows[same] = (name, kind, length, min(first, time_us), max(last, time_us), n + 1)
+        return replace(self, history=tuple(rows))
+
+    def history_table(self) -> pd.DataFrame | None:
+        """The history as rows of identities.parquet (`IDENTITY_SCHEMA`), None where empty."""
+        if not self.history:
+            return None
+        frame = pd.DataFrame(
+            self.history, columns=["name", "ship_type", "length_m", "first", "last", "reports"]
+        )
+        for key in ("first", "last"):
+            frame[key] = pd.to_datetime(frame[key], unit="us", utc=True)
+        return frame
 
 
 class Decoder:
@@ -66,17 +102,19 @@ class Decoder:
             self.skipped["future"] = self.future.set_aside
         return table
 
-    def identities(self) -> dict[int, Identity]:
-        """The vessels named by static messages since the last call (the latest of each)."""
-        out = {}
-        for mmsi, name, kind, length in self.decoder.take_statics():
+    def identities(self) -> dict[int, list[tuple[tuple[str | None, str | None, float], int]]]:
+        """The static messages since the last call, by vessel, in order: each one's own name,
+        ship type and length (read as ingest reads them; a message that gives none is left
+        out) and its time (microseconds; the int64 minimum where its line gave none)."""
+        out: dict[int, list] = {}
+        statics = self.decoder.take_statics()
+        times = static_times_us([s.time for s in statics]) if statics else []
+        for (mmsi, name, kind, length, _), time_us in zip(statics, times, strict=True):
             name = (name or "").strip(PADDING) or None
             ship_type = None if kind is None else ship_type_of(str(kind))
             size = None if length is None else length_of(str(length))
-            old = out.get(mmsi, Identity())
-            out[mmsi] = Identity(
-                name or old.name,
-                ship_type or old.ship_type,
-                size if size is not None else old.length_m,
-            )
+            if name is None and ship_type is None and size is None:
+                continue
+            said = (name, ship_type, np.nan if size is None else float(size))
+            out.setdefault(mmsi, []).append((said, int(time_us)))
         return out

@@ -9,10 +9,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 
 from aisdati.events.behaviour import gap_limit, land_mask
 from aisdati.events.find import placed_rows
+from aisdati.events.identity import change_row, conflict_rows, identity_changes
 from aisdati.events.reports import VesselReports
 from aisdati.events.rules import EventRules
 from aisdati.live.decode import Identity
@@ -21,6 +23,7 @@ from aisdati.preprocess.clean import clean_vessels
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.report import CODE
 from aisdati.preprocess.settings import IngestSettings
+from aisdati.tracks.schema import TRANSMITTER_STEP
 
 KEPT = (0, CODE["slow"])
 """What reports.parquet keeps of a vessel's cleaned reports: the slow ones are judged too."""
@@ -61,7 +64,9 @@ def cleaned(
 ) -> dict[int, VesselReports]:
     """Each window's reports that ingest would keep in reports.parquet, sorted by time; all
     windows cleaned in one pass, as ingest cleans a partition of whole vessels: the table's and
-    the cleaning's fixed cost is paid once per chunk, not once per vessel."""
+    the cleaning's fixed cost is paid once per chunk, not once per vessel. A window heard from
+    two transmitters (`aisdati.preprocess.transmitters`) gives its second's reports under the
+    second's id (MMSI + `TRANSMITTER_STEP`) too."""
     sizes = [len(w["time_us"]) for w in windows.values()]
     status = np.concatenate([w["status"] for w in windows.values()])
     n = len(status)
@@ -85,7 +90,10 @@ def cleaned(
     heading = c["heading"].astype(np.float64)
     status_code = np.nan_to_num(c["status"].astype(np.float64), nan=-1.0)
     out = {}
-    for mmsi in windows:
+    present = set(np.unique(c["mmsi"]).tolist())
+    for mmsi in [*windows, *(m + TRANSMITTER_STEP for m in windows)]:
+        if mmsi >= TRANSMITTER_STEP and mmsi not in present:
+            continue
         lo, hi = np.searchsorted(c["mmsi"], [mmsi, mmsi + 1])
         out[mmsi] = VesselReports(
             mmsi, time_s[lo:hi], c["lon"][lo:hi], c["lat"][lo:hi], c["sog"][lo:hi],
@@ -100,7 +108,10 @@ def judge(
     ingest: IngestSettings,
 ) -> dict[int, Judged]:
     """The model-free events of each vessel's window (MMSI: its window and identity), in the
-    windows' order; a vessel with no report left to judge is left out."""
+    windows' order, with its `identity-conflict` where two transmitters share its MMSI (the
+    batch's rule, `aisdati.events.identity.conflict_rows`) and its `identity-change`s by its
+    identity history (`identity.history`, `aisdati.events.identity.identity_changes`); a
+    vessel with no report left to judge is left out."""
     if not windows:
         return {}
     reports = cleaned({m: cols for m, (cols, _) in windows.items()}, ingest)
@@ -111,6 +122,7 @@ def judge(
             continue
         who = {"name": identity.name, "ship_type": identity.ship_type}
         events = placed_rows(v, rules.events(v, identity.length_m), who, rules.thresholds)
+        events += identity_events(v, reports.get(mmsi + TRANSMITTER_STEP), identity, rules)
         out[mmsi] = Judged(
             events, float(v.time_s[0]), float(v.time_s[-1]), last_report(v, rules), v
         )
@@ -129,3 +141,27 @@ def last_report(v: VesselReports, rules: EventRules) -> LastReport:
         v.mmsi, float(v.time_s[-1]), float(v.lon[-1]), float(v.lat[-1]), limit, usual,
         land is not None and bool(land[0]),
     )  # fmt: skip
+
+
+def identity_events(
+    v: VesselReports, second: VesselReports | None, identity: Identity, rules: EventRules
+) -> list[dict[str, Any]]:
+    """A window's identity events, as the batch finds them (`aisdati.events.identity`): the
+    conflict of its two transmitters (`second`: the second's reports, None: one), and each
+    change of its identity history within the window (an earlier one was raised by the window
+    that held it)."""
+    who = {"mmsi": v.mmsi, "name": identity.name, "ship_type": identity.ship_type}
+    rows = []
+    if second is not None:
+        rows += conflict_rows(v, second, (who, {**who, "mmsi": second.mmsi}))
+    history = identity.history_table()
+    if history is not None:
+        repeats = rules.settings.identity_repeats
+        changes = identity_changes(history, repeats)
+        at = [pd.Timestamp(after["first"]).timestamp() for _, after in changes]
+        rows += [
+            change_row(v, a, b, who)
+            for (a, b), t in zip(changes, at, strict=True)
+            if v.time_s[0] <= t
+        ]
+    return rows

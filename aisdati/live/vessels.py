@@ -93,17 +93,22 @@ class Vessels:
         self.clock_us = max(self.clock_us, int(cols["time_us"].max()))
         return set(keys.tolist())
 
-    def identify(self, identities: dict[int, Identity]) -> None:
-        """What static messages said, over what was known (a field not given is kept)."""
-        for mmsi, said in identities.items():
+    def identify(self, identities: dict[int, list]) -> None:
+        """What static messages said (`Decoder.identities`), over what was known (a field not
+        given is kept), each into the vessel's identity history at its time (the feed's time
+        where its line gave none)."""
+        for mmsi, messages in identities.items():
             one = self.recent.setdefault(mmsi, Recent(empty_columns()))
-            old, one.heard_us = one.identity, max(one.heard_us, self.clock_us)
-            one.identity = replace(
-                old,
-                name=said.name or old.name,
-                ship_type=said.ship_type or old.ship_type,
-                length_m=old.length_m if np.isnan(said.length_m) else said.length_m,
-            )
+            one.heard_us = max(one.heard_us, self.clock_us)
+            for (name, ship_type, length_m), time_us in messages:
+                old = one.identity
+                at = self.clock_us if time_us == np.iinfo(np.int64).min else time_us
+                one.identity = replace(
+                    old.heard((name, ship_type, length_m), at),
+                    name=name or old.name,
+                    ship_type=ship_type or old.ship_type,
+                    length_m=old.length_m if np.isnan(length_m) else length_m,
+                )
 
     def window(self, mmsi: int) -> dict[str, np.ndarray]:
         one = self.recent[mmsi]

@@ -19,6 +19,7 @@ from aisdati.geo import haversine_m, haversine_one_m, initial_bearing_deg
 from aisdati.preprocess.report import CODE
 from aisdati.preprocess.roi import in_roi
 from aisdati.preprocess.settings import IngestSettings
+from aisdati.preprocess.transmitters import split_transmitters
 from aisdati.tracks.schema import KNOT_MPS
 
 SENTINEL_LAT = 91.0
@@ -169,12 +170,19 @@ def _implied_speed_outliers(mmsi, time_us, lon, lat, max_mps, tolerance_m, reset
 
 
 def clean_vessels(table: pa.Table, settings: IngestSettings) -> tuple[pa.Table, np.ndarray]:
-    """Per-vessel cleaning of a partition holding whole vessels: sort by (MMSI, time), reject
-    exact duplicates and repeated timestamps, then position outliers by implied speed, then derive
-    missing SOG/COG from the kept positions and apply the SOG filter to them.
+    """Per-vessel cleaning of a partition holding whole vessels: sort by (MMSI, time), tell
+    apart two transmitters sharing an MMSI (`transmitters.split_transmitters`: the second's
+    reports kept under an id of its own, not dropped as outliers), reject exact duplicates and
+    repeated timestamps, then position outliers by implied speed, then derive missing SOG/COG
+    from the kept positions and apply the SOG filter to them.
     Returns the sorted table (with SOG/COG filled in) and one code per row."""
     order = np.lexsort((_col(table, "time").view(np.int64), _col(table, "mmsi")))
-    table = table.take(pa.array(order))
+    table = split_transmitters(
+        table.take(pa.array(order)),
+        settings.max_speed_kn * KNOT_MPS,
+        POSITION_TOLERANCE_M,
+        int(settings.stop_gap_s * 1e6),
+    )
     mmsi = _col(table, "mmsi")
     time_us = _col(table, "time").view(np.int64)
     lon, lat, sog, cog = (_col(table, c).copy() for c in ("lon", "lat", "sog", "cog"))

@@ -104,12 +104,14 @@ class ParsedBlock:
     def rows(self) -> int:
         return len(self.slow)
 
-    def static_tally(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def static_tally(self, time_us: np.ndarray) -> tuple[np.ndarray, ...]:
         """The distinct static hashes of the plain rows (0 aside), sorted (the tally looks them
-        up among those it knows in one sweep), how many rows have each, and the last of them."""
-        keys, counts, last = tally_keys(self.keys, self.slow)
+        up among those it knows in one sweep), how many rows have each, the last of them, and
+        the earliest and latest of their times `time_us` (microseconds; the int64 minimum:
+        none; `NO_FIRST`/`NO_LAST` where no row has one)."""
+        keys, counts, last, first_us, last_us = tally_keys(self.keys, self.slow, time_us)
         order = np.argsort(keys)
-        return keys[order], counts[order], last[order]
+        return keys[order], counts[order], last[order], first_us[order], last_us[order]
 
     def lines(self, block: bytes | memoryview, rows: np.ndarray) -> bytes:
         """The text of these rows of `block` (parsed into this), each ended by a line end."""
@@ -254,9 +256,10 @@ def _row_key(static, mmsi):  # pragma: no cover - compiled
 
 
 @numba.njit(nogil=True, cache=True)
-def tally_keys(keys, slow):  # pragma: no cover - compiled
+def tally_keys(keys, slow, time_us):  # pragma: no cover - compiled
     """The distinct nonzero `keys` of the rows that are not `slow`, in the order first met,
-    with the rows that have each and the last such row: one pass over an open-addressing
+    with the rows that have each, the last such row, and their earliest and latest time: one
+    pass over an open-addressing
     table (a sort of the block's keys took 5 times as long)."""
     n = keys.shape[0]
     size = 16
@@ -266,6 +269,9 @@ def tally_keys(keys, slow):  # pragma: no cover - compiled
     found = np.empty(n, np.int64)
     counts = np.zeros(n, np.int64)
     last = np.empty(n, np.int64)
+    none = np.iinfo(np.int64).min
+    first_us = np.full(n, np.iinfo(np.int64).max)
+    last_us = np.full(n, none)
     m = 0
     for i in range(n):
         key = keys[i]
@@ -280,7 +286,10 @@ def tally_keys(keys, slow):  # pragma: no cover - compiled
             m += 1
         counts[where[h]] += 1
         last[where[h]] = i
-    return found[:m], counts[:m], last[:m]
+        if time_us[i] != none:
+            first_us[where[h]] = min(first_us[where[h]], time_us[i])
+            last_us[where[h]] = max(last_us[where[h]], time_us[i])
+    return found[:m], counts[:m], last[:m], first_us[:m], last_us[:m]
 
 
 @numba.njit(nogil=True, cache=True, inline="always")

@@ -33,10 +33,10 @@ from __future__ import annotations
 import math
 import re
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -45,7 +45,7 @@ from pyais.messages import AISSentence, GatehouseSentence, NMEASentence, NMEASen
 
 from aisdati.errors import UserError
 from aisdati.preprocess.clean import SENTINEL_COG, SENTINEL_SOG
-from aisdati.preprocess.convert import EPOCH_UNITS, canonical_tables
+from aisdati.preprocess.convert import EPOCH_UNITS, canonical_tables, time_us
 from aisdati.preprocess.inputs import (
     AIS_SENTENCE,
     SNIFF_BYTES,
@@ -200,6 +200,24 @@ class Part:
     line: bytes
 
 
+class Static(NamedTuple):
+    """A static message: the vessel it names, its name, ship-type code and length (None where
+    it gives none), and the time of its line (None: none)."""
+
+    mmsi: int
+    name: str | None
+    ship_type: int | None
+    length: int | None
+    time: str | None
+
+
+def static_times_us(times: Sequence[str | None]) -> np.ndarray:
+    """Static messages' times (as their lines give them, like the rows' `BaseDateTime`) in
+    microseconds since the epoch; the int64 minimum where none."""
+    us, bad = time_us(pa.array(times, pa.string()))
+    return np.where(bad, np.iinfo(np.int64).min, us)
+
+
 class NmeaDecoder:
     """Lines in; position rows (taken as record batches of `FRAME_SCHEMA`) and skipped lines
     (handed to `skip` with their reason) out. With `recent`, a copy of a message already read
@@ -210,9 +228,8 @@ class NmeaDecoder:
     ) -> None:
         self.skip = skip
         self.recent = recent
-        self.statics: list[tuple[int, str | None, int | None, int | None]] = []
-        """(MMSI, name, ship-type code, length) of each static message decoded since the last
-        `take_statics`."""
+        self.statics: list[Static] = []
+        """Each static message decoded since the last `take_statics`."""
         self._rows: list[tuple] = []
         self._gatehouse: str | None = None  # the time of the last $PGHP, for the next sentence
         self._parts: dict[tuple, list[Part]] = {}  # unfinished messages by their stream
@@ -305,7 +322,7 @@ class NmeaDecoder:
             return
         if message.ais_id not in POSITION_TYPES:
             if message.ais_id in STATIC_TYPES:
-                self._static(message)
+                self._static(message, time)
             self.skip("not_position", text)
             return
         try:
@@ -332,26 +349,28 @@ class NmeaDecoder:
         status = None if status is None else int(status)
         self._rows.append((report.mmsi, time, report.lat, report.lon, sog, cog, heading, status))
         if report.msg_type in STATIC_TYPES:
-            self._add_static(report)
+            self._add_static(report, time)
 
-    def _static(self, message: AISSentence) -> None:
+    def _static(self, message: AISSentence, time: str | None) -> None:
         """The vessel a static message names (none where it does not decode)."""
         try:
             report = message.decode()
         except AISBaseException:
             return
-        self._add_static(report)
+        self._add_static(report, time)
 
-    def _add_static(self, report: Any) -> None:
+    def _add_static(self, report: Any, time: str | None) -> None:
         """Name, ship type and length (bow to stern, 0: not available) of a decoded message of
-        `STATIC_TYPES` (type 24's part A gives the name only, part B the rest)."""
+        `STATIC_TYPES` (type 24's part A gives the name only, part B the rest), at its time
+        (None: the line gave none)."""
         kind = getattr(report, "ship_type", None)
         bow, stern = getattr(report, "to_bow", None), getattr(report, "to_stern", None)
         length = None if bow is None or stern is None else bow + stern
         name = getattr(report, "shipname", None)
-        self.statics.append((report.mmsi, name, None if kind is None else int(kind), length))
+        kind = None if kind is None else int(kind)
+        self.statics.append(Static(report.mmsi, name, kind, length, time))
 
-    def take_statics(self) -> list[tuple[int, str | None, int | None, int | None]]:
+    def take_statics(self) -> list[Static]:
         """The static messages decoded since the last call."""
         statics, self.statics = self.statics, []
         return statics
@@ -450,11 +469,11 @@ class NmeaReader:
         finally:
             stream.close()
 
-    def _tally(self, statics: list[tuple[int, str | None, int | None, int | None]]) -> None:
-        """Static messages into `vessels`, in the order read."""
+    def _tally(self, statics: list[Static]) -> None:
+        """Static messages into `vessels`, in the order read, at their times."""
         if not statics:
             return
-        mmsi, names, kinds, lengths = zip(*statics, strict=True)
+        mmsi, names, kinds, lengths, times = zip(*statics, strict=True)
         order = np.arange(self._statics_seen, self._statics_seen + len(statics))
         self._statics_seen += len(statics)
         columns = {
@@ -462,4 +481,4 @@ class NmeaReader:
             "ship_type": pa.array(kinds, pa.int64()),
             "length": pa.array(lengths, pa.int64()),
         }
-        self.vessels.add(np.array(mmsi, np.int64), columns, order)
+        self.vessels.add(np.array(mmsi, np.int64), columns, order, static_times_us(times))

@@ -111,6 +111,7 @@ OUTPUT_NAMES = (
     "tracks.parquet",
     "reports.parquet",
     "vessels.parquet",
+    "identities.parquet",
     "ingest_report.json",
     "rejects.parquet",
     *ROUTE_FILES,

@@ -80,8 +80,14 @@ from aisdati.preprocess.tasks import (
     shift_track_ids,
     write_part,
 )
-from aisdati.preprocess.vessels import vessels_table, winners, with_vessels
-from aisdati.tracks.schema import POINTS_SCHEMA, REJECTS_SCHEMA, REPORTS_SCHEMA
+from aisdati.preprocess.vessels import identity_history, vessels_table, winners, with_vessels
+from aisdati.tracks.schema import (
+    POINTS_SCHEMA,
+    REJECTS_SCHEMA,
+    REPORTS_SCHEMA,
+    is_second_transmitter,
+    mmsi_of,
+)
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -194,7 +200,10 @@ def _run(
         stage_seconds["routes"] = time.perf_counter() - routed_at
         staged.extend(route_files)
         vessels = vessels_table(found, mmsi)
+        counts.two_transmitters = [mmsi_of(m) for m in mmsi if is_second_transmitter(m)]
         staged.append(write_table(stage / "vessels.parquet", vessels))
+        history = identity_history([read.vessels for read in reads])
+        staged.append(write_table(stage / "identities.parquet", history))
         rows = (
             with_vessels(with_routes(shift_track_ids(p.spilled(), p.offset), labels_of(p)), vessels)
             for p in parts

@@ -64,7 +64,7 @@ class PlainRows(NamedTuple):
     parsed: ParsedBlock
     table: pa.Table
     codes: np.ndarray
-    tally: tuple[np.ndarray, np.ndarray, np.ndarray]
+    tally: tuple[np.ndarray, ...]
 
 
 class TableReader(Protocol):
@@ -248,7 +248,8 @@ class SourceReader:
         """The vessels of a batch's rows read the usual way (`table`: them made canonical), at
         `rows` from `_position` on."""
         statics = {key: batch.column(self.columns[key]) for key in STATIC if key in self.columns}
-        self.vessels.add(table.column("mmsi").to_numpy(), statics, self._position + rows)
+        mmsi, time_us = table.column("mmsi").to_numpy(), time_of(table)
+        self.vessels.add(mmsi, statics, self._position + rows, time_us)
 
     def _segments(self) -> Iterator[tuple[LineGuard, list[str], dict[str, str]]]:
         """The CSV's stretches under each header line: the guarded stream, positioned at the
@@ -369,7 +370,7 @@ class SourceReader:
         parsed = parse_block(block, slots)
         batch = typed_batch(parsed, slots, self.columns)
         table, codes = to_canonical(batch, self.columns, src)
-        return PlainRows(parsed, table, codes, parsed.static_tally())
+        return PlainRows(parsed, table, codes, parsed.static_tally(time_of(table)))
 
     def _block_table(
         self,
@@ -419,13 +420,14 @@ class SourceReader:
         self,
         block: bytes | memoryview,
         parsed: ParsedBlock,
-        tally: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tally: tuple[np.ndarray, ...],
         names: list[str],
         columns: dict[str, str],
     ) -> None:
-        """The vessels of a block's plain rows, from their static hashes (`tally`): the text of
-        one row of each hash not met before read the usual way, then the counts."""
-        keys, counts, last = tally
+        """The vessels of a block's plain rows, from their static hashes (`tally`,
+        `ParsedBlock.static_tally`): the text of one row of each hash not met before read the
+        usual way, then the counts and times."""
+        keys, counts, last, first_us, last_us = tally
         if not len(keys):
             return
         numbers = self.vessels.numbers(keys)
@@ -436,7 +438,7 @@ class SourceReader:
             usual = self._read_usual(pa.py_buffer(text), names, columns, numbered=False)
             statics = {k: usual.column(self.columns[k]) for k in STATIC if k in self.columns}
             numbers[new] = self.vessels.know(keys[new], parsed.mmsi[rows], statics)
-        self.vessels.add_counts(numbers, counts, self._position + last)
+        self.vessels.add_counts(numbers, counts, self._position + last, (first_us, last_us))
 
     def _read_usual(
         self, text: pa.Buffer, names: list[str], columns: dict[str, str], numbered: bool
@@ -524,3 +526,8 @@ def check_parquet_types(schema: pa.Schema, columns: dict[str, str], label: str) 
                 )
         elif not _holds_numbers(kind):
             raise UserError(f"{label}: column {name} has type {kind}, expected numbers")
+
+
+def time_of(table: pa.Table) -> np.ndarray:
+    """A canonical table's times, microseconds since the epoch (NaT: the int64 minimum)."""
+    return table.column("time").to_numpy().view(np.int64)

@@ -64,6 +64,9 @@ class IngestCounts:
     """Rows of reports.parquet: every report judged, whatever its speed (not in the balance)."""
     short_segments: int = 0
     tracks: dict[str, int] = field(default_factory=lambda: {"up": 0, "down": 0, "other": 0})
+    two_transmitters: list[int] = field(default_factory=list)
+    """The MMSIs heard from two transmitters at once, each kept as two vessels
+    (`aisdati.preprocess.transmitters`): set once the vessels are known, not summed."""
 
     def add_codes(self, codes: np.ndarray) -> None:
         """Count the rejection codes of one batch (code 0, kept, is not counted here)."""
@@ -105,6 +108,7 @@ class IngestCounts:
             "reports_kept": self.reports_kept,
             "short_segments_dropped": self.short_segments,
             "tracks": {**self.tracks, "total": sum(self.tracks.values())},
+            "two_transmitters": self.two_transmitters,
             "files": self.files,
         }
 

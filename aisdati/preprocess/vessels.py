@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aisdati.tracks.schema import VESSEL_COLUMNS, VESSEL_SCHEMA
+from aisdati.tracks.schema import IDENTITY_SCHEMA, VESSEL_COLUMNS, VESSEL_SCHEMA, mmsi_of
 
 ORDER_BITS = 40
 """A row's place in the input: its source number above this many bits, its row in the source
@@ -57,10 +57,14 @@ TALLY_SCHEMA = pa.schema(
         *VESSEL_SCHEMA,
         ("count", pa.int64()),
         ("last", pa.int64()),
+        ("first_us", pa.int64()),
+        ("last_us", pa.int64()),
     ]
 )
-"""One row per distinct (MMSI, name, ship type, length): how often it was seen, and where last
-(`ORDER_BITS`)."""
+"""One row per distinct (MMSI, name, ship type, length): how often it was seen, where last
+(`ORDER_BITS`), and when first and last (microseconds since the epoch; `NO_FIRST`/`NO_LAST`
+where the source gave no time with it): the identity history (`identity_history`)."""
+NO_FIRST, NO_LAST = np.iinfo(np.int64).max, np.iinfo(np.int64).min
 
 
 def ship_type_of(text: str) -> str | None:
@@ -124,26 +128,43 @@ def _given(mmsi: np.ndarray, values: list[pa.Array]) -> np.ndarray:
     return given & (mmsi > 0)
 
 
-def _rows(mmsi: np.ndarray, values: list[pa.Array], order: np.ndarray) -> pa.Table:
+def _rows(
+    mmsi: np.ndarray, values: list[pa.Array], order: np.ndarray, time_us: np.ndarray | None = None
+) -> pa.Table:
     ones = np.ones(len(mmsi), np.int64)
-    return pa.table(
-        [pa.array(mmsi, pa.int64()), *values, ones, order.astype(np.int64)], schema=TALLY_SCHEMA
-    )
+    first, last = _times(time_us, len(mmsi))
+    columns = [pa.array(mmsi, pa.int64()), *values, ones, order.astype(np.int64), first, last]
+    return pa.table(columns, schema=TALLY_SCHEMA)
 
 
-def statics_rows(mmsi: np.ndarray, columns: dict[str, pa.Array], order: np.ndarray) -> pa.Table:
+def _times(time_us: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows' times (microseconds; NaT's or none: unknown) as their first and last time."""
+    if time_us is None:
+        return np.full(n, NO_FIRST), np.full(n, NO_LAST)
+    time_us = np.asarray(time_us).view(np.int64)
+    return np.where(time_us == NO_LAST, NO_FIRST, time_us), time_us
+
+
+def statics_rows(
+    mmsi: np.ndarray,
+    columns: dict[str, pa.Array],
+    order: np.ndarray,
+    time_us: np.ndarray | None = None,
+) -> pa.Table:
     """Tally rows (`TALLY_SCHEMA`, a count of 1 each) of rows with these MMSIs (0: none) and
     static columns (`STATIC_COLUMNS`, as the source wrote them; absent: none), at places
-    `order`; rows without an MMSI, or without any value, are left out."""
+    `order` and times `time_us` (None: unknown); rows without an MMSI, or without any value,
+    are left out."""
     values = _values(columns, len(mmsi))
-    return _rows(mmsi, values, order).filter(pa.array(_given(mmsi, values)))
+    return _rows(mmsi, values, order, time_us).filter(pa.array(_given(mmsi, values)))
 
 
 def tally(rows: pa.Table) -> pa.Table:
     """Tally rows merged: one per distinct (MMSI, name, ship type, length)."""
     keys = VESSEL_SCHEMA.names
-    merged = rows.group_by(keys, use_threads=False).aggregate([("count", "sum"), ("last", "max")])
-    return merged.rename_columns({"count_sum": "count", "last_max": "last"}).cast(TALLY_SCHEMA)
+    sums = [("count", "sum"), ("last", "max"), ("first_us", "min"), ("last_us", "max")]
+    merged = rows.group_by(keys, use_threads=False).aggregate(sums)
+    return merged.rename_columns([*keys, *TALLY_SCHEMA.names[len(keys) :]]).cast(TALLY_SCHEMA)
 
 
 class VesselTally:
@@ -161,14 +182,22 @@ class VesselTally:
         """Each sorted hash's number (the order they became known)."""
         self._counts = np.zeros(0, np.int64)
         self._last = np.zeros(0, np.int64)
+        self._first_us = np.zeros(0, np.int64)
+        self._last_us = np.zeros(0, np.int64)
         self._values: list[pa.Table] = []
         """Tally rows of the known hashes, by number."""
 
-    def add(self, mmsi: np.ndarray, columns: dict[str, pa.Array], order: np.ndarray) -> None:
-        """Rows (see `statics_rows`) at places `order` of the source."""
+    def add(
+        self,
+        mmsi: np.ndarray,
+        columns: dict[str, pa.Array],
+        order: np.ndarray,
+        time_us: np.ndarray | None = None,
+    ) -> None:
+        """Rows (see `statics_rows`) at places `order` of the source, at times `time_us`."""
         if not columns or not len(mmsi):
             return
-        self._tables.append(tally(statics_rows(mmsi, columns, order)))
+        self._tables.append(tally(statics_rows(mmsi, columns, order, time_us)))
         self._held += self._tables[-1].num_rows
         if self._held > COMPACT_ROWS:
             self._tables, self._held = [tally(pa.concat_tables(self._tables))], 0
@@ -192,13 +221,25 @@ class VesselTally:
         self._numbers = np.concatenate([self._numbers, numbers])[order]
         self._counts = np.concatenate([self._counts, np.zeros(len(keys), np.int64)])
         self._last = np.concatenate([self._last, np.zeros(len(keys), np.int64)])
+        self._first_us = np.concatenate([self._first_us, np.full(len(keys), NO_FIRST)])
+        self._last_us = np.concatenate([self._last_us, np.full(len(keys), NO_LAST)])
         return numbers
 
-    def add_counts(self, numbers: np.ndarray, counts: np.ndarray, order: np.ndarray) -> None:
+    def add_counts(
+        self,
+        numbers: np.ndarray,
+        counts: np.ndarray,
+        order: np.ndarray,
+        times_us: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
         """Counts per hash, by the hashes' (distinct) numbers, each last seen at `order` (later
-        than any place before)."""
+        than any place before), first and last at `times_us` (None: unknown)."""
         self._counts[numbers] += counts
         self._last[numbers] = order
+        if times_us is not None:
+            first, _ = _times(times_us[0], len(numbers))
+            self._first_us[numbers] = np.minimum(self._first_us[numbers], first)
+            self._last_us[numbers] = np.maximum(self._last_us[numbers], times_us[1])
 
     def table(self, src: int) -> pa.Table:
         """The tally of the source numbered `src` (`TALLY_SCHEMA`, places in the input)."""
@@ -211,7 +252,13 @@ class VesselTally:
         """The counts per hash as tally rows, each hash with its values (a hash whose rows give
         none is left out)."""
         rows = pa.concat_tables([TALLY_SCHEMA.empty_table(), *self._values])
-        for name, column in (("count", self._counts), ("last", self._last)):
+        kept = (
+            ("count", self._counts),
+            ("last", self._last),
+            ("first_us", self._first_us),
+            ("last_us", self._last_us),
+        )
+        for name, column in kept:
             rows = rows.set_column(TALLY_SCHEMA.get_field_index(name), name, pa.array(column))
         values = [rows.column(field) for field in VESSEL_COLUMNS]
         given = _given(rows.column("mmsi").to_numpy(), values) & (self._counts > 0)
@@ -255,9 +302,11 @@ def values_by_mmsi(table: pa.Table, field: str, mmsi: np.ndarray) -> pa.Array:
 
 
 def vessels_table(found: pa.Table, mmsi: np.ndarray) -> pa.Table:
-    """vessels.parquet: one row per MMSI of `mmsi` (sorted, unique), with its values from
-    `found` (`winners`) or none."""
-    columns = [values_by_mmsi(found, field, mmsi) for field in VESSEL_COLUMNS]
+    """vessels.parquet: one row per vessel of `mmsi` (sorted, unique), with its values from
+    `found` (`winners`) or none; a second transmitter's id (`schema.TRANSMITTER_STEP`) with
+    those of its MMSI, whose static messages no receiver can tell apart."""
+    named = np.array([mmsi_of(m) for m in mmsi], np.int64)
+    columns = [values_by_mmsi(found, field, named) for field in VESSEL_COLUMNS]
     return pa.table([pa.array(mmsi, pa.int64()), *columns], schema=VESSEL_SCHEMA)
 
 
@@ -270,3 +319,19 @@ def with_vessels(tracks: pa.Table, vessels: pa.Table) -> pa.Table:
         values = values_by_mmsi(vessels, field, mmsi)
         tracks = tracks.set_column(at, tracks.schema.field(at), values)
     return tracks
+
+
+def identity_history(tallies: list[pa.Table]) -> pa.Table:
+    """identities.parquet (`IDENTITY_SCHEMA`): each distinct identity of each vessel over every
+    source's tally, with its first and last time (null where no source gave one) and its
+    reports, sorted by MMSI, then first time."""
+    merged = tally(pa.concat_tables([TALLY_SCHEMA.empty_table(), *tallies]))
+    first, last = merged.column("first_us"), merged.column("last_us")
+    columns = [merged.column(name) for name in VESSEL_SCHEMA.names]
+    for times, none in ((first, NO_FIRST), (last, NO_LAST)):
+        known = pc.not_equal(times, pa.scalar(none, pa.int64()))
+        as_time = times.cast(pa.timestamp("us")).cast(IDENTITY_SCHEMA.field("first").type)
+        columns.append(pc.if_else(known, as_time, pa.scalar(None, as_time.type)))
+    columns.append(merged.column("count"))
+    history = pa.table(columns, schema=IDENTITY_SCHEMA)
+    return history.sort_by([("mmsi", "ascending"), ("first", "ascending")])

@@ -15,6 +15,7 @@ from aisdati.errors import UserError
 
 REPORTS = "reports.parquet"
 VESSELS = "vessels.parquet"
+IDENTITIES = "identities.parquet"
 IDENTITY = ("name", "ship_type", "length_m")
 
 
@@ -62,3 +63,10 @@ def read_vessels(data_dir: Path) -> pd.DataFrame:
     if not path.exists():
         return pd.DataFrame(columns=list(IDENTITY), index=pd.Index([], name="mmsi"))
     return pd.read_parquet(path).set_index("mmsi")
+
+
+def read_identities(data_dir: Path) -> pd.DataFrame | None:
+    """The identity history of every vessel (identities.parquet, `aisdati.tracks.schema.
+    IDENTITY_SCHEMA`); None where the ingest output predates it."""
+    path = data_dir / IDENTITIES
+    return pd.read_parquet(path) if path.exists() else None

@@ -39,6 +39,24 @@ POINTS_SCHEMA = pa.schema([("track_id", pa.int64()), *REPORT_FIELDS])
 """A report a track is made of. `heading` (degrees, [0, 360)) is NaN where the report gave none
 (AIS's 511, a blank); `status` is the navigational status (ITU-R M.1371: 0 under way using
 engine, 1 at anchor, 5 moored, ...; 0-14), null where it is not defined (15) or not given."""
+TRANSMITTER_STEP = 1_000_000_000
+"""One MMSI heard from two transmitters at once (`aisdati.preprocess.transmitters`) is kept as
+two vessels: the first transmitter under the MMSI, the second under MMSI + this (366123456's
+second transmitter is 1366123456), so that no track joins them. MMSIs are nine digits; ingest
+accepts longer numbers but never splits them, and reads an id of ten digits starting with 1 as
+a second transmitter's."""
+
+
+def mmsi_of(vessel: int) -> int:
+    """The MMSI a vessel id stands for: itself, or the MMSI of a second transmitter's id."""
+    vessel = int(vessel)
+    return vessel - TRANSMITTER_STEP if is_second_transmitter(vessel) else vessel
+
+
+def is_second_transmitter(vessel: int) -> bool:
+    return TRANSMITTER_STEP <= vessel < 2 * TRANSMITTER_STEP
+
+
 VESSEL_SCHEMA = pa.schema(
     [
         ("mmsi", pa.int64()),
@@ -52,6 +70,19 @@ none was given); `ship_type` is the ITU ship-type group of a numeric code (Fishi
 ...) or the source's own text."""
 VESSEL_COLUMNS = VESSEL_SCHEMA.names[1:]
 """What tracks.parquet repeats of its vessel."""
+
+IDENTITY_SCHEMA = pa.schema(
+    [
+        *VESSEL_SCHEMA,
+        ("first", UTC_US),
+        ("last", UTC_US),
+        ("reports", pa.int64()),
+    ]
+)
+"""identities.parquet: each identity a vessel reported (its name, ship type and length, as
+vessels.parquet holds them; null where a message left one out), with its first and last time
+(null where the source gave static data without times) and how many reports gave it: the
+history `identity-change` is found in (`aisdati.events.identity`), sorted by MMSI, then first."""
 TRACKS_SCHEMA = pa.schema(
     [
         ("track_id", pa.int64()),

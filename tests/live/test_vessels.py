@@ -4,9 +4,9 @@ silent too long or too many: memory stays bounded when vessels keep appearing.""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 
-from aisdati.live.decode import Identity
 from aisdati.live.judge import cleaned
 from aisdati.live.vessels import Vessels
 from aisdati.preprocess.convert import PARTITION_SCHEMA
@@ -45,11 +45,18 @@ def test_vessels_silent_too_long_or_too_many_are_forgotten():
     assert list(v.recent) == [9] and v.forgotten == 5
 
 
-def test_identity_fields_not_given_are_kept():
+def test_identity_fields_not_given_are_kept_and_each_message_is_in_the_history():
     v = Vessels()
-    v.identify({7: Identity("FRIO", None, np.nan)})
-    v.identify({7: Identity(None, "Tanker", 274.0)})
-    assert v.recent[7].identity == Identity("FRIO", "Tanker", 274.0)
+    v.identify({7: [(("FRIO", None, np.nan), 1_000_000)]})
+    v.identify({7: [((None, "Tanker", 274.0), 2_000_000), ((None, "Tanker", 274.0), 3_000_000)]})
+    identity = v.recent[7].identity
+    assert (identity.name, identity.ship_type, identity.length_m) == ("FRIO", "Tanker", 274.0)
+    history = identity.history_table()
+    assert history["name"].tolist()[0] == "FRIO" and history["ship_type"].tolist()[1] == "Tanker"
+    assert history["name"].isna().tolist() == [False, True]
+    assert history["reports"].tolist() == [1, 2]
+    assert history["first"].tolist() == [pd.Timestamp(s, unit="s", tz="UTC") for s in (1, 2)]
+    assert history["last"].tolist() == [pd.Timestamp(s, unit="s", tz="UTC") for s in (1, 3)]
 
 
 def test_windows_cleaned_together_are_each_cleaned_alone():
