@@ -24,6 +24,9 @@ class Case:
     mmsis: tuple[int, ...]
     start: pd.Timestamp
     end: pd.Timestamp
+    coverage: str | None = None
+    """A gap's expected coverage ("heard", "quiet"; `aisdati.events.coverage`): found only by
+    a gap that says so; None: not judged."""
 
 
 Constructor = Callable[
@@ -34,6 +37,7 @@ Constructor = Callable[
 and identity with one case written in, and the case; None where the traffic offers no place
 for one (e.g. no vessel long enough at sea)."""
 CONSTRUCTORS: dict[str, Constructor] = {}
+"""Each constructed case by name: its kind, or its kind and what it expects ("gap heard")."""
 
 
 def named(event: pd.Series) -> set[int]:
@@ -44,8 +48,18 @@ def named(event: pd.Series) -> set[int]:
 
 def found(case: Case, events: pd.DataFrame) -> bool:
     """Whether `events` hold an event of the case's kind that overlaps its time and names
-    every vessel it involves."""
+    every vessel it involves (and, where the case expects one, says its coverage)."""
     mine = events[events["kind"] == case.kind]
+    if case.coverage is not None:
+        mine = mine[mine["coverage"] == case.coverage]
     start, end = pd.to_datetime(mine["start"], utc=True), pd.to_datetime(mine["end"], utc=True)
     mine = mine[(start <= case.end) & (end >= case.start)]
     return any(set(case.mmsis) <= named(e) for _, e in mine.iterrows())
+
+
+# each case's constructor, registered by its own module (which reads `Case` from here)
+from aisdati.evaluation import interference_case  # noqa: E402
+
+CONSTRUCTORS["gnss-interference"] = interference_case.construct_interference
+CONSTRUCTORS["gap heard"] = interference_case.construct_gap_heard
+CONSTRUCTORS["gap quiet"] = interference_case.construct_gap_quiet
