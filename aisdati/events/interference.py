@@ -130,7 +130,8 @@ def signature(
 ) -> Signature | None:
     """The way most of a candidate area's vessels were displaced alike, where at least
     `interference_min_vessels` were: one common shift, onto or from one common point, onto one
-    circle, or ashore (`land`: which jumps end on land); None where they share none."""
+    circle, or ashore (`land`: which of the group's jumps end on land, `land_mask`, asked of
+    the group's area alone); None where they share none."""
     found = [
         _common_shift(j, group, s), _common_point(j, group, s), _circle(j, group, s),
         _ashore(group, land),
@@ -230,9 +231,9 @@ def displaced_ends(j: Jumps, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _ashore(group: np.ndarray, land: np.ndarray | None) -> Signature | None:
-    if land is None or not land[group].any():
+    if land is None or not land.any():
         return None
-    return Signature("ashore", group[land[group]])
+    return Signature("ashore", group[land])
 
 
 def _metres(lonlat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -325,10 +326,10 @@ def gnss_interference(fleet: Fleet, rules: EventRules) -> list[dict[str, Any]]:
     j = fleet_jumps(fleet, s)
     if len(j) == 0:
         return []
-    events, land = [], land_mask(j.after, rules.seen)
+    events = []
     for group in merged(areas(j, s), j):
         group = extended(group, j, s)
-        sig = signature(j, group, s, land)
+        sig = signature(j, group, s, land_mask(j.after[group], rules.seen))
         if sig is None:
             continue
         rows = group[np.isin(j.mmsi[group], j.mmsi[sig.jumps])]
