@@ -10,11 +10,11 @@ traffic (`aisdati.evaluation.constructed`).
   the vessels whose displacement shows: two displaced reports or more, and a report at most a
   jump's longest step (`EventSettings.jump_step_max_s`) before the first; it needs three.
 - **gap heard**: a vessel under way silenced (its reports removed) for 1.2-3 times its gap
-  limit (`aisdati.events.behaviour.gap_limit`), where other vessels near both ends kept
-  reporting during it: found as a gap whose coverage is "heard".
+  limit (`aisdati.events.behaviour.gap_limit`), both ends at sea, where another vessel
+  reported near its path during it: found as a gap whose coverage is "heard".
 - **gap quiet**: the same silence, and every other report within `QUIET_M` of the vessel's
-  path during it removed too (an area silenced), where a neighbour reported near the ends
-  before and after: found as a gap whose coverage is "quiet"."""
+  path during it removed too (an area silenced), where others reported near its path before
+  and after: found as a gap whose coverage is "quiet"."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.evaluation.constructed import Case
-from aisdati.events.behaviour import gap_limit
+from aisdati.events.behaviour import gap_limit, land_mask
 from aisdati.events.coverage import HEARD, QUIET
 from aisdati.events.reports import VesselReports
 from aisdati.events.settings import EventSettings
@@ -166,6 +166,9 @@ def _silenced(
         v, SETTINGS
     ):
         return None  # not under way at its ends, or already silent in it
+    ashore = land_mask(v.positions(np.array([k, after])), None)
+    if ashore is not None and ashore.any():
+        return None  # a gap is at sea (`aisdati.events.behaviour.gaps`)
     span = (float(v.time_s[k]), float(v.time_s[after]))
     path = v.positions(np.arange(k, after + 1))
     path = path[:: max(1, len(path) // 20)]
