@@ -9,25 +9,11 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-
-@dataclass(frozen=True)
-class Case:
-    """One constructed case: the kind that should find it, the vessels it must name, and the
-    time it spans (UTC)."""
-
-    kind: str
-    mmsis: tuple[int, ...]
-    start: pd.Timestamp
-    end: pd.Timestamp
-    coverage: str | None = None
-    """A gap's expected coverage ("heard", "quiet"; `aisdati.events.coverage`): found only by
-    a gap that says so; None: not judged."""
-
+from aisdati.evaluation.case import Case
 
 Constructor = Callable[
     [pd.DataFrame, pd.DataFrame, np.random.Generator],
@@ -57,7 +43,7 @@ def found(case: Case, events: pd.DataFrame) -> bool:
     return any(set(case.mmsis) <= named(e) for _, e in mine.iterrows())
 
 
-# each case's constructor, registered by its own module (which reads `Case` from here)
+# each case's constructor, from its own module (which reads `Case` from aisdati.evaluation.case)
 from aisdati.evaluation import interference_case  # noqa: E402
 
 CONSTRUCTORS["gnss-interference"] = interference_case.construct_interference

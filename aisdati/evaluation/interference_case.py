@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from aisdati.evaluation.constructed import Case
+from aisdati.evaluation.case import Case
 from aisdati.events.behaviour import gap_limit, land_mask
 from aisdati.events.coverage import HEARD, QUIET
 from aisdati.events.reports import VesselReports
