@@ -6,9 +6,11 @@ traffic (`aisdati.evaluation.constructed`).
   to four hours, log-uniform) displaced together, one of three ways drawn alike: *shifted* by
   one vector (2-15 km, any bearing), *onto one point* (20-50 km away, the reports' own GNSS
   noise of a few metres kept), or *onto a circle* (radius 2-10 km, its centre 20-40 km away,
-  each vessel at its own angle going round it once in 20 minutes to 2 hours). The case names
-  the vessels whose displacement shows: two displaced reports or more, and a report at most a
-  jump's longest step (`EventSettings.jump_step_max_s`) before the first; it needs three.
+  each vessel at its own angle going round it once in 20 minutes to 2 hours). Every report in
+  the area then is displaced (vessels coming in later too); the case names the block: the
+  vessels there at its start whose displacement shows (two displaced reports or more, the
+  first within a jump's longest step, `EventSettings.jump_step_max_s`, of the start and of the
+  report before it); it needs three.
 - **gap heard**: a vessel under way silenced (its reports removed) for 1.2-3 times its gap
   limit (`aisdati.events.behaviour.gap_limit`), both ends at sea, where another vessel
   reported near its path during it: found as a gap whose coverage is "heard".
@@ -76,10 +78,10 @@ def displaced_block(
     for m in np.unique(mmsi[inside]):
         mine = np.flatnonzero((mmsi == m) & inside)
         before = mine[0] - 1
-        shows = (
-            before >= 0 and mmsi[before] == m and t[mine[0]] - t[before] <= SETTINGS.jump_step_max_s
-        )
-        if len(mine) >= 2 and shows:
+        at_once = t[mine[0]] - start <= SETTINGS.jump_step_max_s
+        heard = before >= 0 and mmsi[before] == m
+        shows = heard and t[mine[0]] - t[before] <= SETTINGS.jump_step_max_s
+        if len(mine) >= 2 and at_once and shows:
             named.append(int(m))
     if len(named) < SETTINGS.interference_min_vessels:
         return None
