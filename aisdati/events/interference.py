@@ -128,19 +128,22 @@ class Signature:
 def signature(
     j: Jumps, group: np.ndarray, s: EventSettings, land: np.ndarray | None
 ) -> Signature | None:
-    """The way most of a candidate area's vessels were displaced alike, where at least
-    `interference_min_vessels` were: one common shift, onto or from one common point, onto one
-    circle, or ashore (`land`: which of the group's jumps end on land, `land_mask`, asked of
-    the group's area alone); None where they share none."""
+    """The ways a candidate area's vessels were displaced alike, each by at least
+    `interference_min_vessels` of them (most first; the jumps of all): one common shift, onto
+    or from one common point, onto one circle, or ashore (`land`: which of the group's jumps
+    end on land, `land_mask`, asked of the group's area alone); None where they share none."""
     found = [
         _common_shift(j, group, s), _common_point(j, group, s), _circle(j, group, s),
         _ashore(group, land),
     ]  # fmt: skip
-    found = [f for f in found if f is not None]
-    if not found:
+    alike = [
+        f for f in found if f is not None and _vessels(j, f.jumps) >= s.interference_min_vessels
+    ]
+    if not alike:
         return None
-    best = max(found, key=lambda f: _vessels(j, f.jumps))
-    return best if _vessels(j, best.jumps) >= s.interference_min_vessels else None
+    alike.sort(key=lambda f: -_vessels(j, f.jumps))
+    how = "; ".join(f.how for f in alike)
+    return Signature(how, np.unique(np.concatenate([f.jumps for f in alike])))
 
 
 def _common_shift(j: Jumps, group: np.ndarray, s: EventSettings) -> Signature | None:
