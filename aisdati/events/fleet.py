@@ -68,7 +68,7 @@ def fleet_events(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataF
 def annotated(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFrame:
     """The one-vessel events with what only the other vessels can say of them: the one place
     for such annotations. Today each gap's `coverage` (`aisdati.events.coverage`: whether
-    others near its ends kept being heard during it)."""
+    others near it kept being heard during it)."""
     gaps = np.flatnonzero((own["kind"] == "gap").to_numpy()) if len(own) else []
     if not len(gaps):
         return own
