@@ -27,7 +27,6 @@ import pandas as pd
 
 from aisdati.evaluation.alerts import vessel_day_table
 from aisdati.evaluation.constructed import CONSTRUCTORS, found
-from aisdati.evaluation.identity_cases import renamed  # noqa: F401  (registers the cases)
 from aisdati.events.fleet import FLEET_FINDERS, Fleet
 from aisdati.events.reports import vessels
 from aisdati.events.rules import EventRules

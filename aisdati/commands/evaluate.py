@@ -228,4 +228,13 @@ def alerts_line(alerts: dict) -> str:
         f"[{low:.1f}, {high:.1f}] ({kinds or 'none'}); {alerts['tracks_flagged']} of "
         f"{alerts['tracks']} tracks ({share:.1f} %) flagged by an alert; "
         f"{alerts['activity_per_1000']:.0f} activities per 1,000 vessel-days"
+        + _coverage_words(alerts.get("gaps_by_coverage"))
     )
+
+
+def _coverage_words(rates: dict | None) -> str:
+    """The gaps per 1,000 vessel-days by coverage (heard: others kept reporting; quiet: the area
+    went silent)."""
+    if not rates:
+        return ""
+    return " (gaps: " + ", ".join(f"{k} {v:.1f}" for k, v in rates.items()) + ")"

@@ -5,6 +5,7 @@ goes through `escape`: `a[/]b` and `[x]` are printed as they are."""
 
 from __future__ import annotations
 
+import json
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -374,10 +375,10 @@ def events_table(events: pd.DataFrame, limit: int = 20, width: int = 120) -> Tab
         else "no events"
     )
     rows = list((ranked(events) if len(events) else events).head(limit).itertuples())
-    kinds = [Text(e.kind) for e in rows]
+    kinds = [Text(_kind(e)) for e in rows]
     evidence = [Text(str(e.evidence), style="dim") for e in rows]
     figures = [
-        Column("vessel", [Text(_vessel(e.mmsi, e.name)) for e in rows], wraps=True),
+        Column("vessel", [Text(_vessels(e)) for e in rows], wraps=True),
         Column("start (UTC)", [Text(f"{e.start:%Y-%m-%d %H:%M:%S}") for e in rows]),
         Column("for", [Text(_duration(e.duration_s)) for e in rows]),
         Column("at (lat, lon)", [Text(_place(e.lat, e.lon)) for e in rows]),
@@ -388,10 +389,30 @@ def events_table(events: pd.DataFrame, limit: int = 20, width: int = 120) -> Tab
         beneath = [Text("\n").join([k, e]) for k, e in zip(kinds, evidence, strict=True)]
         columns = [Column("kind, evidence", beneath, wraps=True), *figures]
     table = fitted_table(title, columns, width, EVENT_DROPS)
-    if len(events) > limit:
-        more = f"... and {len(events) - limit} more in events.parquet"
-        table.caption = "; ".join(filter(None, [table.caption, more]))
+    judged = "coverage" in events.columns and events["coverage"].notna().any()
+    covered = COVERAGE_CAPTION if judged else ""
+    more = f"... and {len(events) - limit} more in events.parquet" if len(events) > limit else ""
+    table.caption = "; ".join(filter(None, [table.caption, covered, more]))
     return table
+
+
+COVERAGE_CAPTION = (
+    "gap (heard): other vessels near it kept reporting, it likely stopped transmitting; "
+    "gap (quiet): they went silent too (coverage)"
+)
+
+
+def _kind(e: Any) -> str:
+    """An event's kind as the table names it: a gap with its coverage, where judged."""
+    coverage = getattr(e, "coverage", None)
+    return f"{e.kind} ({coverage})" if isinstance(coverage, str) else str(e.kind)
+
+
+def _vessels(e: Any) -> str:
+    """The vessel an event names, and how many others (a fleet event's)."""
+    named = getattr(e, "others", None)
+    others = len(json.loads(named)) if isinstance(named, str) else 0
+    return _vessel(e.mmsi, e.name) + (f" and {others} other(s)" if others else "")
 
 
 METRICS_CAPTION = (

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-import aisdati.events.identity  # noqa: F401  (registers its fleet finders)
 from aisdati.detection.routing import od_distances, reach_km
 from aisdati.detectors import Detector
 from aisdati.events.anchorages import Anchorages

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from aisdati.detection.webmap import html_detection_map
-from aisdati.events.kinds import ACTIVITY, ALERT
+from aisdati.events.kinds import ACTIVITY, ALERT, KINDS
 from aisdati.events.stretch import deviation_stretch
 from aisdati.events.table import events_geojson
 from aisdati.execution import InProcess, Runner
@@ -93,6 +93,17 @@ def gap_links(events: pd.DataFrame) -> list[tuple[np.ndarray, str]]:
     ]
 
 
+def area_outlines(events: pd.DataFrame) -> list[np.ndarray]:
+    """Each area event's outline ([k, 2] lon/lat, a closed ring: `EventKind.area`)."""
+    if not len(events):
+        return []
+    areas = events[events["kind"].map(lambda k: KINDS[k].area)]
+    return [
+        np.column_stack([a, b]).astype(float)
+        for a, b in zip(areas["lons"], areas["lats"], strict=True)
+    ]
+
+
 def duration_text(seconds: float) -> str:
     """'45 s', '111 min', '19.7 h': a duration as a map labels it."""
     if seconds < 120:
@@ -118,13 +129,15 @@ def plot_detection_map(
     events: np.ndarray | None = None,
     activity: np.ndarray | None = None,
     gaps: Sequence[tuple[np.ndarray, str]] = (),
+    areas: Sequence[np.ndarray] = (),
 ) -> bytes:
     """map.png (its bytes): test tracks grey, flagged tracks red with their nearest rollout blue
     and a cross where they deviate most, alerts (`events`: [k, 2] lon/lat, where each is
     strongest) as orange diamonds, activity (loitering, gaps) as open blue circles, the models'
     regions dashed, each gap (`gaps`: its [2, 2] link from the last report before it to the first
     after, and its duration, longest first) a dotted blue link, the `GAP_LABELS` longest labelled
-    with their duration, over the offline
+    with their duration, each area event (`areas`: its outline, e.g. an interference) an orange
+    area, over the offline
     coastline
     (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
     stretched by 1/cos(latitude) so that shapes are true)."""
@@ -145,6 +158,8 @@ def plot_detection_map(
     ax.plot(places[:, 0], places[:, 1], "D", color="tab:orange", mec="k", ms=6, zorder=5)
     done = np.empty((0, 2)) if activity is None else np.reshape(activity, (-1, 2))
     ax.plot(done[:, 0], done[:, 1], "o", mfc="none", mec="tab:blue", mew=1.5, ms=7, zorder=5)
+    for ring in areas:
+        ax.fill(ring[:, 0], ring[:, 1], color="tab:orange", alpha=0.25, ec="tab:orange", zorder=4)
     for link, _ in gaps:
         ax.plot(link[:, 0], link[:, 1], ":", color="tab:blue", lw=1.6, zorder=4)
     for link, duration in gaps[:GAP_LABELS]:
@@ -173,6 +188,11 @@ def plot_detection_map(
         plt.Line2D([], [], color="tab:orange", mec="k", marker="D", ls="", label="alert"),
         plt.Line2D([], [], mfc="none", mec="tab:blue", marker="o", ls="", label="activity"),
         plt.Line2D([], [], color="tab:blue", ls=":", lw=1.6, label="gap (its duration)"),
+        *(
+            [plt.Rectangle((0, 0), 1, 1, color="tab:orange", alpha=0.25, label="area event")]
+            if len(areas)
+            else []
+        ),
         plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
     ]
     ax.legend(handles=handles, fontsize=8, loc="best")
@@ -431,6 +451,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
                     "events": places(result.events, ALERT),
                     "activity": places(result.events, ACTIVITY),
                     "gaps": gap_links(result.events),
+                    "areas": area_outlines(result.events),
                 },
             ),
         ),

@@ -70,6 +70,11 @@ def alert_rates(
             "longest_h": float(g["duration_s"].max() / 3600),
             "bound_h": None if bound is None else bound / 3600,
         }  # fmt: skip
+    gaps = events[events["kind"] == "gap"]
+    out["gaps_by_coverage"] = {
+        cover: rate(gaps[gaps["coverage"].fillna("unjudged") == cover])[0]
+        for cover in ("heard", "quiet", "unjudged")
+    }
     flagged = set(alerts["track_id"].dropna().astype("int64")) & set(track_ids.tolist())
     out["tracks"] = len(track_ids)
     out["tracks_flagged"] = len(flagged)

@@ -9,22 +9,12 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-
-@dataclass(frozen=True)
-class Case:
-    """One constructed case: the kind that should find it, the vessels it must name, and the
-    time it spans (UTC)."""
-
-    kind: str
-    mmsis: tuple[int, ...]
-    start: pd.Timestamp
-    end: pd.Timestamp
-
+from aisdati.evaluation import encounter_case, identity_cases, interference_case, port_visit_case
+from aisdati.evaluation.case import Case
 
 Constructor = Callable[
     [pd.DataFrame, pd.DataFrame, np.random.Generator],
@@ -33,7 +23,16 @@ Constructor = Callable[
 """(reports: reports.parquet's rows, identity: vessels.parquet's by MMSI, rng) -> the reports
 and identity with one case written in, and the case; None where the traffic offers no place
 for one (e.g. no vessel long enough at sea)."""
-CONSTRUCTORS: dict[str, Constructor] = {}
+CONSTRUCTORS: dict[str, Constructor] = {
+    "encounter": encounter_case.construct_encounter,
+    "port-visit": port_visit_case.construct_port_visit,
+    "identity-conflict": identity_cases.merged_mmsi,
+    "identity-change": identity_cases.renamed,
+    "gnss-interference": interference_case.construct_interference,
+    "gap heard": interference_case.construct_gap_heard,
+    "gap quiet": interference_case.construct_gap_quiet,
+}
+"""Each constructed case by name: its kind, or its kind and what it expects ("gap heard")."""
 
 
 def named(event: pd.Series) -> set[int]:
@@ -44,15 +43,10 @@ def named(event: pd.Series) -> set[int]:
 
 def found(case: Case, events: pd.DataFrame) -> bool:
     """Whether `events` hold an event of the case's kind that overlaps its time and names
-    every vessel it involves."""
+    every vessel it involves (and, where the case expects one, says its coverage)."""
     mine = events[events["kind"] == case.kind]
+    if case.coverage is not None:
+        mine = mine[mine["coverage"] == case.coverage]
     start, end = pd.to_datetime(mine["start"], utc=True), pd.to_datetime(mine["end"], utc=True)
     mine = mine[(start <= case.end) & (end >= case.start)]
     return any(set(case.mmsis) <= named(e) for _, e in mine.iterrows())
-
-
-# each kind's constructor, registered by its own module (which reads `Case` from here)
-from aisdati.evaluation import encounter_case, port_visit_case  # noqa: E402
-
-CONSTRUCTORS["encounter"] = encounter_case.construct_encounter
-CONSTRUCTORS["port-visit"] = port_visit_case.construct_port_visit

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from aisdati.evaluation.constructed import Case
+from aisdati.evaluation.case import Case
 from aisdati.events.anchorages import Anchorages, learned_from
 from aisdati.events.encounters import slow_samples
 from aisdati.events.reports import M_PER_DEG, VesselReports

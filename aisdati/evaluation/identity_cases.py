@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from aisdati.evaluation.constructed import CONSTRUCTORS, Case
+from aisdati.evaluation.case import Case
 from aisdati.events.identity import REACH_KN, differs
 from aisdati.geo import haversine_m
 from aisdati.preprocess.clean import clean_vessels
@@ -131,7 +131,3 @@ def _history_row(mmsi: int, values: dict, first, last, n: int) -> dict:
     """A row of identities.parquet (`IDENTITY_SCHEMA`)."""
     row = {"mmsi": mmsi, **values, "first": pd.Timestamp(first), "last": pd.Timestamp(last)}
     return {key: row.get(key, n) for key in IDENTITY_SCHEMA.names}
-
-
-CONSTRUCTORS["identity-conflict"] = merged_mmsi
-CONSTRUCTORS["identity-change"] = renamed

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from aisdati.evaluation.constructed import Case
+from aisdati.evaluation.case import Case
 from aisdati.evaluation.encounter_case import LOOKED_AT, stop_rows
 from aisdati.events.anchorages import learned_from
 from aisdati.events.port_visits import stays

@@ -13,13 +13,18 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from aisdati.events.anchorages import Anchorages, learn
+from aisdati.events.coverage import gap_coverage
 from aisdati.events.encounters import encounters
+from aisdati.events.heard import Heard
+from aisdati.events.identity import find_changes, find_conflicts
+from aisdati.events.interference import gnss_interference
 from aisdati.events.kinds import KINDS
 from aisdati.events.port_visits import port_visits
 from aisdati.events.record import EVENT_COLUMNS
@@ -56,20 +61,54 @@ class Fleet:
         lat = np.concatenate([y for _, _, y in stopped] or [np.empty(0)])
         return learn(mmsi, lon, lat, s)
 
+    @cached_property
+    def heard(self) -> Heard:
+        """Every vessel's reports in time order (made once, when first asked: the fleet is
+        complete by then)."""
+        return Heard.of(self.vessels.values())
+
 
 FleetFinder = Callable[[Fleet, EventRules], list[dict[str, Any]]]
-FLEET_FINDERS: dict[str, FleetFinder] = {"encounter": encounters, "port-visit": port_visits}
+FLEET_FINDERS: dict[str, FleetFinder] = {
+    "encounter": encounters,
+    "port-visit": port_visits,
+    "identity-conflict": find_conflicts,
+    "identity-change": find_changes,
+    "gnss-interference": gnss_interference,
+}
 """Each fleet kind's finder: (the fleet, the rules) -> its events, records of EVENT_COLUMNS."""
 
 
 def fleet_events(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFrame:
-    """`own` (the one-vessel events of the fleet's vessels) with every fleet kind's events
-    added and the one-vessel events they fold removed."""
+    """`own` (the one-vessel events of the fleet's vessels) with what the fleet says of them
+    (`annotated`), every fleet kind's events added and the one-vessel events they fold
+    removed."""
+    own = annotated(fleet, rules, own)
     found = [row for find in FLEET_FINDERS.values() for row in find(fleet, rules)]
     if not found:
         return own
     fleet_rows = pd.DataFrame(found, columns=list(EVENT_COLUMNS))
     return pd.concat([folded(own, fleet_rows), fleet_rows], ignore_index=True)
+
+
+def annotated(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFrame:
+    """The one-vessel events with what only the other vessels can say of them: the one place
+    for such annotations. Today each gap's `coverage` (`aisdati.events.coverage`: whether
+    others near it kept being heard during it)."""
+    gaps = np.flatnonzero((own["kind"] == "gap").to_numpy()) if len(own) else []
+    if not len(gaps):
+        return own
+    out = own.copy()
+    start, end = _seconds(own["start"]), _seconds(own["end"])
+    radius = rules.settings.gap_coverage_m
+    column = out.columns.get_loc("coverage")
+    for i in gaps:
+        e = own.iloc[i]
+        ends = np.column_stack([e["lons"], e["lats"]])[[0, -1]]
+        out.iloc[i, column] = gap_coverage(
+            fleet.heard, int(e["mmsi"]), (start[i], end[i]), ends, radius
+        )
+    return out
 
 
 def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
@@ -92,3 +131,10 @@ def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
             & (end >= pd.Timestamp(e.start))
         )
     return own[~drop]
+
+
+def _seconds(times: pd.Series) -> np.ndarray:
+    """Times as seconds since the epoch."""
+    return (
+        (pd.to_datetime(times, utc=True) - pd.Timestamp(0, tz="UTC")).dt.total_seconds().to_numpy()
+    )

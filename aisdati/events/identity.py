@@ -8,18 +8,20 @@ vessel's positions. The live watch raises the same events by the same functions
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
-from aisdati.events.fleet import FLEET_FINDERS, Fleet
 from aisdati.events.record import event_row
 from aisdati.events.reports import VesselReports
-from aisdati.events.rules import EventRules
 from aisdati.geo import haversine_m
 from aisdati.preprocess.transmitters import MIN_REPORTS
 from aisdati.tracks.schema import KNOT_MPS, VESSEL_COLUMNS, is_second_transmitter, mmsi_of
+
+if TYPE_CHECKING:  # the fleet module registers these finders
+    from aisdati.events.fleet import Fleet
+    from aisdati.events.rules import EventRules
 
 REACH_KN = 50.0
 """The speed no vessel passes (ingest's `--max-speed` default): a conflict's strength is how far
@@ -194,7 +196,3 @@ def find_changes(fleet: Fleet, rules: EventRules) -> list[dict[str, Any]]:
         for before, after in identity_changes(mine, rules.settings.identity_repeats):
             rows.append(change_row(v, before, after, fleet.who(int(mmsi))))
     return rows
-
-
-FLEET_FINDERS["identity-conflict"] = find_conflicts
-FLEET_FINDERS["identity-change"] = find_changes

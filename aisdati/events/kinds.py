@@ -37,6 +37,9 @@ class EventKind:
     folds: tuple[str, ...] = ()
     """The one-vessel kinds it explains: those events of the vessels it names, within its time
     span, are folded into it, not raised one by one."""
+    area: bool = False
+    """Whether an event of it is an area (its `lons`/`lats` a closed ring, drawn as a polygon),
+    not a stretch of one vessel's reports (drawn as a line, or a point)."""
 
 
 KINDS: dict[str, EventKind] = {
@@ -107,10 +110,14 @@ KINDS: dict[str, EventKind] = {
         EventKind(
             "gap", "gap at sea (going dark)", ACTIVITY, False, None,
             "no report for at least 30 minutes and 10 times the vessel's usual interval (at "
-            "most a day), after reporting under way, both ends on water",
+            "most a day), after reporting under way, both ends on water; its coverage is heard "
+            "where another vessel within 20 km of the line between its ends reported during "
+            "it, quiet where none did though others reported near it before and after",
             "Global Fishing Watch's AIS gaps (theirs: 12 hours, 50 nm offshore, for satellite "
             "reception); ours is for terrestrial receivers hearing a vessel every few minutes, "
-            "and scales with the vessel's own interval",
+            "and scales with the vessel's own interval. Its coverage follows their AIS "
+            "disabling events (Welch et al. 2022), which keep a gap only where other vessels' "
+            "reports show the reception was good; ours asks the vessels near it during it",
         ),
         EventKind(
             "encounter", "encounter at sea", ACTIVITY, False, None,
@@ -158,10 +165,16 @@ KINDS: dict[str, EventKind] = {
         ),
         EventKind(
             "gnss-interference", "positions displaced over an area", ALERT, False, None,
-            "many vessels displaced at once (position jumps, reports on land or on a common "
-            "point or circle) within minutes in one area: one event with its area, time span "
-            "and vessels; their own jumps are folded into it",
-            "ours", fleet=True, folds=("position-jump", "ashore"),
+            "3 or more vessels displaced alike within 15 minutes of one another and 50 km of "
+            "one another (jumps of 1 km or more that their reported motion does not explain: "
+            "by one shift and back, onto or from one point, onto one circle, or ashore), half "
+            "or more of the vessels heard where they were: one event with its area, time span "
+            "and vessels; their own jumps and reports ashore are folded into it",
+            "C4ADS' Above Us Only Stars (2019: spoofed positions on common points and circles) "
+            "and gpsjam.org (a cell is jammed when a share of its aircraft lose accuracy); ours "
+            "reads each vessel's positions against its reported motion, needs the vessels "
+            "displaced alike and most of the area's, and dates it to minutes",
+            fleet=True, folds=("position-jump", "ashore"), area=True,
         ),
     )
 }  # fmt: skip

@@ -91,6 +91,37 @@ class EventSettings:
     # identity change
     identity_repeats: int = 3
     """Reports a new identity needs before its change is raised (a one-message typo is not)."""
+    gap_coverage_m: float = 20_000.0
+    """A gap's neighbourhood: other vessels' reports within this of the line between its ends
+    tell whether the area kept being heard during it (`aisdati.events.coverage`)."""
+    # gnss-interference (`aisdati.events.interference`)
+    interference_min_m: float = 1000.0
+    """The smallest unexplained displacement of a step (a jump at its floor) counted as a
+    vessel displaced: lower than a position jump's alert, above a turn's or a clock's."""
+    interference_z: float = 2.5
+    """A step's unexplained displacement over the vessel's own scale that counts it displaced:
+    half a position jump's floor (`jump_z`), as the vessels displaced alike make the event,
+    not each one's size."""
+    interference_within_s: float = 900.0
+    """Vessels displaced within this of one another are displaced at once (each shows it at its
+    next report: within its reporting interval)."""
+    interference_radius_m: float = 50_000.0
+    """Displaced vessels this close to one another (before or after their jumps) are in one area."""
+    interference_min_vessels: int = 3
+    """Fewest vessels displaced alike that make an interference (fewer: one vessel's own)."""
+    interference_share: float = 0.5
+    """Of the vessels heard near the displaced ones as they were displaced, the share displaced
+    that makes it an interference (it moves every receiver of its area)."""
+    interference_share_m: float = 5000.0
+    """Near a displaced vessel: within this of where it was before its jump."""
+    interference_point_m: float = 100.0
+    """Displaced positions this close to one another are one common point."""
+    interference_shift_share: float = 0.25
+    """Two displacements are one shift when they differ by at most this share of the larger
+    (and at most `interference_point_m` below that)."""
+    interference_circle_share: float = 0.02
+    """Displaced positions are on a circle when their rms distance from the fitted circle is at
+    most this share of its radius."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -17,13 +17,16 @@ from aisdati.events.record import EVENTS_SCHEMA
 from aisdati.outdir import atomic_write_bytes, parquet_bytes
 from aisdati.tracks.schema import geo_metadata
 
-GEO_METADATA = geo_metadata("LineString", "Point")
+GEO_METADATA = geo_metadata("LineString", "Point", "Polygon", "MultiLineString")
 
 
-def _shape(lons: list[float], lats: list[float]) -> shapely.Geometry:
-    """A stretch as a Point, a LineString, or where NaN separates parts (a fleet event's
-    vessels: `aisdati.events.record.EVENT_COLUMNS`) a MultiLineString."""
+def shape(kind: str, lons: list[float], lats: list[float]) -> shapely.Geometry:
+    """An event's geometry: an area kind's outline as a polygon (`EventKind.area`); where NaN
+    separates parts (a fleet event's vessels: `aisdati.events.record.EVENT_COLUMNS`) a
+    MultiLineString; else its stretch as a line, or a point where it is one report."""
     xy = np.round(np.column_stack([lons, lats]), 6)
+    if KINDS[kind].area:
+        return shapely.Polygon(xy)
     gaps = np.flatnonzero(np.isnan(xy[:, 0]))
     if gaps.size:
         parts = [part[~np.isnan(part[:, 0])] for part in np.split(xy, gaps)]
@@ -34,8 +37,8 @@ def _shape(lons: list[float], lats: list[float]) -> shapely.Geometry:
 
 def events_arrow(events: pd.DataFrame) -> pa.Table:
     """The events as events.parquet's table."""
-    stretches = zip(events["lons"], events["lats"], strict=True)
-    geometry = [shapely.to_wkb(_shape(a, b)) for a, b in stretches]
+    stretches = zip(events["kind"], events["lons"], events["lats"], strict=True)
+    geometry = [shapely.to_wkb(shape(k, a, b)) for k, a, b in stretches]
     frame = events.drop(columns=["lons", "lats"]).assign(geometry=geometry)
     frame["track_id"] = frame["track_id"].astype("Int64")
     for key in ("start", "end"):  # reports' times are microseconds (a learned event's: rounded)
@@ -48,9 +51,9 @@ def events_geojson(events: pd.DataFrame) -> dict[str, Any]:
     """The events as a GeoJSON FeatureCollection (the stretch; properties: the fields)."""
     features = []
     for e in _records(events):
-        shape = _shape(e.pop("lons"), e.pop("lats"))
+        drawn = shape(e["kind"], e.pop("lons"), e.pop("lats"))
         features.append(
-            {"type": "Feature", "geometry": shapely.geometry.mapping(shape), "properties": e}
+            {"type": "Feature", "geometry": shapely.geometry.mapping(drawn), "properties": e}
         )
     return {"type": "FeatureCollection", "features": features}
 
@@ -86,14 +89,23 @@ def ranked(events: pd.DataFrame) -> pd.DataFrame:
     return pd.concat([alerts, events[events["class"] != ALERT].sort_values("start")])
 
 
+def gaps_by_coverage(events: pd.DataFrame) -> dict[str, int]:
+    """How many gaps each coverage has (`aisdati.events.coverage`: heard, quiet; unjudged)."""
+    gaps = events[events["kind"] == "gap"] if len(events) else events
+    counts = gaps["coverage"].fillna("unjudged").value_counts() if len(gaps) else {}
+    return {k: int(counts.get(k, 0)) for k in ("heard", "quiet", "unjudged")}
+
+
 def events_summary(events: pd.DataFrame, reports_judged: int) -> dict[str, Any]:
-    """report.json's events: how many reports were judged, alerts and events per kind, and
+    """report.json's events: how many reports were judged, alerts and events per kind, gaps per
+    coverage, and
     each event, alerts first and rarest first (`ranked`; its stretch's positions left to
     events.geojson)."""
     return {
         "reports_judged": reports_judged,
         "alerts": int((events["class"] == ALERT).sum()) if len(events) else 0,
         "events_by_kind": events["kind"].value_counts().to_dict() if len(events) else {},
+        "gaps_by_coverage": gaps_by_coverage(events),
         "events": [
             {k: v for k, v in e.items() if k not in ("lons", "lats")}
             for e in _records(ranked(events))

@@ -23,9 +23,11 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import shapely
 
 from aisdati.errors import UserError
 from aisdati.events.kinds import KINDS
+from aisdati.events.table import shape
 from aisdati.live.decode import Identity
 from aisdati.live.ledger import Change, LiveEvent
 from aisdati.live.vessels import FIELDS
@@ -282,10 +284,9 @@ def _timestamp(value: Any) -> pd.Timestamp:
 
 
 def _geojson(f: dict[str, Any]) -> str:
-    xy = [[x, y] for x, y in zip(f["lons"], f["lats"], strict=True)]
-    shape = {"type": "Point", "coordinates": xy[0]} if len(xy) == 1 else {
-        "type": "LineString", "coordinates": xy}  # fmt: skip
-    return json.dumps(shape)
+    """The event's geometry as events.geojson draws it (`aisdati.events.table.shape`: an area
+    kind's outline a polygon)."""
+    return json.dumps(shapely.geometry.mapping(shape(f["kind"], f["lons"], f["lats"])))
 
 
 def open_store(url: str) -> Store:
