@@ -34,7 +34,9 @@ from aisdati.geo import EARTH_RADIUS_M
 RIVER_HALF_WIDTH_M = 1000.0
 """Half the width of water around a river's centre line: half of a navigable river's width
 (the lower Mississippi and the Columbia are 0.5-2 km wide) plus Natural Earth 1:10m's placing
-of its lines (a few hundred metres); narrower rivers are given the same, wider ones are not."""
+of its lines (up to about 1 km off the bank at New Orleans); narrower rivers are given the
+same, wider ones are not. With the ashore margin a river's reports within about 1.4 km of
+its line are not ashore."""
 
 M_PER_DEG = EARTH_RADIUS_M * math.pi / 180.0
 POLYGON = int(shapely.GeometryType.POLYGON)
