@@ -5,6 +5,7 @@ from positions at ingest). `aisdati.detection.events.event_rules` makes it from 
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,8 +25,16 @@ class EventRules:
     """[m, 2] lon/lat where the training traffic reported ashore (`aisdati.tracks.ashore`)."""
     reported_motion: bool = True
 
-    def events(self, v: VesselReports, length_m: float = np.nan) -> list[Found]:
-        """The vessel's model-free events (`aisdati.events.find.find_events`)."""
+    def events(
+        self,
+        v: VesselReports,
+        length_m: float = np.nan,
+        kinds: Collection[str] | None = None,
+        land: np.ndarray | None = None,
+    ) -> list[Found]:
+        """The vessel's model-free events (`aisdati.events.find.find_events`: `kinds` only,
+        `land` its reports ashore if known)."""
         return find_events(
-            v, self.thresholds, self.settings, length_m, self.seen, self.reported_motion
-        )
+            v, self.thresholds, self.settings, length_m, self.seen, self.reported_motion, kinds,
+            land,
+        )  # fmt: skip
