@@ -3,12 +3,12 @@ reports at once, so that the finders (`aisdati.events.find.FINDERS`, a few hundr
 microseconds a vessel) run only where they can find something.
 
 Each kind's screen is a condition its finder needs to find an event at its floor, read
-without the costlier parts of its rule (the vessel's own spread, the pairing of jumps, the
-length of a drifting vessel): where the screen says no, the finder finds nothing, so a vessel
-no screen holds would give no event, and skipping it changes nothing. A kind without a screen
-here holds every vessel (a new kind is judged everywhere until it has one);
-tests/live/test_screen.py checks on real traffic that every vessel with an event at a floor is
-held."""
+without the costlier parts of its rule (the vessel's own spread only bounded from below, the
+pairing of jumps, the length of a drifting vessel): where the screen says no, the finder finds
+nothing, so a vessel no screen holds would give no event, and skipping it changes nothing. A
+kind without a screen here holds every vessel (a new kind is judged everywhere until it has
+one); tests/live/test_screen.py checks on real traffic that every vessel with an event at a
+floor is held."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from aisdati.events.behaviour import angle_apart
 from aisdati.events.find import finders
-from aisdati.events.motion import CHORD_GPS, unexplained_m
+from aisdati.events.motion import CHORD_GPS, MAD_TO_SIGMA, unexplained_m
 from aisdati.events.reports import VesselReports
 from aisdati.events.rules import EventRules
 from aisdati.events.settings import EventSettings
@@ -157,8 +157,8 @@ def _position_jump(c: Shape, s: EventSettings, land: np.ndarray | None) -> np.nd
 
 
 def _speed_inconsistent(c: Shape, s: EventSettings, land: np.ndarray | None) -> np.ndarray:
-    """The kind's CUSUM over-reaching its limit with each departure over the floor alone (the
-    vessel's own spread, at least the floor, can only lower them)."""
+    """The kind's CUSUM over its limit with each departure scaled by no more than the
+    finder's scale (`least_spread`: a lower bound of the vessel's own spread)."""
     v, inner = c.v, c.inner
     i = np.flatnonzero(inner)
     rough = v.sog[i] - (v.sog[i - 1] + v.sog[i + 1]) / 2
@@ -168,7 +168,7 @@ def _speed_inconsistent(c: Shape, s: EventSettings, land: np.ndarray | None) -> 
 
 
 def _course_inconsistent(c: Shape, s: EventSettings, land: np.ndarray | None) -> np.ndarray:
-    """As for speed: the departures from the chord's bearing over the floor alone."""
+    """As for speed: the departures from the chord's bearing."""
     v, inner = c.v, c.inner
     i = np.flatnonzero(inner)
     chord = haversine_m(v.lon[i - 1], v.lat[i - 1], v.lon[i + 1], v.lat[i + 1])
@@ -181,13 +181,37 @@ def _course_inconsistent(c: Shape, s: EventSettings, land: np.ndarray | None) ->
 def _over(
     c: Shape, i: np.ndarray, rough: np.ndarray, floor: float, limit: float, s: EventSettings
 ) -> np.ndarray:
-    """Whether the CUSUM of `rough` (at inner reports `i`) over `floor` exceeds `limit` in each
-    vessel of at least five reports; it starts again at each vessel's first and last report."""
+    """Whether the CUSUM of `rough` (at inner reports `i`) over a scale no larger than the
+    finder's (`least_spread`, at least `floor`) exceeds `limit` in each vessel of at least five
+    reports; it starts again at each vessel's first and last report."""
     x = np.full(len(c.v), -np.inf)
     ok = np.isfinite(rough)
-    x[i] = np.minimum(np.where(ok, (np.where(ok, rough, 0.0) / floor) ** 2, 0.0), s.noise_cap)
+    scale = np.maximum(least_spread(c, i, rough, s.scale_window_s), floor)
+    x[i] = np.minimum(np.where(ok, (np.where(ok, rough, 0.0) / scale) ** 2, 0.0), s.noise_cap)
     starts = [a for a, _, _ in cusum_stretches(x, s.noise_drift, limit)]
     return c.any_at(np.array(starts, np.int64)) & (c.sizes >= 5)
+
+
+def least_spread(c: Shape, i: np.ndarray, rough: np.ndarray, window_s: float) -> np.ndarray:
+    """[len(i)] no more than `aisdati.events.motion.local_spread` of `rough` (the vessel's own
+    inner reports `i`, NaN not read) at each report: the median of the m values read within
+    `window_s` around a report is at least the ceil(m/2)-th smallest the vessel's window reads,
+    with m counted a second inside the window's edges (never more than the finder reads)."""
+    g = c.group[i]
+    t = c.v.time_s[i] - c.v.time_s[c.bounds[:-1]][g]
+    span = (t.max(initial=0.0) + window_s) * 2 + 1.0
+    key = g * span + t
+    ok = np.isfinite(rough)
+    read = np.r_[0, np.cumsum(ok)]
+    half = window_s / 2 - 1.0
+    m = read[np.searchsorted(key, key + half, "right")] - read[np.searchsorted(key, key - half)]
+    k = (m + 1) // 2
+    order = np.lexsort((np.abs(rough[ok]), g[ok]))
+    smallest = np.abs(rough[ok])[order]
+    first = np.searchsorted(g[ok][order], g)
+    at = np.minimum(first + np.maximum(k - 1, 0), max(len(smallest) - 1, 0))
+    least = smallest[at] if len(smallest) else np.zeros(len(i))
+    return np.where(k > 0, MAD_TO_SIGMA * least, 0.0)
 
 
 SCREENS: dict[str, Screen] = {

@@ -5,6 +5,7 @@ of a kind at its floor is held for that kind, and most windows, with none, are c
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
 
 import numpy as np
@@ -13,10 +14,12 @@ import pytest
 
 from aisdati.events.behaviour import land_mask
 from aisdati.events.find import found_at_floor
+from aisdati.events.motion import local_spread
 from aisdati.events.rules import EventRules
+from aisdati.events.settings import EventSettings
 from aisdati.live.decode import Decoder
 from aisdati.live.judge import clean_together
-from aisdati.live.screen import SCREENS, may_find
+from aisdati.live.screen import SCREENS, Shape, least_spread, may_find
 from aisdati.live.vessels import FIELDS, columns_of
 from aisdati.preprocess.settings import IngestSettings
 from tests.helpers.live import EVENTS, ROOT
@@ -25,8 +28,10 @@ KITIMAT = ROOT / "tests" / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
 WINDOW_S = 3 * 3600
 
 
-def kitimat_windows() -> list[np.ndarray]:
-    """Kitimat's reports as each vessel's 3-hour windows (rows of `FIELDS`)."""
+@functools.cache
+def kitimat_windows(window_s: int = WINDOW_S) -> list[np.ndarray]:
+    """Kitimat's reports as each vessel's windows of `window_s` (rows of `FIELDS`), the
+    vessels with most reports first."""
     f = pd.read_csv(KITIMAT, usecols=["MMSI", "BaseDateTime", "LAT", "LON", "SOG", "COG",
                                       "Heading", "Status"])  # fmt: skip
     t = pd.to_datetime(f["BaseDateTime"], utc=True).astype("datetime64[us, UTC]")
@@ -35,10 +40,10 @@ def kitimat_windows() -> list[np.ndarray]:
         us, f["LON"], f["LAT"], f["SOG"], f["COG"] % 360,
         np.where(f["Heading"] < 360, f["Heading"], np.nan), f["Status"].fillna(-1),
     ]).astype(np.float64)  # fmt: skip
-    key = f["MMSI"].to_numpy() * 10**6 + us // (WINDOW_S * 10**6)
+    key = f["MMSI"].to_numpy() * 10**6 + us // (window_s * 10**6)
     order = np.argsort(key, kind="stable")
     cut = np.flatnonzero(np.diff(key[order])) + 1
-    return [rows[i] for i in np.split(order, cut)]
+    return sorted((rows[i] for i in np.split(order, cut)), key=len, reverse=True)
 
 
 def recording(name: str) -> np.ndarray:
@@ -82,3 +87,29 @@ def test_every_kind_has_a_screen():
     from aisdati.events.find import FINDERS
 
     assert set(FINDERS) == set(SCREENS)
+
+
+def spreads(rows: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The speed kind's departures' spread at each inner report (read under way), by
+    `least_spread` and by the finder's `local_spread`."""
+    together = clean_together(list(range(len(rows))), rows, IngestSettings())
+    shape, v, s = Shape(together.all, together.bounds), together.all, EventSettings()
+    i = np.flatnonzero(shape.inner)
+    moving = v.under_way(s.under_way_kn)
+    read = moving[i - 1] | moving[i] | moving[i + 1]
+    rough = np.where(read, v.sog[i] - (v.sog[i - 1] + v.sog[i + 1]) / 2, np.nan)
+    mine = [shape.group[i] == k for k in range(shape.vessels)]
+    finder = [local_spread(v.time_s[i][m], rough[m], s.scale_window_s) for m in mine]
+    return least_spread(shape, i, rough, s.scale_window_s), np.concatenate(finder)
+
+
+def test_the_least_spread_never_exceeds_the_finders():
+    """`least_spread` bounds `local_spread` from below at every report: over windows far longer
+    than the scale's (Kitimat's ten busiest vessels, two months each), where a report's centred
+    window holds only part of the vessel's, and over the watch's 3-hour windows, where it holds
+    nearly all of it and the bound is close."""
+    least, finder = spreads(kitimat_windows(24 * 3600 * 61)[:10])
+    assert np.all(least <= finder)
+    least, finder = spreads(kitimat_windows()[:300])
+    assert np.all(least <= finder)
+    assert (least > 0).sum() > 0.5 * (finder > 0).sum()  # a bound, not nothing
