@@ -268,17 +268,20 @@ def land(bbox: BBox, tolerance: float = 0.0) -> MultiPolygon:
 
 
 # --------------------------------------------------------------------------- point tests
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=32)
 def _block(bx: int, by: int) -> tuple[np.ndarray, np.ndarray]:
     """Land of one BLOCK_DEG block (its polygons and their bounds), which tiles are cut from:
-    cutting a continent once per block rather than once per tile."""
+    cutting a continent once per block rather than once per tile. The caches hold a whole
+    coast (the US day of tests/data touches 22 blocks and 320 tiles, ~200 MB): a live feed
+    checks reports all along it in every chunk, and a cache smaller than that rebuilt its
+    blocks and tiles for every chunk (0.5 ms a report instead of 2.4 us)."""
     x0, y0 = -180.0 + bx * BLOCK_DEG, -90.0 + by * BLOCK_DEG
     box = (x0, y0, x0 + BLOCK_DEG, y0 + BLOCK_DEG)
     polys = np.asarray(_clip(_polygons_in(_world(), box), box), dtype=object)
     return polys, shapely.bounds(polys).reshape(-1, 4)
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=1024)
 def _tile(ix: int, iy: int, inland_water: bool) -> Polygon | MultiPolygon | bool:
     """Land of one tile, less its inland water (`aisdati.inland_water`) if asked: False (all
     water), True (all land) or a prepared geometry."""

@@ -120,7 +120,13 @@ def gap_limit(v: VesselReports, s: EventSettings) -> float:
     """How long a vessel may be silent before it is a gap: at least `gap_min_s` and
     `gap_factor` times its usual (median) interval. One rule for the batch's gaps between
     reports and the live watch's silence that has not ended yet."""
-    return max(s.gap_min_s, s.gap_factor * float(np.median(v.dt_s)))
+    return float(silence_limit(float(np.median(v.dt_s)), s))
+
+
+def silence_limit(usual_s: np.ndarray | float, s: EventSettings) -> np.ndarray:
+    """`gap_limit` from a vessel's usual (median) interval, for many vessels at once (the live
+    watch's vessels of one chunk)."""
+    return np.maximum(s.gap_min_s, s.gap_factor * np.asarray(usual_s, np.float64))
 
 
 def ashore(v: VesselReports, land: np.ndarray | None) -> list[Found]:

@@ -8,7 +8,7 @@ reports give the same events alone, in any batch and live."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -71,14 +71,23 @@ def find_events(
     length_m: float = np.nan,
     seen: np.ndarray | None = None,
     reported_motion: bool = True,
+    kinds: Collection[str] | None = None,
+    land: np.ndarray | None = None,
 ) -> list[Found]:
     """Every model-free event of one vessel (`aisdati.events.kinds.MODEL_FREE`) that reaches
     its threshold, each kind's overlaps merged, each bounded, in time order; `length_m`: the
     vessel's length if known; `seen`: where its area's training traffic reported ashore
     (`aisdati.tracks.ashore`); `reported_motion`: False where SOG/COG were derived from
-    positions. A kept event's strength is over its threshold (1 = at it)."""
-    out, land = [], land_mask(v.positions(), seen)
-    for find in finders(reported_motion).values():
+    positions; `kinds`: only these are looked for (None: all; the live watch looks only for
+    those its screen says may be found); `land`: which reports are ashore when already known
+    (`land_mask`, which finds it otherwise). A kept event's strength is over its threshold (1 =
+    at it)."""
+    out = []
+    if land is None:
+        land = land_mask(v.positions(), seen)
+    for kind, find in finders(reported_motion).items():
+        if kinds is not None and kind not in kinds:
+            continue
         kept = [thresholds.over(e) for e in find(v, settings, length_m, land)]
         out += [bounded(v, e) for e in merged([e for e in kept if e is not None])]
     return sorted(out, key=lambda e: (e.start, e.kind))

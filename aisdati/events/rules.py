@@ -6,6 +6,7 @@ it from models."""
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,8 +30,16 @@ class EventRules:
     """The area's ports and anchorages (`aisdati.events.anchorages`); None: learned from the
     stopped reports of the vessels judged together (`aisdati.events.fleet.Fleet.anchorages`)."""
 
-    def events(self, v: VesselReports, length_m: float = np.nan) -> list[Found]:
-        """The vessel's model-free events (`aisdati.events.find.find_events`)."""
+    def events(
+        self,
+        v: VesselReports,
+        length_m: float = np.nan,
+        kinds: Collection[str] | None = None,
+        land: np.ndarray | None = None,
+    ) -> list[Found]:
+        """The vessel's model-free events (`aisdati.events.find.find_events`: `kinds` only,
+        `land` its reports ashore if known)."""
         return find_events(
-            v, self.thresholds, self.settings, length_m, self.seen, self.reported_motion
-        )
+            v, self.thresholds, self.settings, length_m, self.seen, self.reported_motion, kinds,
+            land,
+        )  # fmt: skip

@@ -7,15 +7,16 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import asdict, dataclass, field, replace
 
 import pandas as pd
 
+from aisdati.events.fleet import FLEET_FINDERS, Fleet, fleet_events
+from aisdati.events.kinds import FLEET, KINDS
 from aisdati.events.rules import EventRules
 from aisdati.live.area import AreaJudge
 from aisdati.live.decode import Decoder
-from aisdati.live.judge import Judged, LastReport, judge
+from aisdati.live.judge import Judged, LastReport, Verdict, clean_together, judge
 from aisdati.live.ledger import Change, Ledger
 from aisdati.live.sources import Pacer
 from aisdati.live.store import Store
@@ -26,6 +27,12 @@ SCAN_S = 60.0
 """Feed seconds between two looks for silent vessels and vessels to forget."""
 OFF_TRAFFIC = "off-traffic"
 """The learned kind: looked for only when the area models judge a vessel's window."""
+FLEET_KINDS = frozenset(FLEET)
+"""The kinds found across vessels: looked for every `SCAN_S` over all windows (`Watch._fleet`),
+never by one vessel's judgement."""
+ONE_VESSEL_UNJUDGED = FLEET_KINDS | {OFF_TRAFFIC}
+FLEET_UNJUDGED = frozenset(KINDS) - FLEET_KINDS
+"""What a fleet scan leaves as it is: every kind but the fleet's."""
 RATE_S = 5.0
 """Wall seconds over which messages/s is measured."""
 
@@ -81,7 +88,7 @@ class Watch:
         windows kept when the watch stopped. The number of open events resumed."""
         self.ledger.load(self.store.resume())
         for mmsi, (cols, identity) in self.store.windows().items():
-            self.vessels.recent[mmsi] = Recent(cols, identity)
+            self.vessels.recent[mmsi] = Recent.of(cols, identity)
             if len(cols["time_us"]):
                 self.vessels.recent[mmsi].heard_us = int(cols["time_us"].max())
                 self.vessels.clock_us = max(self.vessels.clock_us, int(cols["time_us"].max()))
@@ -91,41 +98,50 @@ class Watch:
         """One chunk of lines through; the event changes it brought (already stored)."""
         reports = self.decoder.reports(lines, self.vessels.clock_us)
         self.vessels.identify(self.decoder.identities())
-        dirty = self.vessels.add(reports)
+        dirty = sorted(self.vessels.add(reports))
         if self.pacer is not None and reports.num_rows:
             self.pacer.wait(self.vessels.clock_us / 1e6)
-        changes = self._judge(sorted(dirty))
+        changes = self._judge(dirty)
         changes += self._scan()
-        self.store.write(changes, [self._position(m) for m in sorted(dirty) if m in self.last])
+        self.store.write(changes, self._positions(dirty))
         self.counters.count(len(lines), reports.num_rows, len(changes))
         if changes:
             self.emit(changes)
         return changes
 
     def _judge(self, dirty: list[int]) -> list[Change]:
-        """The vessels with new reports judged together, their changes in MMSI order."""
-        new = {m: self.vessels.recent[m].new for m in dirty}
-        windows = {m: (self.vessels.window(m), self.vessels.recent[m].identity) for m in dirty}
-        judged = judge(windows, self.rules, self.ingest)
-        learned = self._learned(judged, new)
+        """The vessels with new reports judged together (`judge.judge`), their changes in MMSI
+        order: a vessel the screen cleared has no event now, which changes only the events the
+        ledger holds of it (an open one closes), so it goes to the ledger only if it has some
+        there."""
+        recent = self.vessels.recent
+        new = {m: recent[m].new for m in dirty}
+        for m in dirty:
+            recent[m].new = 0
+        windows = {m: (recent[m].rows, recent[m].identity) for m in dirty}
+        verdict = judge(windows, self.rules, self.ingest)
+        self.last.update(verdict.last)
+        judged = verdict.judged
+        learned = self._learned(verdict, {m: new[m] for m in verdict.last})
+        held = {m for m in verdict.last if self.ledger.known.get(m)}  # its events looked at again
         changes = []
-        for mmsi, one in judged.items():
-            self.last[mmsi] = one.last
+        for mmsi in sorted(judged.keys() | learned.keys() | held):
+            one = judged.get(mmsi) or verdict.quiet(mmsi)
             if mmsi in learned:
-                one = replace(one, events=one.events + learned[mmsi])
+                one = replace(one, events=one.events + learned[mmsi], unjudged=FLEET_KINDS)
             else:
-                one = replace(one, unjudged=frozenset({OFF_TRAFFIC}))
+                one = replace(one, unjudged=ONE_VESSEL_UNJUDGED)
             changes += self.ledger.update(mmsi, one)
         return changes
 
-    def _learned(self, judged: dict[int, Judged], new: dict[int, int]) -> dict[int, list[dict]]:
+    def _learned(self, verdict: Verdict, new: dict[int, int]) -> dict[int, list[dict]]:
         """The off-traffic events of the vessels the area models judge this chunk (all scored
         together), by MMSI; a vessel left out was not judged by them."""
         if self.area is None:
             return {}
-        due = [m for m in self.area.due({m: new[m] for m in judged}) if m in judged]
+        due = self.area.due(new)
         who = {m: self.vessels.recent[m].identity for m in due}
-        return self.area.judge({m: judged[m].reports for m in due}, who)
+        return self.area.judge({m: verdict.reports_of(m) for m in due}, who)
 
     def _scan(self) -> list[Change]:
         """Every `SCAN_S` of the feed's clock: gaps opened for vessels silent at sea, and the
@@ -134,8 +150,10 @@ class Watch:
         if clock_s - self.scanned_s < SCAN_S:
             return []
         self.scanned_s = clock_s
-        changes = []
+        changes = self._fleet()
         for mmsi, last in self.last.items():
+            if last.limit_s is None or clock_s - last.time_s <= last.limit_s:
+                continue  # (`Ledger.silent` says so too: most vessels end here, cheaply)
             identity = self.vessels.recent[mmsi].identity
             who = {"name": identity.name, "ship_type": identity.ship_type}
             if change := self.ledger.silent(last, clock_s, who):
@@ -147,19 +165,47 @@ class Watch:
             changes += self.ledger.forget(mmsi)
         return changes
 
-    def _position(self, mmsi: int) -> dict[str, Any]:
-        """A vessel's row of the vessels table: who it is and its last report."""
-        one = self.vessels.recent[mmsi]
-        last = {k: v[-1] for k, v in one.columns.items()}
-        return {
-            "mmsi": mmsi,
-            "name": one.identity.name,
-            "ship_type": one.identity.ship_type,
-            "length_m": one.identity.length_m,
-            "time": pd.Timestamp(int(last["time_us"]), unit="us", tz="UTC"),
-            **{k: float(last[k]) for k in ("lon", "lat", "sog", "cog", "heading")},
-            "status": None if last["status"] < 0 else int(last["status"]),
-        }
+    def _fleet(self) -> list[Change]:
+        """The fleet kinds (`aisdati.events.fleet.fleet_events`) over every vessel's window,
+        their events through the ledger as the others' (each under the vessel it is of; a
+        vessel's open fleet event not found again closes). Nothing to do while no fleet finder
+        is registered. Unlike detect, a one-vessel event a fleet event explains is not taken
+        back: it was already said."""
+        if not FLEET_FINDERS:
+            return []
+        recent = self.vessels.recent
+        mmsi = [m for m, one in recent.items() if len(one.rows)]
+        together = clean_together(mmsi, [recent[m].rows for m in mmsi], self.ingest)
+        reports = {m: together.of(k) for k, m in enumerate(together.mmsi) if together.sizes[k]}
+        identity = {m: asdict(recent[m].identity) for m in reports}
+        found = fleet_events(Fleet(reports, identity), self.rules, pd.DataFrame())
+        rows: dict[int, list[dict]] = {}
+        for row in found.to_dict("records"):
+            rows.setdefault(int(row["mmsi"]), []).append(row)
+        held = {m for m in reports if any(e.state == "open" and e.fields["kind"] in FLEET_KINDS
+                                          for e in self.ledger.known.get(m, ()))}  # fmt: skip
+        changes = []
+        for m in sorted(rows.keys() | held):
+            v = reports[m]
+            judged = Judged(rows.get(m, []), float(v.time_s[0]), float(v.time_s[-1]), v,
+                            FLEET_UNJUDGED)  # fmt: skip
+            changes += self.ledger.update(m, judged)
+        return changes
+
+    def _positions(self, dirty: list[int]) -> list[tuple]:
+        """The vessels table's rows of the vessels with new reports and a report judged: who
+        each is and its last report (`store.VESSEL_FIELDS` less `recent`, times in
+        microseconds)."""
+        out = []
+        for mmsi in dirty:
+            if mmsi not in self.last:
+                continue
+            one = self.vessels.recent[mmsi]
+            t, lon, lat, sog, cog, heading, status = one.rows[-1].tolist()
+            who = one.identity
+            out.append((mmsi, who.name, who.ship_type, who.length_m, int(t), lon, lat, sog, cog,
+                        heading, None if status < 0 else int(status)))  # fmt: skip
+        return out
 
     def stop(self) -> int:
         """Keep what a restart resumes from: the windows, and the open events marked stopped.

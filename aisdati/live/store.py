@@ -171,6 +171,17 @@ class Store:
             return None
         return t.isoformat() if self.d is SQLITE else t
 
+    def times(self, us: Sequence[int]) -> list[Any]:
+        """Times in microseconds since the epoch as the database takes them, all at once (as
+        `when` gives each: SQLite's ISO 8601 text leaves out a fraction of zero)."""
+        if not len(us):
+            return []
+        stamps = pd.to_datetime(np.asarray(us, np.int64), unit="us", utc=True)
+        if self.d is not SQLITE:
+            return list(stamps.to_pydatetime())
+        text = np.datetime_as_string(np.asarray(us, np.int64).astype("datetime64[us]"))
+        return [t.removesuffix(".000000") + "+00:00" for t in text.tolist()]
+
     def _event_row(self, e: LiveEvent, now: datetime) -> list[Any]:
         f = e.fields
         stretch = json.dumps([np.round(f["lons"], 6).tolist(), np.round(f["lats"], 6).tolist()])
@@ -182,8 +193,9 @@ class Store:
             f.get("others"), f.get("coverage"), e.state, None, self.when(now), stretch,
         ]  # fmt: skip
 
-    def write(self, changes: Sequence[Change], vessels: Sequence[dict[str, Any]]) -> None:
-        """The events changed and the vessels' last positions, in one transaction."""
+    def write(self, changes: Sequence[Change], vessels: Sequence[tuple]) -> None:
+        """The events changed and the vessels' last positions (rows of `VESSEL_FIELDS` less
+        `recent`, times in microseconds since the epoch), in one transaction."""
         now = datetime.now(timezone.utc)
         events = {c.event.event_id: c.event for c in changes}.values()
         with self.transaction():
@@ -194,12 +206,14 @@ class Store:
                     [self._event_row(e, now) for e in events],
                 )
             if vessels:
-                columns = VESSEL_FIELDS[:-1]
+                times = self.times([v[4] for v in vessels])
                 cur.executemany(
-                    upsert(self.d, "vessels", columns, "mmsi"),
-                    [[self.when(v[c]) if c == "time" else _number(v[c]) for c in columns]
-                     for v in vessels],
-                )  # fmt: skip
+                    upsert(self.d, "vessels", VESSEL_FIELDS[:-1], "mmsi"),
+                    [
+                        (*v[:3], _number(v[3]), t, *v[5:])
+                        for v, t in zip(vessels, times, strict=True)
+                    ],
+                )
             if self.d.geometry and events:
                 cur.executemany(
                     "UPDATE events SET geom = ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326) "

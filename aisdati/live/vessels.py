@@ -18,37 +18,30 @@ FIELDS = ("time_us", "lon", "lat", "sog", "cog", "heading", "status")
 
 @dataclass
 class Recent:
-    """One vessel's window (arrays of `FIELDS`, in arrival order until `merged`), who it is,
+    """One vessel's window (`rows`: one row of `FIELDS` per report, in time order), who it is,
     and how many reports arrived since it was last judged."""
 
-    columns: dict[str, np.ndarray]
+    rows: np.ndarray = field(default_factory=lambda: np.zeros((0, len(FIELDS))))
     identity: Identity = field(default_factory=Identity)
-    pending: list[dict[str, np.ndarray]] = field(default_factory=list)
     new: int = 0
     heard_us: int = 0
     """The feed's time when it was last heard of (a report's own time, or a static message's
     arrival)."""
 
-    def merged(self, window_s: float, max_reports: int) -> dict[str, np.ndarray]:
-        """The window with the pending reports in, sorted by time, trimmed to its bounds."""
-        if self.pending:
-            parts = [self.columns, *self.pending]
-            cols = {k: np.concatenate([p[k] for p in parts]) for k in FIELDS}
-            order = np.argsort(cols["time_us"], kind="stable")
-            t = cols["time_us"][order]
-            keep = order[max(np.searchsorted(t, t[-1] - window_s * 1e6), len(t) - max_reports) :]
-            self.columns = {k: v[keep] for k, v in cols.items()}
-            self.pending = []
-        return self.columns
+    @classmethod
+    def of(cls, columns: dict[str, np.ndarray], identity: Identity) -> Recent:
+        """A window from its columns (e.g. as a database kept it)."""
+        return cls(np.column_stack([np.asarray(columns[k], np.float64) for k in FIELDS]), identity)
+
+    @property
+    def columns(self) -> dict[str, np.ndarray]:
+        """The window as arrays of `FIELDS` (times as integers)."""
+        cols = {k: self.rows[:, i] for i, k in enumerate(FIELDS)}
+        cols["time_us"] = cols["time_us"].astype(np.int64)
+        return cols
 
     def nbytes(self) -> int:
-        return sum(v.nbytes for v in self.columns.values()) + sum(
-            v.nbytes for p in self.pending for v in p.values()
-        )
-
-
-def empty_columns() -> dict[str, np.ndarray]:
-    return {k: np.zeros(0, np.int64 if k == "time_us" else np.float64) for k in FIELDS}
+        return self.rows.nbytes
 
 
 def columns_of(table: pa.Table) -> dict[str, np.ndarray]:
@@ -78,18 +71,34 @@ class Vessels:
     forgotten: int = 0
 
     def add(self, table: pa.Table) -> set[int]:
-        """Reports in; the MMSIs that got some."""
+        """Reports in, each vessel's window merged and trimmed to its bounds; the MMSIs that
+        got some. All the chunk's vessels at once: one sort of their windows and the new
+        reports together (by vessel, then time; a report arrived later goes after an earlier
+        one of the same time), not a sort per vessel."""
         if table.num_rows == 0:
             return set()
         cols = columns_of(table)
-        mmsi = table.column("mmsi").to_numpy()
-        order = np.argsort(mmsi, kind="stable")
-        keys, starts = np.unique(mmsi[order], return_index=True)
-        for key, rows in zip(keys.tolist(), np.split(order, starts[1:]), strict=True):
-            one = self.recent.setdefault(key, Recent(empty_columns()))
-            one.pending.append({k: v[rows] for k, v in cols.items()})
-            one.new += len(rows)
-            one.heard_us = max(one.heard_us, int(cols["time_us"][rows].max()))
+        new = np.column_stack([np.asarray(cols[k], np.float64) for k in FIELDS])
+        keys, group_new = np.unique(table.column("mmsi").to_numpy(), return_inverse=True)
+        held = [self.recent.setdefault(k, Recent()) for k in keys.tolist()]
+        sizes = np.array([len(r.rows) for r in held], np.int64)
+        rows = np.concatenate([*(r.rows for r in held), new])
+        group = np.concatenate([np.repeat(np.arange(len(keys)), sizes), group_new])
+        order = np.lexsort((rows[:, 0], group))
+        rows, group = rows[order], group[order]
+        ends = np.searchsorted(group, np.arange(len(keys)), side="right")
+        last_us = rows[ends - 1, 0]
+        from_end = ends[group] - np.arange(len(group))
+        keep = (rows[:, 0] >= last_us[group] - self.window_s * 1e6) & (from_end <= self.max_reports)
+        rows, group = rows[keep], group[keep]
+        bounds = np.searchsorted(group, np.arange(len(keys) + 1)).tolist()
+        counts = np.bincount(group_new, minlength=len(keys)).tolist()
+        newest = np.full(len(keys), np.iinfo(np.int64).min)
+        np.maximum.at(newest, group_new, cols["time_us"])
+        for k, one in enumerate(held):
+            one.rows = rows[bounds[k] : bounds[k + 1]].copy()
+            one.new += counts[k]
+            one.heard_us = max(one.heard_us, int(newest[k]))
         self.clock_us = max(self.clock_us, int(cols["time_us"].max()))
         return set(keys.tolist())
 
@@ -98,7 +107,7 @@ class Vessels:
         given is kept), each into the vessel's identity history at its time (the feed's time
         where its line gave none)."""
         for mmsi, messages in identities.items():
-            one = self.recent.setdefault(mmsi, Recent(empty_columns()))
+            one = self.recent.setdefault(mmsi, Recent())
             one.heard_us = max(one.heard_us, self.clock_us)
             for (name, ship_type, length_m), time_us in messages:
                 old = one.identity
@@ -111,9 +120,10 @@ class Vessels:
                 )
 
     def window(self, mmsi: int) -> dict[str, np.ndarray]:
+        """A vessel's window as arrays, its reports now counted as judged."""
         one = self.recent[mmsi]
         one.new = 0
-        return one.merged(self.window_s, self.max_reports)
+        return one.columns
 
     def forget(self) -> list[int]:
         """Forget the vessels silent for `forget_s`, and the longest silent beyond
