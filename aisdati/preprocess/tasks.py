@@ -45,7 +45,7 @@ from aisdati.preprocess.clean import (
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.output import PartWriter, build_tracks
-from aisdati.preprocess.partition import VesselPartitions, partition_tables
+from aisdati.preprocess.partition import VesselPartitions, partition_tables, write_split
 from aisdati.preprocess.read import TableReader, open_reader
 from aisdati.preprocess.rejects import malformed_rows, reject_rows
 from aisdati.preprocess.report import CODE, IngestCounts
@@ -150,8 +150,8 @@ def _spill_rows(
         filter_area_speed(table, codes, task.roi, task.settings)
         rows += len(codes)
         counts.add_codes(codes)
-        spills[0].write(table.filter(pa.array(codes == 0)))
-        spills[1].write(table.filter(pa.array(codes == CODE["slow"])))
+        which = np.where(codes == 0, 0, np.where(codes == CODE["slow"], 1, -1))
+        write_split(table, which, spills)  # the moving reports, and the slow ones beside
         if rejects:
             rejects.write(reject_rows(table, codes, task.source.label))
         if bar is not None:
