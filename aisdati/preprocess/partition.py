@@ -149,7 +149,9 @@ def partition_tables(
         for path in paths:
             with pa.OSFile(str(path)) as f:
                 tables.append(pa.ipc.open_stream(f).read_all())
-        yield pa.concat_tables(tables)
+        joined = [pa.concat_tables(tables)]
+        del tables  # (the caller alone holds the rows: it may free them before the next)
+        yield joined.pop()
 
 
 def _pieces(
