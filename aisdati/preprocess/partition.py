@@ -196,11 +196,17 @@ def write_split(table: pa.Table, which: np.ndarray, spills: Sequence[VesselParti
     if not len(kept):
         return
     n = len(spills[0])
-    part = partition_of(table.column("mmsi").to_numpy()[kept], n)
-    key = which[kept].astype(np.int64) * n + part
-    rows = table.take(pa.array(kept)) if len(kept) < table.num_rows else table
-    for k, chunk in split_rows(rows, key, n * len(spills)):
-        spills[k // n].append(k % n, chunk)
+    key = which[kept] * n + partition_of(table.column("mmsi").to_numpy()[kept], n)
+    sizes = np.bincount(key, minlength=n * len(spills))
+    rows = table.take(pa.array(kept[_stable_order(key, n * len(spills))]))
+    bounds = np.r_[0, np.cumsum(sizes)]
+    for k in np.flatnonzero(sizes):
+        spills[k // n].append(k % n, rows.slice(bounds[k], sizes[k]))
+
+
+def _stable_order(part: np.ndarray, n: int) -> np.ndarray:
+    """The stable order of part numbers 0 .. n - 1: for 16-bit ones a radix sort, linear."""
+    return np.argsort(part.astype(np.int16) if n <= 1 << 15 else part, kind="stable")
 
 
 def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int, pa.Table]]:
@@ -209,8 +215,7 @@ def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int,
     if len(part) and sizes.max() == len(part):  # one part (a small input's only one): as is
         yield int(part[0]), table
         return
-    # a stable sort of 16-bit keys is a radix sort: linear, not the merge sort of int64s
-    order = np.argsort(part.astype(np.int16) if n <= 1 << 15 else part, kind="stable")
+    order = _stable_order(part, n)
     bounds = np.r_[0, np.cumsum(sizes)]
     table = table.take(pa.array(order))
     for i in np.flatnonzero(np.diff(bounds)):
