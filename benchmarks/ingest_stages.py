@@ -149,7 +149,7 @@ def main() -> None:
         for name, seconds in pieces:
             per = seconds * 1e7 / n
             table.row(
-                [name, f"{seconds:.2f}", f"{per:.1f} s"],
+                [name, f"{seconds:.3f}", f"{per:.2f} s"],
                 {"stage": name, "rows": n, "cpu_s": seconds, "cpu_s_per_10m": per},
             )
 
