@@ -318,8 +318,8 @@ def report_stages(task: ReportsTask) -> ReportsResult:
 
 REPORT_RANGES = 4
 """Ranges of MMSIs a partition's reports are cleaned in, one after the other (`vessel_ranges`):
-most of the input's rows are reports, and cleaning a whole partition at once (its sorted copy,
-the kept rows', the rows of reports.parquet) held three copies of it."""
+most of the input's rows are reports, and cleaning a whole partition at once (its rows, their
+sorted copy, the kept rows, the rows of reports.parquet) held three to four copies of it."""
 
 
 def vessel_ranges(table: pa.Table, n: int) -> list[pa.Table]:
@@ -330,8 +330,7 @@ def vessel_ranges(table: pa.Table, n: int) -> list[pa.Table]:
     if n < 2 or len(mmsi) < 2 * n:
         return [table]
     cuts = np.quantile(mmsi, np.arange(1, n) / n, method="lower")
-    ranges = [chunk for _, chunk in split_rows(table, np.searchsorted(cuts, mmsi, "right"), n)]
-    return ranges
+    return [chunk for _, chunk in split_rows(table, np.searchsorted(cuts, mmsi, "right"), n)]
 
 
 def partition_stage(task: VesselTask | ReportsTask) -> VesselResult | ReportsResult:
