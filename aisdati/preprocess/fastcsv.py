@@ -183,14 +183,34 @@ def scan_block(buf, slots, optional, ints, numbers, slow, spans):  # pragma: no 
         line, field, bad = i, 0, False
         static, any_static = HASH_SEED, False
         while True:
-            # (a static field is hashed as written: its doubled quotes need no unquoting here)
-            needed = field < n_fields and slots[field] >= 0
-            start, end, i, kind, odd = _field_at(buf, i, needed)
-            bad |= odd
             # the values are read and stored here, not in a helper: one handed the outputs made
             # the scan 2.1 times as slow, one returning the values 1.3 times (issue 58)
-            if field < n_fields:
-                slot = slots[field]
+            slot = slots[field] if field < n_fields else NOT_READ
+            end = -1  # the field's end, once a value read in passing found it
+            if slot == TIME:  # `YYYY-MM-DDTHH:MM:SS` then a delimiter: no scan for the end
+                if i + 19 < n and 0 < DELIMITER[buf[i + 19]] < 3:
+                    value, date_at, date_days = _time_us(buf, i, i + 19, date_at, date_days)
+                    if value != _NO_TIME:  # (its 19 bytes checked: no delimiter among them)
+                        ints[TIME, row] = value
+                        start, end, i, kind = i, i + 19, i + 19, DELIMITER[buf[i + 19]]
+            elif slot == MMSI or slot >= FIRST_NUMBER:  # read while the end is sought
+                j, mantissa, digits, decimals = _leading_number(buf, i, slot == MMSI)
+                if 0 < DELIMITER[buf[j]] < 3:  # the field ended with the number
+                    start, end, kind = i, j, DELIMITER[buf[j]]
+                    i = j
+                    if slot == MMSI:
+                        value = mantissa if 0 < digits <= MAX_MMSI_DIGITS else np.int64(0)
+                        bad |= value <= 0
+                        ints[MMSI, row] = value
+                    else:
+                        number = _number_of(buf[start] == 45, mantissa, digits, decimals)
+                        k = slot - FIRST_NUMBER
+                        bad |= np.isnan(number) and not (optional[k] and end == start)
+                        numbers[k, row] = number
+            if end < 0:  # any other field, or a value in an odd form: scanned, then read
+                # (a static field is hashed as written: its doubled quotes need no unquoting)
+                start, end, i, kind, odd = _field_at(buf, i, slot >= 0)
+                bad |= odd
                 if slot == MMSI:
                     value = _digits(buf, start, end)
                     bad |= value <= 0
@@ -421,6 +441,42 @@ def _number(buf, a, b):  # pragma: no cover - compiled
         digits += 1
         if decimals >= 0:
             decimals += 1
+    if digits == 0 or decimals == 0 or digits > MAX_DIGITS or mantissa > EXACT:
+        return np.nan
+    value = np.float64(mantissa) / POW10[max(decimals, 0)]
+    return -value if negative else value
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _leading_number(buf, i, unsigned):  # pragma: no cover - compiled
+    """The number `-?digits(.digits)?` (`unsigned`: digits only) that starts at `i`, read up to
+    the first byte that cannot continue it: (where that byte is, the digits as an integer, how
+    many there are, how many follow the point, -1: no point). Where that byte ends the field,
+    this is the field's value (`_number_of`), as `_number` reads it."""
+    j = i
+    if not unsigned and buf[j] == 45:
+        j += 1
+    mantissa = np.int64(0)
+    digits = 0
+    decimals = -1
+    while True:
+        d = np.int64(buf[j]) - 48
+        if 0 <= d <= 9:
+            if digits < MAX_DIGITS:  # (more: no value either way; no overflow)
+                mantissa = mantissa * 10 + d
+            digits += 1
+            if decimals >= 0:
+                decimals += 1
+        elif d == -2 and decimals < 0 and digits > 0 and not unsigned:  # the point
+            decimals = 0
+        else:
+            return j, mantissa, digits, decimals
+        j += 1
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _number_of(negative, mantissa, digits, decimals):  # pragma: no cover - compiled
+    """The value `_number` gives the text `_leading_number` read (NaN: the usual way decides)."""
     if digits == 0 or decimals == 0 or digits > MAX_DIGITS or mantissa > EXACT:
         return np.nan
     value = np.float64(mantissa) / POW10[max(decimals, 0)]

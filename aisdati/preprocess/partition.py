@@ -87,8 +87,12 @@ class VesselPartitions:
             return
         part = partition_of(table.column("mmsi").to_numpy(), len(self.paths))
         for i, chunk in split_rows(table, part, len(self.paths)):
-            self._writer(i).write_table(chunk)
-            self._rows[i] += chunk.num_rows
+            self.append(i, chunk)
+
+    def append(self, i: int, chunk: pa.Table) -> None:
+        """Rows of partition `i` (`partition_of` their MMSIs), written after those before."""
+        self._writer(i).write_table(chunk)
+        self._rows[i] += chunk.num_rows
 
     def _writer(self, i: int) -> pa.ipc.RecordBatchStreamWriter:
         if i not in self._writers:
@@ -145,7 +149,9 @@ def partition_tables(
         for path in paths:
             with pa.OSFile(str(path)) as f:
                 tables.append(pa.ipc.open_stream(f).read_all())
-        yield pa.concat_tables(tables)
+        joined = [pa.concat_tables(tables)]
+        del tables  # (the caller alone holds the rows: it may free them before the next)
+        yield joined.pop()
 
 
 def _pieces(
@@ -182,13 +188,34 @@ def _pieces(
         yield table
 
 
+def write_split(table: pa.Table, which: np.ndarray, spills: Sequence[VesselPartitions]) -> None:
+    """Each row of `table` into the partitions `spills[which[row]]` (-1: none of them), as
+    `write` of each one's rows would put them, with one sort and one `take` for all: the read
+    stage spills its moving and its slow reports (most of the rows) at once."""
+    kept = np.flatnonzero(which >= 0)
+    if not len(kept):
+        return
+    n = len(spills[0])
+    key = which[kept] * n + partition_of(table.column("mmsi").to_numpy()[kept], n)
+    sizes = np.bincount(key, minlength=n * len(spills))
+    rows = table.take(pa.array(kept[_stable_order(key, n * len(spills))]))
+    bounds = np.r_[0, np.cumsum(sizes)]
+    for k in np.flatnonzero(sizes):
+        spills[k // n].append(k % n, rows.slice(bounds[k], sizes[k]))
+
+
+def _stable_order(part: np.ndarray, n: int) -> np.ndarray:
+    """The stable order of part numbers 0 .. n - 1: for 16-bit ones a radix sort, linear."""
+    return np.argsort(part.astype(np.int16) if n <= 1 << 15 else part, kind="stable")
+
+
 def split_rows(table: pa.Table, part: np.ndarray, n: int) -> Iterator[tuple[int, pa.Table]]:
     """The rows of `table` by their part number (0 .. n - 1), each part in the table's order."""
     sizes = np.bincount(part, minlength=n)
     if len(part) and sizes.max() == len(part):  # one part (a small input's only one): as is
         yield int(part[0]), table
         return
-    order = np.argsort(part, kind="stable")
+    order = _stable_order(part, n)
     bounds = np.r_[0, np.cumsum(sizes)]
     table = table.take(pa.array(order))
     for i in np.flatnonzero(np.diff(bounds)):

@@ -45,7 +45,12 @@ from aisdati.preprocess.clean import (
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.inputs import Source, describe_read_error
 from aisdati.preprocess.output import PartWriter, build_tracks
-from aisdati.preprocess.partition import VesselPartitions, partition_tables
+from aisdati.preprocess.partition import (
+    VesselPartitions,
+    partition_tables,
+    split_rows,
+    write_split,
+)
 from aisdati.preprocess.read import TableReader, open_reader
 from aisdati.preprocess.rejects import malformed_rows, reject_rows
 from aisdati.preprocess.report import CODE, IngestCounts
@@ -150,8 +155,8 @@ def _spill_rows(
         filter_area_speed(table, codes, task.roi, task.settings)
         rows += len(codes)
         counts.add_codes(codes)
-        spills[0].write(table.filter(pa.array(codes == 0)))
-        spills[1].write(table.filter(pa.array(codes == CODE["slow"])))
+        which = np.where(codes == 0, 0, np.where(codes == CODE["slow"], 1, -1))
+        write_split(table, which, spills)  # the moving reports, and the slow ones beside
         if rejects:
             rejects.write(reject_rows(table, codes, task.source.label))
         if bar is not None:
@@ -295,16 +300,37 @@ def report_stages(task: ReportsTask) -> ReportsResult:
             task.spills, PARTITION_SCHEMA, task.rows, settings.rows_per_bucket,
             _independent_s(settings), pieces_as="reports",
         )  # fmt: skip
-        for table in pieces:
-            table, codes = clean_vessels(table, settings)
-            rows = table.filter(pa.array((codes == 0) | (codes == slow)))
-            out.write_table(report_rows(rows))
-            written += rows.num_rows
-            mmsi = rows.column("mmsi").to_numpy()  # sorted: each vessel's first row
-            first = np.ones(len(mmsi), bool)
-            first[1:] = mmsi[1:] != mmsi[:-1]
-            vessels.append(mmsi[first])
+        for piece in pieces:
+            ranges = vessel_ranges(piece, REPORT_RANGES)
+            del piece  # (a copy in ranges: the piece's rows are freed)
+            for table in ranges:
+                table, codes = clean_vessels(table, settings)
+                rows = table.filter(pa.array((codes == 0) | (codes == slow)))
+                out.write_table(report_rows(rows))
+                written += rows.num_rows
+                mmsi = rows.column("mmsi").to_numpy()  # sorted: each vessel's first row
+                first = np.ones(len(mmsi), bool)
+                first[1:] = mmsi[1:] != mmsi[:-1]
+                vessels.append(mmsi[first])
+            del ranges, table, rows  # (not held while the next piece is read)
     return ReportsResult(written, np.unique(np.concatenate(vessels)))
+
+
+REPORT_RANGES = 4
+"""Ranges of MMSIs a partition's reports are cleaned in, one after the other (`vessel_ranges`):
+most of the input's rows are reports, and cleaning a whole partition at once (its rows, their
+sorted copy, the kept rows, the rows of reports.parquet) held three to four copies of it."""
+
+
+def vessel_ranges(table: pa.Table, n: int) -> list[pa.Table]:
+    """The rows of `table` in `n` ranges of MMSIs (whole vessels, each range's rows in the
+    table's order), from the lowest MMSIs up: cleaned one after the other, they give the rows
+    and the order the whole table gives (`clean_vessels` sorts by MMSI and time, stably)."""
+    mmsi = table.column("mmsi").to_numpy()
+    if n < 2 or len(mmsi) < 2 * n:
+        return [table]
+    cuts = np.quantile(mmsi, np.arange(1, n) / n, method="lower")
+    return [chunk for _, chunk in split_rows(table, np.searchsorted(cuts, mmsi, "right"), n)]
 
 
 def partition_stage(task: VesselTask | ReportsTask) -> VesselResult | ReportsResult:
