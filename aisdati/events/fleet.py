@@ -11,7 +11,7 @@ its finder in `FLEET_FINDERS`."""
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -79,12 +79,15 @@ FLEET_FINDERS: dict[str, FleetFinder] = {
 """Each fleet kind's finder: (the fleet, the rules) -> its events, records of EVENT_COLUMNS."""
 
 
-def fleet_events(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFrame:
+def fleet_events(
+    fleet: Fleet, rules: EventRules, own: pd.DataFrame, kinds: Collection[str] | None = None
+) -> pd.DataFrame:
     """`own` (the one-vessel events of the fleet's vessels) with what the fleet says of them
-    (`annotated`), every fleet kind's events added and the one-vessel events they fold
-    removed."""
+    (`annotated`), every fleet kind's events (`kinds`: only those) added and the one-vessel
+    events they fold removed."""
     own = annotated(fleet, rules, own)
-    found = [row for find in FLEET_FINDERS.values() for row in find(fleet, rules)]
+    finders = [f for k, f in FLEET_FINDERS.items() if kinds is None or k in kinds]
+    found = [row for find in finders for row in find(fleet, rules)]
     if not found:
         return own
     fleet_rows = pd.DataFrame(found, columns=list(EVENT_COLUMNS))

@@ -27,9 +27,10 @@ SCAN_S = 60.0
 """Feed seconds between two looks for silent vessels and vessels to forget."""
 OFF_TRAFFIC = "off-traffic"
 """The learned kind: looked for only when the area models judge a vessel's window."""
-FLEET_KINDS = frozenset(FLEET)
+FLEET_KINDS = frozenset(FLEET) - {"identity-conflict", "identity-change"}
 """The kinds found across vessels: looked for every `SCAN_S` over all windows (`Watch._fleet`),
-never by one vessel's judgement."""
+never by one vessel's judgement; but for the identity kinds, which are a vessel's own and are
+looked for in its window (`aisdati.live.judge.identity_events`)."""
 ONE_VESSEL_UNJUDGED = FLEET_KINDS | {OFF_TRAFFIC}
 FLEET_UNJUDGED = frozenset(KINDS) - FLEET_KINDS
 """What a fleet scan leaves as it is: every kind but the fleet's."""
@@ -178,7 +179,7 @@ class Watch:
         together = clean_together(mmsi, [recent[m].rows for m in mmsi], self.ingest)
         reports = {m: together.of(k) for k, m in enumerate(together.mmsi) if together.sizes[k]}
         identity = {m: asdict(recent[m].identity) for m in reports}
-        found = fleet_events(Fleet(reports, identity), self.rules, pd.DataFrame())
+        found = fleet_events(Fleet(reports, identity), self.rules, pd.DataFrame(), FLEET_KINDS)
         rows: dict[int, list[dict]] = {}
         for row in found.to_dict("records"):
             rows.setdefault(int(row["mmsi"]), []).append(row)
