@@ -124,7 +124,7 @@ def clean_together(mmsi: list[int], rows: list[np.ndarray], ingest: IngestSettin
     for second in np.unique(c["mmsi"][bounds[-1] :]).tolist() if len(order) else []:
         a, b = np.searchsorted(c["mmsi"], [second, second + 1])
         seconds[second] = part(every, a, b, second)
-    return Together(order, every, bounds, seconds)
+    return Together(order, part(every, 0, bounds[-1], -1), bounds, seconds)
 
 
 def part(v: VesselReports, a: int, b: int, mmsi: int) -> VesselReports:

@@ -151,8 +151,16 @@ function visible(e) {
   return (!view.get('class') || e['class'] === view.get('class')) &&
     (!view.get('kind') || e.kind === view.get('kind'));
 }
+function points(e) {  // an event's positions; null parts a fleet event's vessels
+  return e.lats.map((lat, i) => [lat, e.lons[i]]).filter(p => p[0] !== null);
+}
+function parts(e) {
+  const out = [[]];
+  e.lats.forEach((lat, i) => lat === null ? out.push([]) : out[out.length - 1].push([lat, e.lons[i]]));
+  return out.filter(p => p.length);
+}
 function zoomTo(e) {
-  const where = e.lats.map((lat, i) => [lat, e.lons[i]]);
+  const where = points(e);
   map.fitBounds(L.latLngBounds(where).pad(0.5), {maxZoom: 14});
   shapes[e.id].openPopup(L.latLng(e.lat, e.lon));
   shown = e.id;
@@ -166,7 +174,8 @@ function eventRow(e) {
   const badge = document.createElement('span');
   badge.className = 'badge';
   badge.textContent = e.state === 'open' ? 'OPEN' : 'closed';
-  const cells = [null, e.label, e.name || String(e.mmsi), utc(Date.parse(e.start) / 1000).slice(5),
+  const who = [e, ...(e.others || [])].map(v => v.name || String(v.mmsi)).join(' + ');
+  const cells = [null, e.label, who, utc(Date.parse(e.start) / 1000).slice(5),
     e.state === 'open' ? `${duration(e.duration_s)}+` : duration(e.duration_s), place(e.lat, e.lon)];
   ['state', 'kind', 'who', 'when', 'for', 'where'].forEach((name, i) => {
     const c = r.insertCell();
@@ -183,9 +192,9 @@ function drawEvents() {
   body.replaceChildren();
   for (const e of latest.events) {
     const colour = e.state !== 'open' ? '#7b8794' : e['class'] === 'alert' ? '#d62728' : '#e07b00';
-    const where = e.lats.map((lat, i) => [lat, e.lons[i]]);
-    const shape = where.length > 1
-      ? L.polyline(where, {color: colour, weight: 5, opacity: 0.8, dashArray: e.state === 'open' ? null : '6 4'})
+    const where = points(e), style = {color: colour, weight: 5, opacity: 0.8, dashArray: e.state === 'open' ? null : '6 4'};
+    const shape = e.area ? L.polygon(where, {...style, weight: 2, fillOpacity: 0.2})
+      : where.length > 1 ? L.polyline(parts(e), style)
       : L.circleMarker(where[0], {radius: 9, color: colour, weight: 3, fill: false});
     shape.bindPopup(() => eventRows(e));
     shapes[e.id] = shape;

@@ -57,8 +57,14 @@ def event_json(event_id: int, state: str, f: dict[str, Any]) -> dict[str, Any]:
         "start": f["start"].isoformat(), "end": f["end"].isoformat(),
         "duration_s": (f["end"] - f["start"]).total_seconds(),
         "strength": f["strength"], "evidence": f["evidence"], "lon": f["lon"], "lat": f["lat"],
-        "lons": list(f["lons"]), "lats": list(f["lats"]),
+        "lons": [_coordinate(x) for x in f["lons"]], "lats": [_coordinate(y) for y in f["lats"]],
+        "area": KINDS[f["kind"]].area, "others": json.loads(f.get("others") or "[]"),
     }  # fmt: skip
+
+
+def _coordinate(value: float) -> float | None:
+    """A stretch's coordinate for JSON: None where NaN parts a fleet event's vessels."""
+    return None if math.isnan(value) else value
 
 
 def number(value: float, digits: int) -> float | None:
