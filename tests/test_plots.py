@@ -29,7 +29,8 @@ def test_mathtext_in_an_input_name_is_drawn_as_it_is(tmp_path):
     assert result.exit_code == 0, result.output
     assert (out / "routes.png").stat().st_size > 10_000
     assert sorted(p.name for p in out.iterdir()) == [
-        "ingest_report.json", "points.parquet", "reports.parquet", "routes.geojson",
+        "identities.parquet", "ingest_report.json", "points.parquet", "reports.parquet",
+        "routes.geojson",
         "routes.parquet", "routes.png", "tracks.parquet", "vessels.parquet",
     ]  # fmt: skip
 

@@ -137,10 +137,12 @@ def test_ingesting_twice_gives_identical_outputs(cli, data, tmp_path):
     for out in (first, second, first):
         result, _ = ingest(cli, out, data / HEAD_ZIP, data / "NYHarbor_2020_06_30_first_hour.csv")
         assert result.exit_code == 0, result.output
-    names = ("points.parquet", "tracks.parquet", "reports.parquet", "vessels.parquet")
+    names = ("points.parquet", "tracks.parquet", "reports.parquet", "vessels.parquet",
+             "identities.parquet")  # fmt: skip
     for name in (*names, "routes.parquet", "routes.geojson"):
         assert contents(first / name) == contents(second / name), name
     assert sorted(p.name for p in first.iterdir()) == [
+        "identities.parquet",
         "ingest_report.json",
         "points.parquet",
         "reports.parquet",
