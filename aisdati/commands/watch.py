@@ -132,7 +132,7 @@ def run(o: WatchOptions) -> None:
     if o.ports is not None:
         rules = replace(rules, ports=read_ports(o.ports))
     chunks = open_source(o.source, say, paced=o.speed is not None)
-    state, show, db = LiveState(), printer(o.as_json), without_password(o.db)
+    state, show, db = LiveState(bool(o.serve)), printer(o.as_json), without_password(o.db)
     push = pusher(notifiers)
 
     def emit(changes: list[Change]) -> None:

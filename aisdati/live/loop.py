@@ -25,10 +25,14 @@ from aisdati.preprocess.settings import IngestSettings
 
 SCAN_S = 60.0
 """Feed seconds between two looks for silent vessels and vessels to forget."""
+FLEET_SCAN_S = 1800.0
+"""Feed seconds between two looks for the fleet kinds over every window (`Watch._fleet`): a scan
+costs about as much as judging every vessel once, and an encounter lasts hours (at 10,000
+vessels, every 10 minutes held the watch near 1,000 msg/s)."""
 OFF_TRAFFIC = "off-traffic"
 """The learned kind: looked for only when the area models judge a vessel's window."""
 FLEET_KINDS = frozenset(FLEET) - {"identity-conflict", "identity-change"}
-"""The kinds found across vessels: looked for every `SCAN_S` over all windows (`Watch._fleet`),
+"""The kinds found across vessels: looked for every `FLEET_SCAN_S` over all windows (`_fleet`),
 never by one vessel's judgement; but for the identity kinds, which are a vessel's own and are
 looked for in its window (`aisdati.live.judge.identity_events`)."""
 ONE_VESSEL_UNJUDGED = FLEET_KINDS | {OFF_TRAFFIC}
@@ -78,6 +82,7 @@ class Watch:
     ledger: Ledger = field(init=False)
     last: dict[int, LastReport] = field(default_factory=dict)
     scanned_s: float = 0.0
+    fleet_scanned_s: float = 0.0
     area: AreaJudge | None = None
     """The area models judging each vessel's window every `area.EVERY` reports (None: none)."""
 
@@ -172,8 +177,9 @@ class Watch:
         vessel's open fleet event not found again closes). Nothing to do while no fleet finder
         is registered. Unlike detect, a one-vessel event a fleet event explains is not taken
         back: it was already said."""
-        if not FLEET_FINDERS:
+        if not FLEET_FINDERS or self.vessels.clock_us / 1e6 - self.fleet_scanned_s < FLEET_SCAN_S:
             return []
+        self.fleet_scanned_s = self.vessels.clock_us / 1e6
         recent = self.vessels.recent
         mmsi = [m for m, one in recent.items() if len(one.rows)]
         together = clean_together(mmsi, [recent[m].rows for m in mmsi], self.ingest)

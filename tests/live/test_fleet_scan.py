@@ -1,4 +1,4 @@
-"""The watch's hook for the kinds found across vessels (`Watch._fleet`): every `SCAN_S` of the
+"""The watch's hook for the kinds found across vessels (`Watch._fleet`): every `FLEET_SCAN_S` of the
 feed it runs the registered fleet finders over all windows, and their events go through the
 ledger as the others' (opened while found, closed once not), while one vessel's judgement
 leaves them as they are. A stand-in finder (two vessels within 2 km at their last reports, an
@@ -14,6 +14,7 @@ from pyais.encode import encode_dict
 from aisdati.events import fleet
 from aisdati.events.record import event_row
 from aisdati.geo import haversine_m
+from aisdati.live import loop
 from aisdati.live.loop import Watch
 from aisdati.live.store import open_store
 
@@ -52,6 +53,7 @@ def minute(k: int, apart_deg: float) -> list[bytes]:
 
 def test_fleet_events_open_and_close_through_the_ledger(tmp_path: Path, monkeypatch):
     monkeypatch.setitem(fleet.FLEET_FINDERS, "encounter", side_by_side)
+    monkeypatch.setattr(loop, "FLEET_SCAN_S", loop.SCAN_S)  # a scan every minute of the feed
     watch = Watch(open_store(str(tmp_path / "w.sqlite")))
     changes = [(k, c) for k in range(6) for c in watch.step(minute(k, 0.005 if k < 3 else 0.5))]
     encounters = [(k, c.what) for k, c in changes if c.event.fields["kind"] == "encounter"]
