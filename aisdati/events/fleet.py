@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Collection
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -86,6 +86,8 @@ def fleet_events(
     (`annotated`), every fleet kind's events (`kinds`: only those) added and the one-vessel
     events they fold removed."""
     own = annotated(fleet, rules, own)
+    if rules.ports is None:  # learned once for every finder that asks (`Fleet.anchorages`)
+        rules = replace(rules, ports=fleet.anchorages(rules))
     finders = [f for k, f in FLEET_FINDERS.items() if kinds is None or k in kinds]
     found = [row for find in finders for row in find(fleet, rules)]
     if not found:

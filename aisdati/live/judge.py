@@ -135,17 +135,6 @@ def part(v: VesselReports, a: int, b: int, mmsi: int) -> VesselReports:
     )  # fmt: skip
 
 
-def cleaned(
-    windows: dict[int, dict[str, np.ndarray]], ingest: IngestSettings
-) -> dict[int, VesselReports]:
-    """Each window's reports that ingest would keep in reports.parquet, sorted by time
-    (`clean_together`), by MMSI."""
-    as_rows = [[np.asarray(w[k], np.float64) for k in FIELDS] for w in windows.values()]
-    rows = [np.column_stack(r) for r in as_rows]
-    together = clean_together(list(windows), rows, ingest)
-    return {m: together.of(k) for k, m in enumerate(together.mmsi)}
-
-
 @dataclass(frozen=True)
 class Verdict:
     """A chunk's judgement: the vessels whose events were looked for, each one's `Judged`; the

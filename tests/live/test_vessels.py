@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from aisdati.live.judge import cleaned
-from aisdati.live.vessels import Vessels
+from aisdati.live.judge import clean_together
+from aisdati.live.vessels import FIELDS, Vessels
 from aisdati.preprocess.convert import PARTITION_SCHEMA
 from aisdati.preprocess.settings import IngestSettings
 
@@ -59,9 +59,17 @@ def test_identity_fields_not_given_are_kept_and_each_message_is_in_the_history()
     assert history["last"].tolist() == [pd.Timestamp(s, unit="s", tz="UTC") for s in (1, 3)]
 
 
+def cleaned(windows: dict[int, dict[str, np.ndarray]]) -> dict:
+    """Each window's cleaned reports by MMSI, the windows cleaned in one pass."""
+    rows = [np.column_stack([np.asarray(w[k], np.float64) for k in FIELDS])
+            for w in windows.values()]  # fmt: skip
+    together = clean_together(list(windows), rows, IngestSettings())
+    return {m: together.of(k) for k, m in enumerate(together.mmsi)}
+
+
 def test_windows_cleaned_together_are_each_cleaned_alone():
-    """The chunk's vessels are cleaned in one pass (`judge.cleaned`): each keeps what it keeps
-    alone, a position outlier and a repeated time out, whatever the other vessels hold."""
+    """The chunk's vessels are cleaned in one pass (`judge.clean_together`): each keeps what it
+    keeps alone, a position outlier and a repeated time out, whatever the other vessels hold."""
     v = Vessels()
     v.add(reports([7] * 6 + [3] * 5, [0, 60, 120, 120, 180, 240, 0, 30, 60, 90, 120]))
     windows = {m: v.window(m) for m in (7, 3)}
@@ -69,9 +77,9 @@ def test_windows_cleaned_together_are_each_cleaned_alone():
         cols["lon"][:] = 10.0 + 0.002 * np.arange(len(cols["lon"]))
         cols["lat"][:] = 57.0
     windows[7]["lat"][4] = 0.0  # 57 degrees south of the others: an outlier
-    together = cleaned(windows, IngestSettings())
+    together = cleaned(windows)
     for mmsi, cols in windows.items():
-        alone = cleaned({mmsi: cols}, IngestSettings())[mmsi]
+        alone = cleaned({mmsi: cols})[mmsi]
         assert together[mmsi].mmsi == mmsi
         for name in ("time_s", "lon", "lat", "sog", "cog", "heading", "status"):
             assert np.array_equal(getattr(together[mmsi], name), getattr(alone, name))
