@@ -34,8 +34,8 @@ from aisdati.storage import fetched_models, without_password
 
 PROGRESS_S = 5.0
 """Wall seconds between two progress lines on stderr."""
-PUSHED = ("opened", "closed")
-"""The changes of an alert that `--notify` posts."""
+PUSHED = ("opened", "closed", "withdrawn")
+"""The changes of an alert that `--notify` posts (one withdrawn was posted when it opened)."""
 
 
 def say(message: str) -> None:
@@ -47,6 +47,8 @@ def change_record(change: Change) -> dict[str, Any]:
     """An event change as one JSON object: what changed, the event's id, state and fields."""
     e = change.event
     record = {"change": change.what, "event_id": e.event_id, "state": e.state}
+    if change.into is not None:
+        record["into"] = change.into
     for key, value in e.fields.items():
         record[key] = value.isoformat() if hasattr(value, "isoformat") else value
     record["label"] = KINDS[e.fields["kind"]].label
@@ -63,9 +65,10 @@ def printer(as_json: bool) -> Callable[[list[Change]], None]:
                 continue
             f = c.event.fields
             who = f["name"] or f["mmsi"]
+            into = "" if c.into is None else f" (folded into #{c.into})"
             print(f"{c.what:8} #{c.event.event_id} {f['kind']} {who} since "
                   f"{f['start']:%Y-%m-%d %H:%M:%S} at {f['lat']:.4f},{f['lon']:.4f}: "
-                  f"{f['evidence']}", flush=True)  # fmt: skip
+                  f"{f['evidence']}{into}", flush=True)  # fmt: skip
 
     return emit
 
@@ -194,5 +197,6 @@ def follow(
         if time.monotonic() - shown >= PROGRESS_S:
             say(summary(watch, notifiers))
             shown = time.monotonic()
+    watch.end()
     state.refresh(watch, force=True)
     say(f"feed ended: {summary(watch, notifiers)}")

@@ -7,7 +7,6 @@ whether an events table finds a case (its kind, overlapping its time, naming its
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 
 import numpy as np
@@ -15,6 +14,7 @@ import pandas as pd
 
 from aisdati.evaluation import encounter_case, identity_cases, interference_case, port_visit_case
 from aisdati.evaluation.case import Case
+from aisdati.events.fleet import named
 
 Constructor = Callable[
     [pd.DataFrame, pd.DataFrame, np.random.Generator],
@@ -33,12 +33,6 @@ CONSTRUCTORS: dict[str, Constructor] = {
     "gap quiet": interference_case.construct_gap_quiet,
 }
 """Each constructed case by name: its kind, or its kind and what it expects ("gap heard")."""
-
-
-def named(event: pd.Series) -> set[int]:
-    """The vessels an event names: its own and its others'."""
-    others = json.loads(event["others"]) if isinstance(event["others"], str) else []
-    return {int(event["mmsi"])} | {int(o["mmsi"]) for o in others}
 
 
 def found(case: Case, events: pd.DataFrame) -> bool:

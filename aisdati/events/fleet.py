@@ -11,7 +11,7 @@ its finder in `FLEET_FINDERS`."""
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -116,24 +116,56 @@ def annotated(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFram
     return out
 
 
+@dataclass(frozen=True)
+class Fold:
+    """What one fleet event explains (`EventKind.folds`): the one-vessel events of `kinds`, of
+    a vessel it names, overlapping its time span (seconds). detect drops them (`folded`); the
+    watch withdraws them (`aisdati.live.ledger.Ledger.withdraw`)."""
+
+    kinds: tuple[str, ...]
+    named: frozenset[int]
+    start_s: float
+    end_s: float
+
+    @classmethod
+    def of(cls, event: Mapping[str, Any]) -> Fold | None:
+        """The fold of a fleet event (a record of EVENT_COLUMNS); None: its kind folds none."""
+        kinds = KINDS[event["kind"]].folds
+        if not kinds:
+            return None
+        start, end = pd.Timestamp(event["start"]), pd.Timestamp(event["end"])
+        return cls(kinds, frozenset(named(event)), start.timestamp(), end.timestamp())
+
+    def explains(self, kind: str, mmsi: int, start_s: float, end_s: float) -> bool:
+        return (
+            kind in self.kinds
+            and mmsi in self.named
+            and start_s <= self.end_s
+            and end_s >= self.start_s
+        )
+
+
+def named(event: Mapping[str, Any]) -> set[int]:
+    """The vessels an event names: its own and its others' (`others`: JSON; null: NaN or
+    None)."""
+    others = json.loads(event["others"]) if isinstance(event["others"], str) else []
+    return {int(event["mmsi"])} | {int(o["mmsi"]) for o in others}
+
+
 def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
-    """`own` less the events a fleet event explains: of a kind it folds, of a vessel it names,
-    overlapping its time span."""
+    """`own` less the events a fleet event explains (`Fold`)."""
     if not len(own):
         return own
     drop = pd.Series(False, index=own.index)
-    start, end = pd.to_datetime(own["start"], utc=True), pd.to_datetime(own["end"], utc=True)
-    for e in fleet_rows.itertuples(index=False):
-        kinds = KINDS[e.kind].folds
-        if not kinds:
+    start, end = _seconds(own["start"]), _seconds(own["end"])
+    for row in fleet_rows.to_dict("records"):
+        if (fold := Fold.of(row)) is None:
             continue
-        others = json.loads(e.others) if isinstance(e.others, str) else []  # null: NaN or None
-        named = {int(e.mmsi)} | {int(o["mmsi"]) for o in others}
         drop |= (
-            own["kind"].isin(kinds)
-            & own["mmsi"].isin(named)
-            & (start <= pd.Timestamp(e.end))
-            & (end >= pd.Timestamp(e.start))
+            own["kind"].isin(fold.kinds)
+            & own["mmsi"].isin(fold.named)
+            & (start <= fold.end_s)
+            & (end >= fold.start_s)
         )
     return own[~drop]
 

@@ -6,7 +6,11 @@ its stretch reaches the vessel's latest report (a drift still drifting, a CUSUM 
 rising) and closed once a later report is not part of it; an event found already ended (a
 loitering, which needs the vessel under way again; a gap, found when the vessel reappears) is
 closed at once. A vessel under way that falls silent for longer than the gap kind allows opens
-a gap, which closes when the vessel is heard again (or is forgotten)."""
+a gap, which closes when the vessel is heard again (or is forgotten).
+
+What only the fleet scan can say comes after (`aisdati.live.loop.Watch._fleet`): a gap's
+coverage (`cover`), and the one-vessel events a fleet event explains (`withdraw`), which detect
+never raises and the watch takes back."""
 
 from __future__ import annotations
 
@@ -16,8 +20,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
+from aisdati.events.coverage import HEARD
+from aisdati.events.fleet import Fleet, Fold, annotated
 from aisdati.events.record import event_row
+from aisdati.events.rules import EventRules
 from aisdati.events.settings import EventSettings
 from aisdati.live.judge import Judged, LastReport
 
@@ -44,16 +52,18 @@ class LiveEvent:
 
 @dataclass(frozen=True)
 class Change:
-    """What happened to an event: opened, extended, closed, or revised (a closed event whose
-    stretch a later judgement read differently)."""
+    """What happened to an event: opened, extended, closed, revised (a closed event whose
+    stretch a later judgement read differently, or a gap whose coverage a fleet scan told), or
+    withdrawn (a one-vessel event a fleet event explains, `into`: that event's id)."""
 
     what: str
     event: LiveEvent
+    into: int | None = None
 
     @classmethod
-    def of(cls, what: str, e: LiveEvent) -> Change:
+    def of(cls, what: str, e: LiveEvent, into: int | None = None) -> Change:
         """The change with the event as it stands now (the ledger's own copy changes on)."""
-        return cls(what, LiveEvent(e.event_id, dict(e.fields), e.state))
+        return cls(what, LiveEvent(e.event_id, dict(e.fields), e.state), into)
 
 
 @dataclass
@@ -63,6 +73,9 @@ class Ledger:
     new_id: Callable[[], int] = field(default_factory=lambda: itertools.count(1).__next__)
     """Where a new event's id comes from: the watch's database (`Store.new_id`), so that no
     other watch on it and no restart ever gives the same id to another event."""
+    folds: dict[int, Fold] = field(default_factory=dict)
+    """What the fleet events explain (`Fold`), by the fleet event's id: kept while a window may
+    hold what they explain, so that no later judgement raises it again (`withdraw`)."""
 
     def load(self, events: list[LiveEvent]) -> None:
         """The events a store kept (open ones, and recent closed ones to match again)."""
@@ -75,6 +88,8 @@ class Ledger:
         changes, matched = [], set()
         for row in judged.events:
             start_s, end_s = row["start"].timestamp(), row["end"].timestamp()
+            if self._folding(row["kind"], mmsi, start_s, end_s) is not None:
+                continue  # a fleet event explains it: not raised (`withdraw`)
             state = "open" if end_s >= judged.last_s and row["kind"] != "gap" else "closed"
             match = next((e for e in known if e.overlaps(row["kind"], start_s, end_s)), None)
             if match is None:
@@ -119,16 +134,65 @@ class Ledger:
                 changes.append(Change.of("closed", e))
         return changes
 
+    def withdraw(self, clock_s: float, kept_s: float) -> list[Change]:
+        """The one-vessel events that a fleet event held explains (`aisdati.events.fleet.
+        Fold`: detect folds them) withdrawn, and forgotten: detect never raises them. Each
+        fleet event's fold is kept until `kept_s` before `clock_s` (a window's span: no window
+        holds a report older), so that a later judgement does not raise them again."""
+        for events in self.known.values():
+            for e in events:
+                if (fold := Fold.of(e.fields)) is not None:
+                    self.folds[e.event_id] = fold
+        self.folds = {i: f for i, f in self.folds.items() if f.end_s >= clock_s - kept_s}
+        changes = []
+        for mmsi in {m for f in self.folds.values() for m in f.named} & self.known.keys():
+            kept = []
+            for e in self.known[mmsi]:
+                into = self._folding(e.fields["kind"], mmsi, *e.span_s)
+                if into is None:
+                    kept.append(e)
+                else:
+                    changes.append(Change.of("withdrawn", e, into))
+            self.known[mmsi] = kept
+        return changes
+
+    def _folding(self, kind: str, mmsi: int, start_s: float, end_s: float) -> int | None:
+        """The id of a fleet event that explains this one-vessel event (None: none does)."""
+        return next(
+            (i for i, f in self.folds.items() if f.explains(kind, mmsi, start_s, end_s)), None
+        )
+
+    def cover(self, fleet: Fleet, rules: EventRules) -> list[Change]:
+        """Each held gap's coverage by detect's own rule (`aisdati.events.fleet.annotated`)
+        from the windows of a fleet scan (`fleet`), revised where it tells more: from null to
+        heard or quiet, from quiet to heard, never back. The windows drop a gap's neighbours'
+        reports as they move on (a later scan may know less of its time than an earlier),
+        while those after it (what a quiet gap needs) come in later."""
+        gaps = [e for events in self.known.values() for e in events
+                if e.fields["kind"] == "gap" and e.fields.get("coverage") != HEARD]  # fmt: skip
+        if not gaps:
+            return []
+        told = annotated(fleet, rules, pd.DataFrame([e.fields for e in gaps]))["coverage"]
+        changes = []
+        for e, coverage in zip(gaps, told.tolist(), strict=True):
+            if not isinstance(coverage, str) or coverage == e.fields.get("coverage"):
+                continue
+            e.fields = {**e.fields, "coverage": coverage}
+            changes.append(Change.of("revised", e))
+        return changes
+
     def open_events(self) -> list[LiveEvent]:
         return [e for events in self.known.values() for e in events if e.state == "open"]
 
 
 def _changed(e: LiveEvent, row: dict[str, Any], state: str, first_s: float) -> str | None:
     """Update `e` from a judgement's `row`; what changed (None: nothing). A start before the
-    window is kept: the window no longer holds the event's beginning."""
+    window is kept: the window no longer holds the event's beginning; and a gap's coverage."""
     if e.fields["start"].timestamp() < first_s:
         row = {**row, "start": e.fields["start"]}
         row["duration_s"] = (row["end"] - row["start"]).total_seconds()
+    if row.get("coverage") is None:  # a fleet scan's, which one vessel's judgement cannot say
+        row = {**row, "coverage": e.fields.get("coverage")}
     same = all(_same(e.fields[k], row[k]) for k in COMPARED)
     if same and state == e.state:
         return None

@@ -171,21 +171,25 @@ class Watch:
             changes += self.ledger.forget(mmsi)
         return changes
 
-    def _fleet(self) -> list[Change]:
+    def _fleet(self, now: bool = False) -> list[Change]:
         """The fleet kinds (`aisdati.events.fleet.fleet_events`) over every vessel's window,
-        their events through the ledger as the others' (each under the vessel it is of; a
-        vessel's open fleet event not found again closes). Nothing to do while no fleet finder
-        is registered. Unlike detect, a one-vessel event a fleet event explains is not taken
-        back: it was already said."""
-        if not FLEET_FINDERS or self.vessels.clock_us / 1e6 - self.fleet_scanned_s < FLEET_SCAN_S:
+        every `FLEET_SCAN_S` of the feed's clock (`now`: at once), their events through the
+        ledger as the others' (each under the vessel it is of; a vessel's open fleet event not
+        found again closes); then what only this scan can tell of the other events: each gap's
+        coverage (`Ledger.cover`), and the one-vessel events a fleet event explains withdrawn
+        (`Ledger.withdraw`), as detect folds them. Nothing to do while no fleet finder is
+        registered."""
+        clock_s = self.vessels.clock_us / 1e6
+        if not FLEET_FINDERS or (not now and clock_s - self.fleet_scanned_s < FLEET_SCAN_S):
             return []
-        self.fleet_scanned_s = self.vessels.clock_us / 1e6
+        self.fleet_scanned_s = clock_s
         recent = self.vessels.recent
         mmsi = [m for m, one in recent.items() if len(one.rows)]
         together = clean_together(mmsi, [recent[m].rows for m in mmsi], self.ingest)
         reports = {m: together.of(k) for k, m in enumerate(together.mmsi) if together.sizes[k]}
         identity = {m: asdict(recent[m].identity) for m in reports}
-        found = fleet_events(Fleet(reports, identity), self.rules, pd.DataFrame(), FLEET_KINDS)
+        fleet = Fleet(reports, identity)
+        found = fleet_events(fleet, self.rules, pd.DataFrame(), FLEET_KINDS)
         rows: dict[int, list[dict]] = {}
         for row in found.to_dict("records"):
             rows.setdefault(int(row["mmsi"]), []).append(row)
@@ -197,6 +201,16 @@ class Watch:
             judged = Judged(rows.get(m, []), float(v.time_s[0]), float(v.time_s[-1]), v,
                             FLEET_UNJUDGED)  # fmt: skip
             changes += self.ledger.update(m, judged)
+        changes += self.ledger.cover(fleet, self.rules)
+        return changes + self.ledger.withdraw(clock_s, self.vessels.window_s)
+
+    def end(self) -> list[Change]:
+        """The feed ended (a replay, stdin closed): the fleet kinds looked for once more, so
+        that its last stretch is judged as detect judges it (already stored)."""
+        changes = self._fleet(now=True)
+        self.store.write(changes, [])
+        if changes:
+            self.emit(changes)
         return changes
 
     def _positions(self, dirty: list[int]) -> list[tuple]:

@@ -108,11 +108,13 @@ class LiveState:
             self.asked.append(mmsi)
 
     def record(self, changes: list[Change]) -> None:
-        """The events that closed, kept for the page (the latest `RECENT_EVENTS`)."""
+        """The events that closed, kept for the page (the latest `RECENT_EVENTS`); one
+        withdrawn is no longer shown."""
         for c in changes:
-            if c.event.state == "closed":
+            if c.event.state == "closed" or c.what == "withdrawn":
                 shown = [e for e in self.closed if e["id"] != c.event.event_id]
                 self.closed = deque(shown, maxlen=RECENT_EVENTS)
+            if c.event.state == "closed" and c.what != "withdrawn":
                 self.closed.append(event_json(c.event.event_id, "closed", c.event.fields))
 
     def refresh(self, w: Watch, force: bool = False) -> None:

@@ -195,11 +195,17 @@ class Store:
 
     def write(self, changes: Sequence[Change], vessels: Sequence[tuple]) -> None:
         """The events changed and the vessels' last positions (rows of `VESSEL_FIELDS` less
-        `recent`, times in microseconds since the epoch), in one transaction."""
+        `recent`, times in microseconds since the epoch), in one transaction. An event
+        withdrawn (`Change`) is deleted: detect never raises it, and the database ends with
+        detect's events (its id is never given again)."""
         now = datetime.now(timezone.utc)
-        events = {c.event.event_id: c.event for c in changes}.values()
+        last = {c.event.event_id: c for c in changes}
+        events = [c.event for c in last.values() if c.what != "withdrawn"]
+        gone = [(i,) for i, c in last.items() if c.what == "withdrawn"]
         with self.transaction():
             cur = self.conn.cursor()
+            if gone:
+                cur.executemany(f"DELETE FROM events WHERE event_id = {self.d.mark}", gone)
             if events:
                 cur.executemany(
                     upsert(self.d, "events", EVENT_FIELDS, "event_id"),
