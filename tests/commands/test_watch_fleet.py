@@ -6,9 +6,12 @@ vessels, and end with the same events.
 The traffic is cut so that each test takes seconds: the New York Harbor hour's 80 busiest
 vessels (an interference, a gap heard, a gap quiet), and the two Kitimat vessels of an
 encounter over the hours around it. The watch judges 3-hour windows, looks for the fleet kinds
-every 30 minutes of the feed and once more where the feed ends (`Watch.end`): on these feeds,
-all shorter than a window, that last look sees what detect sees. On a longer feed an encounter
-longer than a window keeps the start it was first found with (`aisdati.live.ledger`), and a
+every 30 minutes of the feed and once more where the feed ends (`Watch.end`): on the NY
+feeds, all shorter than a window, that last look sees what detect sees. The encounter (3.8 h,
+longer than a window) is replayed paced (`--speed`, chunks of a few lines), as a live feed
+comes: the scans during the meeting find it, and it keeps the start it was first found with
+(`aisdati.live.ledger`); read in one chunk, only the last window's 2 hours of it would be
+seen, and no encounter of 2 hours within 500 m found there. A
 position jump or report ashore is raised, then withdrawn at the next scan that finds the
 interference explaining it (docs/usage/watch.md)."""
 
@@ -60,7 +63,8 @@ def test_watch_finds_a_constructed_encounter_as_detect(kitimat, tmp_path):
     hours = pd.Timedelta(hours=1)
     cut = reports[reports["mmsi"].isin(case.mmsis) & (reports["time"] >= case.start - hours)
                   & (reports["time"] <= case.end + hours)]  # fmt: skip
-    batch, live, _ = detected_and_watched(as_nmea(cut, identity, tmp_path / "feed.nmea"), tmp_path)
+    feed = as_nmea(cut, identity, tmp_path / "feed.nmea")
+    batch, live, _ = detected_and_watched(feed, tmp_path, "--speed", "1e9")
     assert found(case, batch) and found(case, live)
     same_events(batch, live)
 
