@@ -28,8 +28,9 @@ from aisdati.events.interference import gnss_interference
 from aisdati.events.kinds import KINDS
 from aisdati.events.port_visits import port_visits
 from aisdati.events.record import EVENT_COLUMNS
-from aisdati.events.reports import VesselReports
+from aisdati.events.reports import VesselReports, heard_as_one
 from aisdati.events.rules import EventRules
+from aisdati.tracks.schema import mmsi_of
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,14 @@ class Fleet:
         lon = np.concatenate([x for _, x, _ in stopped] or [np.empty(0)])
         lat = np.concatenate([y for _, _, y in stopped] or [np.empty(0)])
         return learn(mmsi, lon, lat, s)
+
+    def heard_as_one(self) -> list[VesselReports]:
+        """Each MMSI's reports as a receiver heard them, its two transmitters' together
+        (`aisdati.events.reports.heard_as_one`)."""
+        by_mmsi: dict[int, list[VesselReports]] = {}
+        for vessel, reports in self.vessels.items():
+            by_mmsi.setdefault(mmsi_of(vessel), []).append(reports)
+        return [heard_as_one(parts, mmsi) for mmsi, parts in by_mmsi.items()]
 
     @cached_property
     def heard(self) -> Heard:
@@ -93,7 +102,7 @@ def fleet_events(
     if not found:
         return own
     fleet_rows = pd.DataFrame(found, columns=list(EVENT_COLUMNS))
-    return pd.concat([folded(own, fleet_rows), fleet_rows], ignore_index=True)
+    return folded(pd.concat([own, fleet_rows], ignore_index=True), fleet_rows)
 
 
 def annotated(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFrame:
@@ -118,9 +127,9 @@ def annotated(fleet: Fleet, rules: EventRules, own: pd.DataFrame) -> pd.DataFram
 
 @dataclass(frozen=True)
 class Fold:
-    """What one fleet event explains (`EventKind.folds`): the one-vessel events of `kinds`, of
-    a vessel it names, overlapping its time span (seconds). detect drops them (`folded`); the
-    watch withdraws them (`aisdati.live.ledger.Ledger.withdraw`)."""
+    """What one fleet event explains (`EventKind.folds`): the events of `kinds`, of a vessel it
+    names (either transmitter of its MMSI), overlapping its time span (seconds). detect drops
+    them (`folded`); the watch withdraws them (`aisdati.live.ledger.Ledger.withdraw`)."""
 
     kinds: tuple[str, ...]
     named: frozenset[int]
@@ -139,7 +148,7 @@ class Fold:
     def explains(self, kind: str, mmsi: int, start_s: float, end_s: float) -> bool:
         return (
             kind in self.kinds
-            and mmsi in self.named
+            and mmsi_of(mmsi) in self.named
             and start_s <= self.end_s
             and end_s >= self.start_s
         )
@@ -153,7 +162,8 @@ def named(event: Mapping[str, Any]) -> set[int]:
 
 
 def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
-    """`own` less the events a fleet event explains (`Fold`)."""
+    """`own` less the events a fleet event explains (`Fold`; a fleet event among them too, as
+    an interference explains the identity conflict its displaced reports look like)."""
     if not len(own):
         return own
     drop = pd.Series(False, index=own.index)
@@ -163,7 +173,7 @@ def folded(own: pd.DataFrame, fleet_rows: pd.DataFrame) -> pd.DataFrame:
             continue
         drop |= (
             own["kind"].isin(fold.kinds)
-            & own["mmsi"].isin(fold.named)
+            & own["mmsi"].map(mmsi_of).isin(fold.named)
             & (start <= fold.end_s)
             & (end >= fold.start_s)
         )

@@ -67,9 +67,9 @@ class Jumps:
 def fleet_jumps(fleet: Fleet, s: EventSettings) -> Jumps:
     """Every vessel's steps whose unexplained displacement reaches the interference floor and
     stands out of that vessel's own (over its scale, `jump_sizes`: `interference_z`), within a
-    jump's longest step."""
+    jump's longest step; an MMSI's two transmitters heard as one (`Fleet.heard_as_one`)."""
     parts = []
-    for v in fleet.vessels.values():
+    for v in fleet.heard_as_one():
         if len(v) < 3:
             continue
         metres = unexplained_m(v, s)

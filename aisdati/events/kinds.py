@@ -169,12 +169,14 @@ KINDS: dict[str, EventKind] = {
             "one another (jumps of 1 km or more that their reported motion does not explain: "
             "by one shift and back, onto or from one point, onto one circle, or ashore), half "
             "or more of the vessels heard where they were: one event with its area, time span "
-            "and vessels; their own jumps and reports ashore are folded into it",
+            "and vessels (an MMSI's two transmitters read as one vessel); their own jumps, reports "
+            "ashore and the identity conflicts their displaced reports look like are folded "
+            "into it",
             "C4ADS' Above Us Only Stars (2019: spoofed positions on common points and circles) "
             "and gpsjam.org (a cell is jammed when a share of its aircraft lose accuracy); ours "
             "reads each vessel's positions against its reported motion, needs the vessels "
             "displaced alike and most of the area's, and dates it to minutes",
-            fleet=True, folds=("position-jump", "ashore"), area=True,
+            fleet=True, folds=("position-jump", "ashore", "identity-conflict"), area=True,
         ),
     )
 }  # fmt: skip

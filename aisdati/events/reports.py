@@ -106,6 +106,19 @@ class VesselReports:
             return np.hypot(*self.moved.T) / np.maximum(self.dt_s, 1e-9) / KNOT_MPS
 
 
+def heard_as_one(parts: list[VesselReports], mmsi: int) -> VesselReports:
+    """The reports of several vessel ids as one vessel `mmsi`, by time: what a receiver heard
+    under one MMSI before ingest split its two transmitters (`aisdati.tracks.schema.
+    TRANSMITTER_STEP`). Interference displaces a vessel's reports far enough to be taken for a
+    second transmitter's; heard as one, they are its jumps again."""
+    if len(parts) == 1:
+        return parts[0]
+    names = ("time_s", "lon", "lat", "sog", "cog", "heading", "status", "track_id")
+    joined = {n: np.concatenate([getattr(p, n) for p in parts]) for n in names}
+    order = np.argsort(joined["time_s"], kind="stable")
+    return VesselReports(mmsi, **{n: a[order] for n, a in joined.items()})
+
+
 def _per_second(unit: str) -> float:
     return {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}[unit]
 

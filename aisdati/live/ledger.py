@@ -28,6 +28,7 @@ from aisdati.events.record import event_row
 from aisdati.events.rules import EventRules
 from aisdati.events.settings import EventSettings
 from aisdati.live.judge import Judged, LastReport
+from aisdati.tracks.schema import mmsi_of
 
 COMPARED = ("start", "end", "n_reports", "strength", "evidence", "lon", "lat")
 """The fields whose change makes an event's new version (`extended` or `revised`)."""
@@ -145,7 +146,8 @@ class Ledger:
                     self.folds[e.event_id] = fold
         self.folds = {i: f for i, f in self.folds.items() if f.end_s >= clock_s - kept_s}
         changes = []
-        for mmsi in {m for f in self.folds.values() for m in f.named} & self.known.keys():
+        named = {m for f in self.folds.values() for m in f.named}
+        for mmsi in [m for m in self.known if mmsi_of(m) in named]:
             kept = []
             for e in self.known[mmsi]:
                 into = self._folding(e.fields["kind"], mmsi, *e.span_s)

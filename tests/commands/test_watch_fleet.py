@@ -69,11 +69,14 @@ def test_watch_finds_a_constructed_encounter_as_detect(kitimat, tmp_path):
     same_events(batch, live)
 
 
-def test_watch_finds_a_constructed_interference_as_detect_its_jumps_withdrawn(processed, tmp_path):
-    """Seed 1: the first case's block (seed 0) loses a vessel to ingest's split of two
-    transmitters (its displaced reports kept as a second transmitter's, in detect and in the
-    watch alike), so that neither names it."""
-    reports, identity, case = written(processed, "gnss-interference", seed=1)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_watch_finds_a_constructed_interference_as_detect_its_jumps_withdrawn(
+    processed, tmp_path, seed
+):
+    """Seed 0's block has a vessel whose displaced reports ingest takes for a second
+    transmitter's (split off under MMSI + 1000000000): the interference reads an MMSI's two
+    transmitters as one vessel, names it, and folds the conflict they seemed."""
+    reports, identity, case = written(processed, "gnss-interference", seed=seed)
     nmea = as_nmea(reports, identity, tmp_path / "feed.nmea")
     batch, live, changes = detected_and_watched(nmea, tmp_path)
     assert found(case, batch) and found(case, live)
