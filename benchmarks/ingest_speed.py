@@ -56,14 +56,15 @@ print(n, time.perf_counter() - start)
 
 
 def build(rows: int, work: Path) -> tuple[Path, Path, int]:
-    """The big zip (and its CSV, for DuckDB), built once and reused."""
+    """The big zip (and its CSV, for DuckDB), built once per size and reused: named by the
+    number of copies, so that another `--rows` never measures a stale input."""
     work.mkdir(parents=True, exist_ok=True)
-    big_zip, big_csv = work / "AIS_big.zip", work / "AIS_big.csv"
     with zipfile.ZipFile(SEED) as zf:
         seed = zf.read("AIS_2022_01_03.csv")
     header, body = seed.split(b"\n", 1)
     n_seed = body.count(b"\n")
     copies = -(-rows // n_seed)
+    big_zip, big_csv = work / f"AIS_big_{copies}x.zip", work / f"AIS_big_{copies}x.csv"
     if not big_zip.exists() or not big_csv.exists():
         with open(big_csv, "wb") as out:
             out.write(header + b"\n")
@@ -72,7 +73,7 @@ def build(rows: int, work: Path) -> tuple[Path, Path, int]:
                 out.write(body.replace(b"2022-01-03T", day + b"T"))
         tmp = big_zip.with_suffix(".tmp")
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
-            zf.write(big_csv, "AIS_big.csv")
+            zf.write(big_csv, big_csv.name)
         os.replace(tmp, big_zip)
     return big_zip, big_csv, copies * n_seed
 
