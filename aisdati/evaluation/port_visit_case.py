@@ -43,7 +43,7 @@ def construct_port_visit(
         metres, _ = ports.nearest(v.lon, v.lat)
         passing = np.flatnonzero((metres <= PASS_M) & (v.sog >= UNDER_WAY_KN))
         passing = passing[(passing > 0) & (passing < len(v) - 1)]
-        for first, last, _ in stays(v, ports, s):  # not a pass during a real visit
+        for first, last, _ in stays(v, metres, s):  # not a pass during a real visit
             passing = passing[(passing < first) | (passing > last)]
         if not passing.size:
             continue

@@ -39,12 +39,16 @@ def slow_samples(v: VesselReports, s: EventSettings, ports: Anchorages) -> pd.Da
     """The vessel's positions every `encounter_step_s` (step = time // step_s) where it is under
     `encounter_kn` (the mean of the two sampled steps around, by position) and at least
     `encounter_port_m` from every anchorage: columns mmsi, step, lon, lat, port_m."""
-    empty = pd.DataFrame(
-        {"mmsi": np.empty(0, np.int64), "step": np.empty(0, np.int64)}
-        | {k: np.empty(0) for k in ("lon", "lat", "port_m")}
-    )
+    steps, lon, lat = slow_steps(v, s)
+    return at_sea(np.full(len(steps), v.mmsi, np.int64), steps, lon, lat, s, ports)
+
+
+def slow_steps(v: VesselReports, s: EventSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`slow_samples` before the anchorages are asked: the steps, lons and lats (none where
+    the vessel's positions never imply a step under `encounter_kn`)."""
+    none = np.empty(0, np.int64), np.empty(0), np.empty(0)
     if len(v) < 2 or not (v.implied_kn < s.encounter_kn).any():
-        return empty
+        return none
     t, step_s = v.time_s, s.encounter_step_s
     steps = np.arange(np.ceil(t[0] / step_s), np.floor(t[-1] / step_s) + 1).astype(np.int64)
     at = steps * step_s
@@ -52,7 +56,7 @@ def slow_samples(v: VesselReports, s: EventSettings, ports: Anchorages) -> pd.Da
     bridged = (t[before + 1] - t[before] <= s.encounter_max_gap_s) | (t[before] == at)
     steps, at = steps[bridged], at[bridged]
     if len(steps) < 2:
-        return empty
+        return none
     lon, lat = np.interp(at, t, v.lon), np.interp(at, t, v.lat)
     joined = np.diff(steps) == 1
     step_kn = haversine_m(lon[:-1], lat[:-1], lon[1:], lat[1:]) / step_s / KNOT_MPS
@@ -61,17 +65,21 @@ def slow_samples(v: VesselReports, s: EventSettings, ports: Anchorages) -> pd.Da
     counted = np.isfinite(around).sum(axis=0)
     kn = np.where(counted > 0, np.nansum(around, axis=0) / np.maximum(counted, 1), np.inf)
     slow = kn < s.encounter_kn  # no sampled step around: not judged
-    port_m, _ = ports.nearest(lon[slow], lat[slow])
+    return steps[slow], lon[slow], lat[slow]
+
+
+def at_sea(
+    mmsi: np.ndarray, steps: np.ndarray, lon: np.ndarray, lat: np.ndarray, s: EventSettings,
+    ports: Anchorages,
+) -> pd.DataFrame:  # fmt: skip
+    """The samples (`slow_steps`' of one vessel or of many, `mmsi` each) at least
+    `encounter_port_m` from every anchorage, as `slow_samples` gives them."""
+    port_m, _ = ports.nearest(lon, lat)
     sea = port_m >= s.encounter_port_m
     return pd.DataFrame(
-        {
-            "mmsi": v.mmsi,
-            "step": steps[slow][sea],
-            "lon": lon[slow][sea],
-            "lat": lat[slow][sea],
-            "port_m": port_m[sea],
-        }
-    )
+        {"mmsi": mmsi[sea], "step": steps[sea], "lon": lon[sea], "lat": lat[sea],
+         "port_m": port_m[sea]}
+    )  # fmt: skip
 
 
 def close_pairs(samples: pd.DataFrame, s: EventSettings) -> pd.DataFrame:
@@ -183,10 +191,17 @@ def encounters(fleet: Fleet, rules: EventRules) -> list[dict[str, Any]]:
     s, ports = rules.settings, fleet.anchorages(rules)
     doubtful = ports.fragile(2, s.anchorage_min_vessels)
     firm = ports.subset(~doubtful)
-    samples = [slow_samples(v, s, firm) for m, v in fleet.vessels.items() if is_vessel(m)]
-    samples = [x for x in samples if len(x)]
-    if len(samples) < 2:
+    every = fleet.joined  # (a vessel whose positions never imply a slow step has no sample)
+    slow = every.any_step(every.reports.implied_kn < s.encounter_kn)
+    sampled = [(v.mmsi, *slow_steps(v, s)) for k, (m, v) in enumerate(fleet.vessels.items())
+               if slow[k] and is_vessel(m)]  # fmt: skip
+    mmsi = [np.full(len(x[1]), x[0], np.int64) for x in sampled]
+    steps, lon, lat = ([x[i] for x in sampled] for i in (1, 2, 3))
+    if not sampled:
         return []
-    pairs = close_pairs(pd.concat(samples, ignore_index=True), s)
+    samples = at_sea(*(np.concatenate(a) for a in (mmsi, steps, lon, lat)), s, firm)
+    if samples["mmsi"].nunique() < 2:
+        return []
+    pairs = close_pairs(samples, s)
     pairs = pairs[away_from_others_ports(pairs, ports.subset(doubtful), s)]
     return [encounter_row(fleet, g, s) for g in meetings(pairs, s)]

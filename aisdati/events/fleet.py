@@ -54,27 +54,68 @@ class Fleet:
         the anchorages of the fleet's own stopped reports (`aisdati.events.anchorages.learn`)."""
         if rules.ports is not None:
             return rules.ports
-        s = rules.settings
-        stopped = [(v.mmsi, v.lon[v.sog < s.stopped_kn], v.lat[v.sog < s.stopped_kn])
-                   for v in self.vessels.values()]  # fmt: skip
-        mmsi = np.concatenate([np.full(len(x), m) for m, x, _ in stopped] or [np.empty(0)])
-        lon = np.concatenate([x for _, x, _ in stopped] or [np.empty(0)])
-        lat = np.concatenate([y for _, _, y in stopped] or [np.empty(0)])
-        return learn(mmsi, lon, lat, s)
+        s, every = rules.settings, self.joined
+        stopped = every.reports.sog < s.stopped_kn
+        mmsi = every.mmsi[every.vessel][stopped]
+        return learn(mmsi, every.reports.lon[stopped], every.reports.lat[stopped], s)
 
-    def heard_as_one(self) -> list[VesselReports]:
-        """Each MMSI's reports as a receiver heard them, its two transmitters' together
-        (`aisdati.events.reports.heard_as_one`)."""
+    @cached_property
+    def joined(self) -> Joined:
+        """Every vessel's reports in one set of arrays (made once, when first asked)."""
+        vs = list(self.vessels.values())
+        sizes = [len(v) for v in vs]
+        fields = ("time_s", "lon", "lat", "sog", "cog", "heading", "status", "track_id")
+        reports = VesselReports(
+            -1, *(np.concatenate([getattr(v, k) for v in vs] or [np.empty(0)]) for k in fields)
+        )
+        bounds = np.r_[0, np.cumsum(sizes, dtype=np.int64)]
+        return Joined(reports, bounds, np.array([v.mmsi for v in vs], np.int64))
+
+    @cached_property
+    def as_heard(self) -> Fleet:
+        """The fleet as a receiver heard it: each MMSI's two transmitters one vessel again
+        (`aisdati.events.reports.heard_as_one`); itself where no MMSI was split."""
         by_mmsi: dict[int, list[VesselReports]] = {}
         for vessel, reports in self.vessels.items():
             by_mmsi.setdefault(mmsi_of(vessel), []).append(reports)
-        return [heard_as_one(parts, mmsi) for mmsi, parts in by_mmsi.items()]
+        if len(by_mmsi) == len(self.vessels):
+            return self
+        vessels = {mmsi: heard_as_one(parts, mmsi) for mmsi, parts in by_mmsi.items()}
+        return replace(self, vessels=vessels)
 
     @cached_property
     def heard(self) -> Heard:
         """Every vessel's reports in time order (made once, when first asked: the fleet is
         complete by then)."""
         return Heard.of(self.vessels.values())
+
+
+@dataclass(frozen=True)
+class Joined:
+    """The fleet's reports in one `VesselReports`, vessel after vessel in the fleet's order
+    (vessel k, MMSI `mmsi[k]`: `bounds[k]:bounds[k + 1]`): what a finder computes of every
+    report or step at once, to look one by one only at the vessels that may give an event
+    (10,000 vessels one by one cost seconds). A step from one vessel's last report to the
+    next one's first means nothing: `any_step` leaves it out."""
+
+    reports: VesselReports
+    bounds: np.ndarray
+    mmsi: np.ndarray
+
+    @cached_property
+    def vessel(self) -> np.ndarray:
+        """[n] the vessel (its index) each report is of."""
+        return np.repeat(np.arange(len(self.mmsi)), np.diff(self.bounds))
+
+    def any_step(self, steps: np.ndarray) -> np.ndarray:
+        """[vessels] whether some step of each vessel is True in `steps` ([n - 1])."""
+        vessel = self.vessel
+        own = steps & (vessel[:-1] == vessel[1:])
+        return np.bincount(vessel[:-1][own], minlength=len(self.mmsi)) > 0
+
+    def any_report(self, reports: np.ndarray) -> np.ndarray:
+        """[vessels] whether some report of each vessel is True in `reports` ([n])."""
+        return np.bincount(self.vessel[reports], minlength=len(self.mmsi)) > 0
 
 
 FleetFinder = Callable[[Fleet, EventRules], list[dict[str, Any]]]

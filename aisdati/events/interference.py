@@ -67,11 +67,16 @@ class Jumps:
 def fleet_jumps(fleet: Fleet, s: EventSettings) -> Jumps:
     """Every vessel's steps whose unexplained displacement reaches the interference floor and
     stands out of that vessel's own (over its scale, `jump_sizes`: `interference_z`), within a
-    jump's longest step; an MMSI's two transmitters heard as one (`Fleet.heard_as_one`)."""
+    jump's longest step; an MMSI's two transmitters heard as one (`Fleet.as_heard`); the floor
+    looked for in all vessels' steps at once, the scale only in the vessels that reach it."""
+    fleet = fleet.as_heard
+    every = fleet.joined  # (a vessel with no step that far unexplained has no jump)
+    far = (unexplained_m(every.reports, s) >= s.interference_min_m) & (
+        every.reports.dt_s <= s.jump_step_max_s
+    )
+    may = every.any_step(far) & (np.diff(every.bounds) >= 3)
     parts = []
-    for v in fleet.heard_as_one():
-        if len(v) < 3:
-            continue
+    for v in (v for k, v in enumerate(fleet.vessels.values()) if may[k]):
         metres = unexplained_m(v, s)
         k = np.flatnonzero((metres >= s.interference_min_m) & (v.dt_s <= s.jump_step_max_s))
         if k.size == 0:

@@ -10,7 +10,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from aisdati.events.anchorages import Anchorages
 from aisdati.events.record import event_row
@@ -23,12 +22,13 @@ if TYPE_CHECKING:  # the fleet module registers this finder
     from aisdati.events.rules import EventRules
 
 
-def stays(v: VesselReports, ports: Anchorages, s: EventSettings) -> list[tuple[int, int, int]]:
-    """Each stay of the vessel near an anchorage that is a visit: (first report in, last
+def stays(v: VesselReports, metres: np.ndarray, s: EventSettings) -> list[tuple[int, int, int]]:
+    """Each stay of the vessel near an anchorage that is a visit (`metres`: each report's
+    distance to the nearest anchorage point, `Anchorages.nearest`): (first report in, last
     report in, the report nearest an anchorage point while stopped)."""
-    metres, _ = ports.nearest(v.lon, v.lat)
-    state = np.where(metres <= s.port_entry_m, 1.0, np.where(metres > s.port_exit_m, 0.0, np.nan))
-    inside = pd.Series(state).ffill().fillna(0.0).to_numpy() > 0
+    entered, left = metres <= s.port_entry_m, metres > s.port_exit_m
+    said = np.maximum.accumulate(np.where(entered | left, np.arange(len(v)), -1))  # the last
+    inside = entered[said] & (said >= 0)  # of them so far: between the two, a vessel stays
     out = []
     for a, b in runs(inside):
         stopped = np.flatnonzero(v.sog[a : b + 1] < s.stopped_kn)
@@ -66,11 +66,16 @@ def visit_row(
 
 def port_visits(fleet: Fleet, rules: EventRules) -> list[dict[str, Any]]:
     """Every port visit of the fleet's vessels."""
-    ports = fleet.anchorages(rules)
+    ports, s = fleet.anchorages(rules), rules.settings
     if not len(ports):
         return []
+    every = fleet.joined  # (a vessel never within `port_entry_m` or never stopped has none)
+    metres, _ = ports.nearest(every.reports.lon, every.reports.lat)
+    stopped = every.reports.sog < s.stopped_kn
+    near = every.any_report(metres <= s.port_entry_m) & every.any_report(stopped)
     return [
-        visit_row(fleet, v, stay, ports, rules.settings.port_min_s)
-        for v in fleet.vessels.values()
-        for stay in stays(v, ports, rules.settings)
+        visit_row(fleet, v, stay, ports, s.port_min_s)
+        for k, v in enumerate(fleet.vessels.values())
+        if near[k]
+        for stay in stays(v, metres[every.bounds[k] : every.bounds[k + 1]], s)
     ]

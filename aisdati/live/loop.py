@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import pandas as pd
 
@@ -187,7 +187,9 @@ class Watch:
         mmsi = [m for m, one in recent.items() if len(one.rows)]
         together = clean_together(mmsi, [recent[m].rows for m in mmsi], self.ingest)
         reports = {m: together.of(k) for k, m in enumerate(together.mmsi) if together.sizes[k]}
-        identity = {m: asdict(recent[m].identity) for m in reports}
+        who = {m: recent[m].identity for m in reports}  # (`asdict` copied each history too)
+        identity = {m: {"name": i.name, "ship_type": i.ship_type, "length_m": i.length_m}
+                    for m, i in who.items()}  # fmt: skip
         fleet = Fleet(reports, identity)
         found = fleet_events(fleet, self.rules, pd.DataFrame(), FLEET_KINDS)
         rows: dict[int, list[dict]] = {}
