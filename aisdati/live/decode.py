@@ -91,8 +91,7 @@ class Decoder:
         """The reports of these lines that pass ingest's row checks and are not far ahead of
         the feed's clock `clock_us` (0: none yet), with those held before and confirmed since
         (`future.FutureGuard`)."""
-        for line in lines:
-            self.decoder.feed(line)
+        self.decoder.feed_lines(lines)
         table, codes = to_canonical(self.decoder.take(), COLUMNS, 0)
         table = check_values(table, codes)
         for code, n in zip(*np.unique(codes[codes > 0], return_counts=True), strict=True):

@@ -125,6 +125,8 @@ TIME_RANGE_US = (
 )
 """Times outside [1990, 2100) are no AIS reports (AIS began in the 2000s): a time column read in
 the wrong unit lands in 1970 or far in the future, and is rejected row by row as bad_time."""
+EPOCH_DIGITS = r"^[0-9]{9,15}$"
+"""Epoch seconds or milliseconds (any time since 1973) written as text, each exactly a float."""
 EPOCH_UNITS = ((1e11, 1_000_000, 1), (1e14, 1_000, 1), (1e17, 1, 1), (math.inf, 1, 1_000))
 """Numeric times are seconds, milliseconds, microseconds or nanoseconds since 1970, told apart by
 their size (|t| below 1e11, 1e14, 1e17 or more: any time from 1973 to 5138 in each unit):
@@ -192,7 +194,11 @@ def _epoch_us(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _text_time_us(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
-    """Times written as text: ISO 8601 (fast path in Arrow, else pandas), or epoch numbers."""
+    """Times written as text: ISO 8601 (fast path in Arrow, else pandas), or epoch numbers.
+    Text of 9-15 digits alone is no ISO 8601 time (pandas reads none of it as one): where every
+    value is such, as receivers' tag blocks write times, it is read as numbers at once."""
+    if arr.null_count == 0 and pc.all(pc.match_substring_regex(arr, EPOCH_DIGITS)).as_py():
+        return _epoch_us(pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False))
     for kind in (pa.timestamp("us"), pa.timestamp("us", tz="UTC")):
         try:
             values = pc.cast(arr, kind)

@@ -36,6 +36,7 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
+from itertools import islice
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -44,6 +45,7 @@ from pyais.exceptions import AISBaseException, UnknownMessageException
 from pyais.messages import AISSentence, GatehouseSentence, NMEASentence, NMEASentenceFactory
 
 from aisdati.errors import UserError
+from aisdati.preprocess import position_sentences
 from aisdati.preprocess.clean import SENTINEL_COG, SENTINEL_SOG
 from aisdati.preprocess.convert import EPOCH_UNITS, canonical_tables, time_us
 from aisdati.preprocess.inputs import (
@@ -103,7 +105,9 @@ HEADING_NOT_AVAILABLE = 511
 LONG_RANGE_SOG_NOT_AVAILABLE = 63
 LONG_RANGE_COG_NOT_AVAILABLE = 511
 BATCH_MESSAGES = 1 << 16
-"""Position reports per record batch."""
+"""Position reports per record batch (give or take `LINES_AT_ONCE`)."""
+LINES_AT_ONCE = 4096
+"""Lines decoded together (`NmeaDecoder.feed_lines`)."""
 MAX_LINE_BYTES = 4096
 """An NMEA sentence has at most 82 characters, a tag block a few dozen: a longer line is none."""
 MAX_KEPT_TEXT = 1 << 26
@@ -146,7 +150,10 @@ class RecentMessages:
         time (else it is kept now). A copy at the very time of the kept one stays a row: the
         vessel stage counts it as an exact `duplicate`, as it does a CSV's repeated row. A time
         Python cannot read makes no copy: the row goes on to the time check."""
-        us = _time_us(time)
+        return self.heard_at(payload, _time_us(time))
+
+    def heard_at(self, payload: bytes, us: int | None) -> bool:
+        """`heard` with the time already read (microseconds; None: unreadable)."""
         if us is None:
             return False
         self._forget(us - 2 * self.window_us)
@@ -237,6 +244,31 @@ class NmeaDecoder:
     @property
     def pending_rows(self) -> int:
         return len(self._rows)
+
+    def feed_lines(self, lines: list[bytes]) -> None:
+        """Lines of the log (without their line ends), in order: those of the common shape
+        decoded together (`position_sentences`: the same rows as pyais, many times faster),
+        the others one by one (`feed`)."""
+        lines = [line.strip() for line in lines]
+        fast = position_sentences.decode(lines)
+        heading = [None if h < 0 else h for h in fast.heading.tolist()]
+        rows = zip(
+            fast.mmsi.tolist(), fast.time, fast.lat.tolist(), fast.lon.tolist(),
+            fast.sog.tolist(), fast.cog.tolist(), heading, fast.status.tolist(),
+            strict=True,
+        )  # fmt: skip
+        taken, times, j = fast.line.tolist(), fast.time_us.tolist(), 0
+        for k, line in enumerate(lines):
+            if j < len(taken) and taken[j] == k:
+                self._gatehouse = None  # a $PGHP stamps the line after it only
+                row = next(rows)
+                if self.recent is not None and self.recent.heard_at(fast.payload[j], times[j]):
+                    self.skip(DUPLICATE_RECEPTION, line)
+                else:
+                    self._rows.append(row)
+                j += 1
+            else:
+                self.feed(line)
 
     def feed(self, line: bytes) -> None:
         """One line of the log (without its line end)."""
@@ -457,8 +489,9 @@ class NmeaReader:
         stream, self._counter = self.source.open()
         decoder = NmeaDecoder(self._skipped.add, RecentMessages())
         try:
-            for line in read_lines(stream):
-                decoder.feed(line)
+            lines = read_lines(stream)
+            while batch := list(islice(lines, LINES_AT_ONCE)):
+                decoder.feed_lines(batch)
                 if decoder.pending_rows >= BATCH_MESSAGES or len(decoder.statics) >= BATCH_MESSAGES:
                     self._tally(decoder.take_statics())
                     yield decoder.take()

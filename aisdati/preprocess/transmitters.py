@@ -15,9 +15,12 @@ report, which was an outlier). The MMSI is split only where each transmitter has
 `MIN_REPORTS` reports, the reports switch between them at least `MIN_SWITCHES` times out of
 reach of the other's last report (two transmitters interleave; a vessel whose first fix was
 wrong, or that jumped once, does not; two vessels within reach of each other prove nothing),
-and the second's reports are not copies of the vessel's own at other times (`COPY_S`: a
-receiver's clock gone wrong, as in the DMA's recording of FRIO); else nothing changes and the
-implied-speed check judges the reports as before."""
+each has `MIN_REPORTS` reports heard within `AT_ONCE_S` of one of the other's (both on the air
+at once: one vessel's stale or mistimed report, or its own track handed from one transmitter
+to the other after a silence, gives a few at most), and the second's reports are not copies
+of the vessel's own at other times (`COPY_S`: a receiver's clock gone wrong, as in the DMA's
+recording of FRIO); else nothing changes and the implied-speed check judges the reports as
+before."""
 
 from __future__ import annotations
 
@@ -32,6 +35,11 @@ MIN_REPORTS = 10
 """Reports each transmitter needs: fewer is an outlier or two, for the implied-speed check."""
 MIN_SWITCHES = 4
 """Switches between the two in time order: A B A B A at least, so that both report at once."""
+AT_ONCE_S = 180.0
+"""The longest interval at which a vessel's transmitter reports (ITU-R M.1371: a Class A
+moored or at anchor, a Class B under 2 kn; more often under way): two transmitters on the air
+at once are each heard within it of the other. A feed that keeps fewer reports (one a few
+minutes) is judged as it holds them."""
 COPY_S = 3600.0
 """A second transmitter whose reports are mostly copies of the vessel's own (the same
 position, speed and course) from within this of them is the vessel relayed with wrong times (a
@@ -86,6 +94,25 @@ def _chains(time_us, lon, lat, max_mps, tolerance_m, reset_us):
 
 
 @numba.njit(cache=True)
+def _at_once(chain, time_us):
+    """How many reports of each chain are heard within `AT_ONCE_S` of one of the other's."""
+    n = chain.shape[0]
+    near = np.zeros(n, np.bool_)
+    window = AT_ONCE_S * 1e6
+    last = np.array([-np.inf, -np.inf])
+    for k in range(n):  # the other's latest report before, then its earliest after
+        if chain[k] >= 0:
+            near[k] = time_us[k] - last[1 - chain[k]] <= window
+            last[chain[k]] = time_us[k]
+    last = np.array([np.inf, np.inf])
+    for k in range(n - 1, -1, -1):
+        if chain[k] >= 0:
+            near[k] |= last[1 - chain[k]] - time_us[k] <= window
+            last[chain[k]] = time_us[k]
+    return (near & (chain == 0)).sum(), (near & (chain == 1)).sum()
+
+
+@numba.njit(cache=True)
 def _copies(chain, time_us, lon, lat, sog, cog):
     """Whether most of chain 1's reports are copies of other reports of the vessel (the same
     position, speed and course, at another time within `COPY_S`)."""
@@ -135,6 +162,9 @@ def second_transmitter(mmsi, time_us, lon, lat, sog, cog, max_mps, tolerance_m, 
                     switches += 1
                 prev = c
             apart = n0 >= MIN_REPORTS and n1 >= MIN_REPORTS and switches >= MIN_SWITCHES
+            if apart:
+                near0, near1 = _at_once(chain, time_us[lo:hi])
+                apart = near0 >= MIN_REPORTS and near1 >= MIN_REPORTS
             if apart and not _copies(
                 chain, time_us[lo:hi], lon[lo:hi], lat[lo:hi], sog[lo:hi], cog[lo:hi]
             ):

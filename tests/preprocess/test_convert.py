@@ -31,6 +31,17 @@ def test_numeric_times_in_every_unit():
     assert us[0] == t * 1_000_000 + 500_000 and list(bad) == [False, True]
 
 
+def test_epoch_text_alone_reads_as_it_reads_among_other_times():
+    """A column of epoch seconds or milliseconds as text (receivers' tag blocks) is read at once
+    as numbers: the same microseconds and bad times as where ISO times share the column."""
+    texts = ["1593475200", "1593475200123", "1593475200999", "100000000", "9999999999999"]
+    alone = time_us(pa.array(texts))
+    mixed = time_us(pa.array([*texts, "2020-06-30T00:00:00"]))
+    assert alone[1].tolist() == mixed[1][:-1].tolist() == [False, False, False, True, True]
+    assert alone[0][:3].tolist() == mixed[0][:3].tolist()  # (a bad time's value is not read)
+    assert alone[0][:3].tolist() == [1593475200_000_000, 1593475200_123_000, 1593475200_999_000]
+
+
 @pytest.fixture(scope="module")
 def baseline(tmp_path_factory):
     """The clean NY hour, ingested once: what every damaged copy is compared with."""

@@ -1,7 +1,9 @@
 """The two-transmitter rule (`aisdati.preprocess.transmitters`) inside ingest's cleaning, on
 real Kitimat reports: two vessels under one MMSI are kept as two (none dropped as an outlier);
 one vessel with a wrong fix, or with its own reports relayed again late (a receiver's clock
-off), stays one vessel and the implied-speed check judges it as before."""
+off), stays one vessel and the implied-speed check judges it as before. On the US coast day
+(positions only), an MMSI heard from two places 19 km apart all day is two transmitters, and
+vessels with a stale or mistimed report, or with their own track at shifted times, are one."""
 
 from __future__ import annotations
 
@@ -19,6 +21,17 @@ from tests.helpers.live import ROOT
 
 KITIMAT = ROOT / "tests" / "data" / "AIS_2018_07-08_Kitimat.csv.gz"
 FIRST, SECOND = 100000496, 100000692
+COAST = ROOT / "tests" / "data" / "US_coastal_2020_06_30_points.csv.gz"
+SHARED = 368134280
+"""Heard from two places 19 km apart on the Illinois waterway from 11:00 to 19:30, each of its
+two transmitters within 3 minutes of the other's reports some 200 times."""
+ONE_VESSEL = {
+    367639990: "a stale report at the berth it left, its own track there again 7 hours later",
+    367199310: "a ferry: one report 35 minutes early, then its 28-kn track with times jittered",
+    368102110: "its own track along one lane again at times shifted by 5-12 minutes",
+}
+"""US coast MMSIs whose reports alternate out of reach at 50 kn but are one vessel's (docs/
+results/identity.md): the other 'transmitter' is never heard at once for long."""
 
 
 @pytest.fixture(scope="module")
@@ -29,6 +42,18 @@ def rows() -> pd.DataFrame:
         "mmsi": frame["MMSI"].astype("int64"),
         "time": pd.to_datetime(frame["BaseDateTime"], utc=True),
         "lon": frame["LON"], "lat": frame["LAT"], "sog": frame["SOG"], "cog": frame["COG"],
+        "heading": np.float32(np.nan), "status": None, "src": 0,
+    })  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def coast() -> pd.DataFrame:
+    frame = pd.read_csv(COAST, usecols=["MMSI", "BaseDateTime", "LAT", "LON"])
+    frame = frame[frame["MMSI"].isin([SHARED, *ONE_VESSEL])]
+    return pd.DataFrame({
+        "mmsi": frame["MMSI"].astype("int64"),
+        "time": pd.to_datetime(frame["BaseDateTime"], utc=True),
+        "lon": frame["LON"], "lat": frame["LAT"], "sog": np.nan, "cog": np.nan,
         "heading": np.float32(np.nan), "status": None, "src": 0,
     })  # fmt: skip
 
@@ -71,3 +96,17 @@ def test_its_own_reports_relayed_late_are_no_second_transmitter(rows):
     late = one.iloc[::3].assign(time=lambda f: f["time"] + pd.Timedelta(minutes=17))
     table, _ = cleaned(pd.concat([one, late]))
     assert set(table["mmsi"]) == {FIRST}
+
+
+def test_two_places_heard_at_once_all_day_are_two_transmitters(coast):
+    table, _ = cleaned(coast[coast["mmsi"] == SHARED])
+    assert set(table["mmsi"]) == {SHARED, SHARED + TRANSMITTER_STEP}
+    lat = table.groupby("mmsi")["lat"]
+    assert lat.count().min() > 200
+    assert lat.max()[SHARED] < lat.min()[SHARED + TRANSMITTER_STEP]  # two places, never mixed
+
+
+@pytest.mark.parametrize("mmsi", ONE_VESSEL)
+def test_one_vessel_never_heard_at_once_from_two_places_stays_one(coast, mmsi):
+    table, _ = cleaned(coast[coast["mmsi"] == mmsi])
+    assert set(table["mmsi"]) == {mmsi}
