@@ -17,9 +17,10 @@ from rich.markup import escape
 from aisdati.ais.training import TrainSettings
 from aisdati.commands.common import console, err_console, lane_settings, shows_progress, spinner
 from aisdati.commands.options import EvaluateOptions
-from aisdati.commands.tables import event_metrics_table, pooled_table, results_table
+from aisdati.commands.tables import event_metrics_table, fleet_table, pooled_table, results_table
 from aisdati.detectors import ScoreSettings, parse_detectors
 from aisdati.detectors.train import Trained, routes_bar, train_detector, train_routes
+from aisdati.evaluation.fleet import parse_fleet_kinds
 from aisdati.evaluation.inject import parse_kinds, parse_params
 from aisdati.evaluation.outputs import (
     REPORT,
@@ -71,6 +72,8 @@ def run(o: EvaluateOptions) -> None:
         strength=o.strength,
         at_sea=o.at_sea,
         thin_s=None if o.thin is None else parse_duration(o.thin, "--thin"),
+        fleet_kinds=parse_fleet_kinds(o.fleet_kinds),
+        fleet_cases=o.fleet_cases,
         device=resolve_device(o.device),
         **lane_settings(o.preset, o.lane, o.cluster),
     )
@@ -160,6 +163,8 @@ def evaluate_one(
     console.print(event_metrics_table(result.event_table, console.width))
     if result.alerts is not None:
         console.print(alerts_line(result.alerts))
+    if result.fleet is not None:
+        console.print(fleet_table(result.fleet, console.width))
     if settings.ashore:
         n = ashore_summary(result.scores)
         console.print(
@@ -196,6 +201,8 @@ def evaluate_every_route(
         return
     console.print(pooled_table(routes, console.width))
     console.print(event_metrics_table(routes.event_table, console.width))
+    if routes.fleet is not None:
+        console.print(fleet_table(routes.fleet, console.width))
     for ev in routes.routes:
         times = ", ".join(
             f"{m} {t['train_s']:.0f} + {t['score_s']:.0f} s" for m, t in ev.timings.items()

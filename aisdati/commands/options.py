@@ -393,6 +393,20 @@ class EvaluateOptions:
             metavar="DURATION",
         ),
     ] = None
+    fleet_kinds: Annotated[
+        str,
+        typer.Option(
+            "--fleet-kinds",
+            help="Fleet cases to construct in the area's untouched later traffic (from --before, "
+            "else its later half by time), comma-separated: encounter, port-visit, "
+            "identity-conflict, identity-change, gnss-interference, gap-heard, gap-quiet; "
+            "'all' or 'none'. Each reports its recall and its kind's events per 1,000 "
+            "vessel-days of that traffic.",
+        ),
+    ] = "all"
+    fleet_cases: Annotated[
+        int, typer.Option("--fleet-cases", help="Fleet cases per kind (seeded by --seed).")
+    ] = 20
     models: Annotated[
         str | None,
         typer.Option(

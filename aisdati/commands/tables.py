@@ -451,6 +451,32 @@ def event_metrics_table(table: pd.DataFrame, width: int = 120) -> Table:
     return out
 
 
+def fleet_table(fleet: dict[str, Any], width: int = 120) -> Table:
+    """`evaluate`'s fleet kinds (`aisdati.evaluation.fleet.summary`): per kind (and area), the
+    cases found with recall's 95 % interval, and the kind's events per 1,000 vessel-days of
+    the untouched later traffic, false or the traffic's own."""
+    rows = fleet["rows"]
+    columns = [
+        Column("kind", [Text(str(r["kind"])) for r in rows]),
+        Column("area", [Text(str(r["area"])) for r in rows]),
+        Column("cases", [Text(str(r["cases"])) for r in rows], right=True),
+        Column("found", [Text(str(r["found"])) for r in rows], right=True),
+        Column("recall", [Text(_with_ci(r, "recall", "{:.3f}")) for r in rows], right=True,
+               wraps=True),
+        Column("per 1,000 vd", [Text(_with_ci(r, "per_1000")) for r in rows], right=True,
+               wraps=True),
+        Column("events are", [Text("false" if r["false"] else "own") for r in rows]),
+    ]  # fmt: skip
+    out = fitted_table("Fleet cases constructed in untouched later traffic", columns, width, ())
+    words = (
+        f"{fleet['cases_asked']} cases asked per kind and seed; per 1,000 vd: the kind's events "
+        "on the untouched traffic per 1,000 vessel-days (false: none was written; own: the "
+        "traffic's real calls and gaps); [95 % bootstrap interval]"
+    )
+    out.caption = "; ".join(filter(None, [out.caption, words]))
+    return out
+
+
 def _with_ci(row: dict[str, Any], name: str, fmt: str = "{:.2f}") -> str:
     """`value [low-high]`, '-' where the row has no value."""
     value = row.get(name)

@@ -7,6 +7,7 @@ flagged track, what it was compared with and its deviation profile, to say why i
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -104,6 +105,29 @@ def area_outlines(events: pd.DataFrame) -> list[np.ndarray]:
     ]
 
 
+def meetings(events: pd.DataFrame) -> list[tuple[list[np.ndarray], str]]:
+    """Each event of several vessels that is not an area (an encounter: its vessels' stretches,
+    NaN between them, `aisdati.events.record.EVENT_COLUMNS`): each stretch ([k, 2] lon/lat)
+    and the MMSIs it names, as map.png draws and labels it rather than one point."""
+    if not len(events):
+        return []
+    out = []
+    for e in events[_several(events)].itertuples():
+        xy = np.column_stack([e.lons, e.lats]).astype(float)
+        parts = np.split(xy, np.flatnonzero(np.isnan(xy[:, 0])))
+        parts = [p[~np.isnan(p[:, 0])] for p in parts]
+        others = json.loads(e.others) if isinstance(e.others, str) else []
+        names = " / ".join(str(m) for m in [int(e.mmsi), *(int(o["mmsi"]) for o in others)])
+        out.append(([p for p in parts if len(p)], f"{e.kind} {names}"))
+    return out
+
+
+def _several(events: pd.DataFrame) -> np.ndarray:
+    """Which events hold several vessels' stretches (NaN-separated), not an area's outline."""
+    parted = events["lons"].map(lambda x: bool(np.isnan(np.asarray(x, float)).any()))
+    return (parted & ~events["kind"].map(lambda k: KINDS[k].area)).to_numpy(bool)
+
+
 def duration_text(seconds: float) -> str:
     """'45 s', '111 min', '19.7 h': a duration as a map labels it."""
     if seconds < 120:
@@ -112,8 +136,12 @@ def duration_text(seconds: float) -> str:
 
 
 def places(events: pd.DataFrame, cls: str) -> np.ndarray:
-    """[k, 2] lon/lat where each event of class `cls` is strongest."""
-    return events.loc[events["class"] == cls, ["lon", "lat"]].to_numpy(np.float64)
+    """[k, 2] lon/lat where each event of class `cls` is strongest (not the `meetings`: their
+    vessels' stretches are drawn)."""
+    if not len(events):
+        return np.empty((0, 2))
+    mine = (events["class"] == cls).to_numpy(bool) & ~_several(events)
+    return events.loc[mine, ["lon", "lat"]].to_numpy(np.float64)
 
 
 # ------------------------------------------------------------------------------- map.png
@@ -130,6 +158,7 @@ def plot_detection_map(
     activity: np.ndarray | None = None,
     gaps: Sequence[tuple[np.ndarray, str]] = (),
     areas: Sequence[np.ndarray] = (),
+    met: Sequence[tuple[list[np.ndarray], str]] = (),
 ) -> bytes:
     """map.png (its bytes): test tracks grey, flagged tracks red with their nearest rollout blue
     and a cross where they deviate most, alerts (`events`: [k, 2] lon/lat, where each is
@@ -137,7 +166,8 @@ def plot_detection_map(
     regions dashed, each gap (`gaps`: its [2, 2] link from the last report before it to the first
     after, and its duration, longest first) a dotted blue link, the `GAP_LABELS` longest labelled
     with their duration, each area event (`areas`: its outline, e.g. an interference) an orange
-    area, over the offline
+    area, each meeting of vessels (`met`: each vessel's stretch and the MMSIs named) its
+    stretches in purple, labelled with the vessels, over the offline
     coastline
     (aisdati.coastline, cut to the map's box at any scale; lon/lat, the longitude axis
     stretched by 1/cos(latitude) so that shapes are true)."""
@@ -162,6 +192,7 @@ def plot_detection_map(
         ax.fill(ring[:, 0], ring[:, 1], color="tab:orange", alpha=0.25, ec="tab:orange", zorder=4)
     for link, _ in gaps:
         ax.plot(link[:, 0], link[:, 1], ":", color="tab:blue", lw=1.6, zorder=4)
+    _draw_meetings(ax, met)
     for link, duration in gaps[:GAP_LABELS]:
         ax.annotate(
             duration, link.mean(axis=0), fontsize=7, color="tab:blue", ha="center",
@@ -180,7 +211,15 @@ def plot_detection_map(
     pad = np.maximum((hi - lo) * 0.04, 0.01)
     set_map_limits(ax, lo - pad, hi + pad)
     draw_land(ax)
-    handles = [
+    handles = _legend(evidence_label, bool(len(areas)), bool(len(met)))
+    ax.legend(handles=handles, fontsize=8, loc="best")
+    ax.set_title(title or "DATI anomalies")
+    return drawn(fig)
+
+
+def _legend(evidence_label: str, areas: bool, met: bool) -> list:
+    """map.png's legend: what every map shows, and area events and meetings where it has any."""
+    return [
         plt.Line2D([], [], color="0.55", lw=1, label="test track"),
         plt.Line2D([], [], color="tab:red", lw=1.4, label="flagged track"),
         plt.Line2D([], [], color="tab:blue", lw=1, label=evidence_label),
@@ -190,14 +229,26 @@ def plot_detection_map(
         plt.Line2D([], [], color="tab:blue", ls=":", lw=1.6, label="gap (its duration)"),
         *(
             [plt.Rectangle((0, 0), 1, 1, color="tab:orange", alpha=0.25, label="area event")]
-            if len(areas)
+            if areas
+            else []
+        ),
+        *(
+            [plt.Line2D([], [], color="tab:purple", lw=2.2, label="meeting: each vessel")]
+            if met
             else []
         ),
         plt.Line2D([], [], color="k", ls="--", lw=0.8, label="model region"),
     ]
-    ax.legend(handles=handles, fontsize=8, loc="best")
-    ax.set_title(title or "DATI anomalies")
-    return drawn(fig)
+
+
+def _draw_meetings(ax: plt.Axes, met: Sequence[tuple[list[np.ndarray], str]]) -> None:
+    """Each meeting (`meetings`) as its vessels' stretches in purple, labelled with the MMSIs."""
+    for parts, label in met:
+        for xy in parts:
+            ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:purple", lw=2.2, zorder=5)
+            ax.plot(*xy[-1], "o", color="tab:purple", ms=4, zorder=5)
+        ax.annotate(label, parts[0][len(parts[0]) // 2], fontsize=7, color="tab:purple",
+                    ha="left", va="bottom", zorder=6)  # fmt: skip
 
 
 # ------------------------------------------------------------------------------ map.html
@@ -452,6 +503,7 @@ def write_maps(result: Detection, out: Path, runner: Runner | None = None) -> li
                     "activity": places(result.events, ACTIVITY),
                     "gaps": gap_links(result.events),
                     "areas": area_outlines(result.events),
+                    "met": meetings(result.events),
                 },
             ),
         ),

@@ -25,6 +25,17 @@ def vessel_day_table(reports: pd.DataFrame) -> pd.Series:
     )
 
 
+def per_1000(
+    counts: np.ndarray, days: np.ndarray, resamples: int = 1000
+) -> tuple[float, tuple[float | None, float | None]]:
+    """Events per 1,000 vessel-days of vessels with `counts` events in `days` vessel-days, and
+    its 95 % bootstrap interval over the vessels (NaN where no day)."""
+    total = float(days.sum())
+    value = 1000.0 * counts.sum() / total if total else float("nan")
+    ci = interval(lambda i: 1000.0 * counts[i].sum() / days[i].sum(), len(days), resamples)
+    return float(value), ci
+
+
 def overlaps(events: pd.DataFrame) -> int:
     """How many events overlap an earlier one of the same vessel and kind in time (sharing only
     an end is not overlapping)."""
@@ -52,9 +63,7 @@ def alert_rates(
 
     def rate(frame: pd.DataFrame) -> tuple[float, tuple[float | None, float | None]]:
         counts = frame.groupby("mmsi").size().reindex(mmsis, fill_value=0).to_numpy(np.float64)
-        value = 1000.0 * counts.sum() / total_days if total_days else float("nan")
-        ci = interval(lambda i: 1000.0 * counts[i].sum() / days[i].sum(), len(mmsis), resamples)
-        return value, ci
+        return per_1000(counts, days, resamples)
 
     out: dict[str, Any] = {"vessels": len(mmsis), "vessel_days": total_days}
     out["alerts"] = len(alerts)

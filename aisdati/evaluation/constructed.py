@@ -29,10 +29,10 @@ CONSTRUCTORS: dict[str, Constructor] = {
     "identity-conflict": identity_cases.merged_mmsi,
     "identity-change": identity_cases.renamed,
     "gnss-interference": interference_case.construct_interference,
-    "gap heard": interference_case.construct_gap_heard,
-    "gap quiet": interference_case.construct_gap_quiet,
+    "gap-heard": interference_case.construct_gap_heard,
+    "gap-quiet": interference_case.construct_gap_quiet,
 }
-"""Each constructed case by name: its kind, or its kind and what it expects ("gap heard")."""
+"""Each constructed case by name: its kind, or its kind and what it expects ("gap-heard")."""
 
 
 def found(case: Case, events: pd.DataFrame) -> bool:

@@ -11,10 +11,10 @@ traffic (`aisdati.evaluation.constructed`).
   vessels there at its start whose displacement shows (two displaced reports or more, the
   first within a jump's longest step, `EventSettings.jump_step_max_s`, of the start and of the
   report before it); it needs three.
-- **gap heard**: a vessel under way silenced (its reports removed) for 1.2-3 times its gap
+- **gap-heard**: a vessel under way silenced (its reports removed) for 1.2-3 times its gap
   limit (`aisdati.events.behaviour.gap_limit`), both ends at sea, where another vessel
   reported near its path during it: found as a gap whose coverage is "heard".
-- **gap quiet**: the same silence, and every other report within `QUIET_M` of the vessel's
+- **gap-quiet**: the same silence, and every other report within `QUIET_M` of the vessel's
   path during it removed too (an area silenced), where others reported near its path before
   and after: found as a gap whose coverage is "quiet"."""
 

@@ -53,6 +53,7 @@ def report(ev: Evaluation) -> dict[str, Any]:
         "results": table.to_dict(orient="records"),
         "events": event_rows(ev.event_table),
         "alerts": ev.alerts,
+        "fleet": ev.fleet,
     }
 
 
@@ -96,6 +97,7 @@ def routes_report(rev: RoutesEvaluation) -> dict[str, Any]:
         "skipped": rev.skipped,
         "results": rev.table.replace({np.nan: None}).to_dict(orient="records"),
         "events": event_rows(rev.event_table),
+        "fleet": rev.fleet,
     }
 
 

@@ -18,6 +18,9 @@
 5. Find the held-out tracks' events as `aisdati detect` does (`aisdati.evaluation.events`:
    the model-free kinds, and off-traffic from each detector's `DETECT_SCORE`) and report, per
    detector and kind, how they find the injected stretches (`event_metrics`).
+6. The fleet kinds asked (`fleet_kinds`): cases constructed in the area's untouched later
+   traffic, their recall, and the same kinds' events on that traffic per 1,000 vessel-days
+   (`aisdati.evaluation.fleet`).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from aisdati.detectors import DETECTORS, Detector, ScoreSettings, load_detector,
 from aisdati.errors import UserError
 from aisdati.evaluation import dataset
 from aisdati.evaluation.events import forward_alerts, model_free, on_reports, with_off_traffic
+from aisdati.evaluation.fleet import FleetSettings, measure, read_area
 from aisdati.evaluation.inject import parse_params, with_strength
 from aisdati.evaluation.metrics import event_metrics
 from aisdati.execution import Runner
@@ -85,6 +89,10 @@ class EvaluateSettings:
     (`aisdati.evaluation.dataset`): what a vessel could sail, which the ashore rule cannot see."""
     thin_s: float | None = None
     """Every track thinned to one report per this many seconds before injection; None: all."""
+    fleet_kinds: tuple[str, ...] = ()
+    """Fleet cases constructed and measured (`aisdati.evaluation.fleet`); (): none."""
+    fleet_cases: int = 20
+    """Fleet cases asked per kind (`seed` the one seed)."""
 
     @property
     def models_named(self) -> str | Path | None:
@@ -120,6 +128,8 @@ class Evaluation:
     alerts: dict[str, Any] | None = None
     """With `before`: the measure of record on the untouched later traffic
     (`aisdati.evaluation.events.forward_alerts`)."""
+    fleet: dict[str, Any] | None = None
+    """With `fleet_kinds`: the fleet kinds' recall and untouched events (`fleet_measure`)."""
 
 
 def check(settings: EvaluateSettings) -> None:
@@ -129,6 +139,8 @@ def check(settings: EvaluateSettings) -> None:
         raise UserError(f"--contamination must be in (0, 0.5), got {settings.contamination:g}")
     if settings.episodes < 1:
         raise UserError("--episodes must be at least 1")
+    if settings.fleet_cases < 1:
+        raise UserError(f"--fleet-cases must be at least 1, got {settings.fleet_cases}")
     if not 0.05 <= settings.altered <= 0.95:
         raise UserError(f"--altered must be in [0.05, 0.95], got {settings.altered:g}")
     with_strength({}, settings.strength)  # a --strength out of range fails here
@@ -267,7 +279,9 @@ def evaluate(
             trained = train(method, prepared.train_settings(), HOW)
             detectors[method] = _load(trained.model.with_suffix(""), settings)
         train_s[method] = time.perf_counter() - t0
-    return _score(prepared, detectors, train_s, say, runner)
+    result = _score(prepared, detectors, train_s, say, runner)
+    result.fleet = fleet_measure(settings, say)
+    return result
 
 
 def _score(
@@ -327,6 +341,17 @@ def _score(
         say("counting alerts on the untouched later traffic")
         result.alerts = forward_alerts(settings.data_dir, settings.before, list(detectors.values()))
     return result
+
+
+def fleet_measure(settings: EvaluateSettings, say: Callable[[str], None]) -> dict[str, Any] | None:
+    """The fleet kinds asked measured on the area's untouched later traffic (from `before`, else
+    from the middle of its time span: `aisdati.evaluation.fleet`); None where none is asked."""
+    if not settings.fleet_kinds:
+        return None
+    say(f"constructing {', '.join(settings.fleet_kinds)} cases in the untouched later traffic")
+    fleet = FleetSettings(settings.fleet_kinds, settings.fleet_cases, (settings.seed,),
+                          settings.before)  # fmt: skip
+    return measure([read_area(settings.data_dir, settings.before)], fleet, say)
 
 
 DETECT_SCORE = ScoreSettings().score
@@ -393,6 +418,8 @@ class RoutesEvaluation:
     """Every route's `Evaluation.scores`, with `route` and `ratio` (value / threshold)."""
     event_table: pd.DataFrame = field(default_factory=pd.DataFrame)
     """As `Evaluation.event_table`, over the held-out tracks of all routes."""
+    fleet: dict[str, Any] | None = None
+    """As `Evaluation.fleet`: the area's, once."""
 
 
 def evaluate_routes(
@@ -440,7 +467,8 @@ def evaluate_routes(
     ]
     scores, table = _pooled(evaluations, settings.kinds)
     events = _pooled_events(evaluations, settings)
-    return RoutesEvaluation(settings, evaluations, skipped, table, scores, events)
+    fleet = fleet_measure(settings, say)
+    return RoutesEvaluation(settings, evaluations, skipped, table, scores, events, fleet)
 
 
 def _prepare_routes(

@@ -74,7 +74,7 @@ def test_a_block_displaced_together_is_one_interference_drawn_as_an_area(process
     assert report["events_by_kind"]["gnss-interference"] == 1
 
 
-@pytest.mark.parametrize("name", ["gap heard", "gap quiet"])
+@pytest.mark.parametrize("name", ["gap-heard", "gap-quiet"])
 def test_a_silenced_vessel_says_whether_its_area_kept_being_heard(processed, tmp_path, name):
     data, case = _written(processed, tmp_path, name)
     events, report, _ = _detect(data, tmp_path / "out")

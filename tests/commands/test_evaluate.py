@@ -62,6 +62,8 @@ def test_evaluate_bad_input_is_one_line_and_writes_nothing(cli, kitimat, tmp_pat
     cases = [
         (("--cluster", "down"), "evaluate needs at least"),
         (("--kinds", "detour,teleport"), "unknown anomaly kind"),
+        (("--fleet-kinds", "encounter,teleport"), "unknown fleet kind 'teleport'"),
+        (("--fleet-cases", "0"), "--fleet-cases must be at least 1"),
         (("--detectors", "nearest,magic"), "unknown detector"),
         (("--param", "jump.km=9-3"), "--param"),
         (("--lane", "region=land"), "region must be one of"),

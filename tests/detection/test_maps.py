@@ -197,3 +197,30 @@ def test_a_gap_is_a_link_labelled_with_its_duration():
     links = maps.gap_links(events)
     assert [label for _, label in links] == ["19.7 h", "111 min"]  # longest first
     assert links[1][0].tolist() == [[-129.0, 53.0], [-128.5, 53.2]]
+
+
+def test_a_meeting_is_each_vessels_stretch_named_not_one_point():
+    events = pd.DataFrame(
+        {
+            "kind": ["encounter", "loitering", "gnss-interference"],
+            "class": ["activity", "activity", "alert"],
+            "mmsi": [316001000, 316002000, 316003000],
+            "others": ['[{"mmsi": 316004000, "name": null, "ship_type": null}]', None, None],
+            "lons": [[-129.2, -129.19, np.nan, -129.201, -129.191], [-129.0], [-129.3, -129.2,
+                     -129.25, -129.3]],
+            "lats": [[53.5, 53.51, np.nan, 53.5, 53.511], [53.0], [53.4, 53.4, 53.45, 53.4]],
+            "lon": [-129.195, -129.0, -129.25],
+            "lat": [53.505, 53.0, 53.42],
+        }
+    )  # fmt: skip
+    [(parts, label)] = maps.meetings(events)  # the area is an outline, not a meeting
+    assert [p.tolist() for p in parts] == [[[-129.2, 53.5], [-129.19, 53.51]],
+                                           [[-129.201, 53.5], [-129.191, 53.511]]]  # fmt: skip
+    assert label == "encounter 316001000 / 316004000"
+    assert maps.places(events, "activity").tolist() == [[-129.0, 53.0]]  # not the meeting's point
+    assert len(maps.area_outlines(events)) == 1
+    tracks = _channel_tracks()
+    png = plot_detection_map(tracks, tracks, np.array([False, False]), np.zeros((2, 2)), [],
+                             met=maps.meetings(events))  # fmt: skip
+    img = mpimg.imread(io.BytesIO(png), format="png")
+    assert _share(img, "#9467bd") > 0  # tab:purple: the two stretches
