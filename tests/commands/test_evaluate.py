@@ -15,6 +15,7 @@ from aisdati.tracks.store import read_track_table
 def _evaluate(cli, data, out, *extra):
     return cli(
         "evaluate", "--data", data, "--cluster", "other", "--detectors", "nearest", "--out", out,
+        "--fleet-kinds", "none",
         *extra,
     )
 
@@ -99,7 +100,7 @@ def test_evaluate_refuses_models_of_another_region(cli, kitimat, tmp_path):
 def test_evaluate_every_route_pools_scores_on_each_routes_threshold(cli, kitimat, tmp_path):
     out = tmp_path / "routes"
     r = cli("evaluate", "--data", kitimat, "--cluster", "routes", "--detectors", "nearest",
-            "--kinds", "detour,jump,loiter", "--out", out)
+            "--kinds", "detour,jump,loiter", "--fleet-kinds", "none", "--out", out)
     assert r.exit_code == 0, r.output
     assert "over 2 routes" in " ".join(r.output.split())
     doc = json.loads((out / "evaluation.json").read_text())

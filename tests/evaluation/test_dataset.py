@@ -16,7 +16,8 @@ def test_evaluate_splits_by_time_and_judges_every_later_track(cli, kitimat, tmp_
     out = tmp_path / "ev"
     r = cli("evaluate", "--data", kitimat, "--cluster", "all", "--before",
             "2018-08-01", "--detectors", "nearest", "--kinds", "detour,jump,loiter",
-            "--altered", "0.3", "--strength", "0.3", "--out", out)  # fmt: skip
+            "--altered", "0.3", "--strength", "0.3", "--fleet-kinds", "none",
+            "--out", out)  # fmt: skip
     assert r.exit_code == 0, r.output
     doc = json.loads((out / "evaluation.json").read_text())
     table = read_track_table(kitimat)

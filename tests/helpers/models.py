@@ -144,4 +144,4 @@ def detect_args(world, out: Path, *extra) -> list:
 
 def evaluate_args(kitimat: Path, out: Path) -> list:
     return ["evaluate", "--cluster", "route-1", "--data", kitimat, "--detectors", "nearest",
-            "--out", out]  # fmt: skip
+            "--fleet-kinds", "none", "--out", out]  # fmt: skip

@@ -147,6 +147,8 @@ def test_evaluate_reports_the_rule_and_scores_without_it(cli, kitimat, tmp_path)
         "detour,jump",
         "--altered",
         "0.5",
+        "--fleet-kinds",
+        "none",
     )
     ruled = cli(*args, "--out", tmp_path / "ruled")  # fmt: skip
     assert ruled.exit_code == 0, ruled.output
@@ -219,7 +221,7 @@ def test_evaluate_at_sea_writes_only_anomalies_a_vessel_could_sail(cli, kitimat,
     out = tmp_path / "sea"
     r = cli("evaluate", "--data", kitimat, "--cluster", "all", "--before",
             "2018-08-01", "--detectors", "nearest", "--kinds", "detour,jump", "--altered", "0.5",
-            "--at-sea", "--out", out)  # fmt: skip
+            "--at-sea", "--fleet-kinds", "none", "--out", out)  # fmt: skip
     assert r.exit_code == 0, r.output
     assert "--at-sea:" in r.output
     doc = json.loads((out / "evaluation.json").read_text())
