@@ -144,8 +144,11 @@ KINDS: dict[str, EventKind] = {
             "identity-conflict", "one MMSI, two transmitters", ALERT, False, None,
             "one MMSI whose positions alternate between places no vessel could join in the time "
             "between them (at --max-speed, 50 kn): two transmitters, each of at least 10 reports,"
-            " whose reports switch at least 4 times out of reach of each other (not copies of one"
-            " another: a receiver's clock); ingest keeps the second's reports as vessel MMSI + "
+            " whose reports switch at least 4 times out of reach of each other, each with at "
+            "least 10 reports heard within 3 minutes of one of the other's (both on the air at "
+            "once, at AIS's longest reporting interval: one vessel's stale or mistimed report, or"
+            " its own track picked up again after a silence, is not), not copies of one another "
+            "(a receiver's clock); ingest keeps the second's reports as vessel MMSI + "
             "1000000000 (not dropped as outliers); one event per stretch in which both report (a "
             "silence of an hour ends one), naming both and their places",
             "Global Fishing Watch's segmenter (a report joins the segment it can be reached from;"

@@ -17,6 +17,7 @@ interference explaining it (docs/usage/watch.md)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ import pandas as pd
 import pytest
 
 from aisdati.evaluation.constructed import CONSTRUCTORS, Case, found
+from aisdati.events.anchorages import learned_from
 from aisdati.events.fleet import named
 from aisdati.events.kinds import KINDS
 from aisdati.tracks.reports import read_reports, read_vessels
@@ -89,7 +91,29 @@ def test_watch_finds_a_constructed_interference_as_detect_its_jumps_withdrawn(
         assert c["mmsi"] in case.mmsis and c["event_id"] not in set(live["event_id"])
 
 
-@pytest.mark.parametrize("name", ["gap heard", "gap quiet"])
+def test_watch_finds_a_constructed_port_visit_as_detect_given_the_ports(kitimat, tmp_path):
+    """A visit lasts 3 hours or more (3.5-12 h here): the watch finds it with a window longer
+    than the stay (`--window 16h`; the default 3 h holds none whole). Both are given the same
+    ports (`--ports`: the anchorages of the whole of Kitimat, as an analyst gives a port list),
+    which a few vessels' hours could not learn."""
+    reports, identity = read_reports(kitimat), read_vessels(kitimat)
+    made = (
+        CONSTRUCTORS["port-visit"](reports, identity, np.random.default_rng(s)) for s in range(40)
+    )
+    out, identity, case = next(m for m in made if m is not None)
+    hours = pd.Timedelta(hours=2)
+    cut = out[out["mmsi"].isin(case.mmsis) & (out["time"] >= case.start - hours)
+              & (out["time"] <= case.end + hours)]  # fmt: skip
+    ports = tmp_path / "ports.geojson"
+    ports.write_text(json.dumps(learned_from(reports).geojson()))
+    feed = as_nmea(cut, identity, tmp_path / "feed.nmea")
+    batch, live, _ = detected_and_watched(feed, tmp_path, "--speed", "1e9", "--window", "16h",
+                                          ports=ports)  # fmt: skip
+    assert found(case, batch) and found(case, live)
+    same_events(batch, live)
+
+
+@pytest.mark.parametrize("name", ["gap-heard", "gap-quiet"])
 def test_watch_says_a_gaps_coverage_as_detect(processed, tmp_path, name):
     reports, identity, case = written(processed, name, seed=0)
     batch, live, _ = detected_and_watched(as_nmea(reports, identity, tmp_path / "feed.nmea"),

@@ -63,19 +63,21 @@ def as_nmea(reports: pd.DataFrame, identity: pd.DataFrame, path: Path) -> Path:
 
 
 def detected_and_watched(
-    nmea: Path, folder: Path, *paced: str
+    nmea: Path, folder: Path, *paced: str, ports: Path | None = None
 ) -> tuple[pd.DataFrame, pd.DataFrame, list[dict]]:
     """The events of `nmea` by ingest + `detect --models none`; those `watch` ends with (its
     database's events table, `start_time`/`end_time` as `start`/`end`); and the changes the
     watch printed (`--json`), in order. Times as UTC timestamps. `paced`: `--speed X` (its
-    chunks of a few lines), else the file is read as fast as it goes (its chunks of 2,000)."""
+    chunks of a few lines), else the file is read as fast as it goes (its chunks of 2,000), and
+    any other option of the watch's; `ports`: `--ports` to both."""
     data, out, db = folder / "data", folder / "detect", folder / "watch.sqlite"
     got = run("ingest", "--input", nmea, "--roi", "none", "--min-points", "5", "--out", data)
     assert got.exit_code == 0, got.output
-    got = run("detect", "--data", data, "--models", "none", "--out", out)
+    given = ["--ports", ports] if ports is not None else []
+    got = run("detect", "--data", data, "--models", "none", *given, "--out", out)
     assert got.exit_code == 0, got.output
     batch = pd.read_parquet(out / "events.parquet")
-    got = run("watch", "--input", nmea, *paced, "--db", db, "--json")
+    got = run("watch", "--input", nmea, *paced, *given, "--db", db, "--json")
     assert got.exit_code == 0, got.output
     live = events(db).rename(columns={"start_time": "start", "end_time": "end"})
     for frame in (batch, live):
