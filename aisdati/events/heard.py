@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aisdati.events.reports import VesselReports
-from aisdati.geo import haversine_m
+from aisdati.geo import EARTH_RADIUS_M, haversine_m
 
 
 @dataclass(frozen=True)
@@ -36,11 +36,16 @@ class Heard:
 
     def near(self, start_s: float, end_s: float, places: np.ndarray, radius_m: float) -> np.ndarray:
         """[k] the rows reported from `start_s` to `end_s` within `radius_m` of any of
-        `places` ([m, 2] lon/lat)."""
+        `places` ([m, 2] lon/lat); the distance reckoned only for rows within `radius_m` in
+        latitude alone (a great circle is never shorter), the same rows at a coast's scale
+        in a fraction of the time."""
         a = np.searchsorted(self.time_s, start_s, side="left")
         b = np.searchsorted(self.time_s, end_s, side="right")
         rows = np.arange(a, b)
+        lons, lats = self.lon[rows], self.lat[rows]
+        band = np.degrees(radius_m / EARTH_RADIUS_M) * (1 + 1e-9) + 1e-9
         close = np.zeros(len(rows), bool)
         for lon, lat in np.reshape(places, (-1, 2)):
-            close |= haversine_m(lon, lat, self.lon[rows], self.lat[rows]) <= radius_m
+            may = np.flatnonzero(np.abs(lats - lat) <= band)  # (never nearer than in latitude)
+            close[may] |= haversine_m(lon, lat, lons[may], lats[may]) <= radius_m
         return rows[close]
