@@ -28,7 +28,7 @@ from aisdati.events.interference import gnss_interference
 from aisdati.events.kinds import KINDS
 from aisdati.events.port_visits import port_visits
 from aisdati.events.record import EVENT_COLUMNS
-from aisdati.events.reports import VesselReports, heard_as_one
+from aisdati.events.reports import VesselReports, concatenated, heard_as_one
 from aisdati.events.rules import EventRules
 from aisdati.tracks.schema import mmsi_of
 
@@ -63,12 +63,8 @@ class Fleet:
     def joined(self) -> Joined:
         """Every vessel's reports in one set of arrays (made once, when first asked)."""
         vs = list(self.vessels.values())
-        sizes = [len(v) for v in vs]
-        fields = ("time_s", "lon", "lat", "sog", "cog", "heading", "status", "track_id")
-        reports = VesselReports(
-            -1, *(np.concatenate([getattr(v, k) for v in vs] or [np.empty(0)]) for k in fields)
-        )
-        bounds = np.r_[0, np.cumsum(sizes, dtype=np.int64)]
+        reports = concatenated(vs, -1)
+        bounds = np.r_[0, np.cumsum([len(v) for v in vs], dtype=np.int64)]
         return Joined(reports, bounds, np.array([v.mmsi for v in vs], np.int64))
 
     @cached_property

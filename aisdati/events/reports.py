@@ -7,7 +7,7 @@ say where the previous report puts the vessel next."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
@@ -106,6 +106,17 @@ class VesselReports:
             return np.hypot(*self.moved.T) / np.maximum(self.dt_s, 1e-9) / KNOT_MPS
 
 
+ARRAYS = tuple(f.name for f in fields(VesselReports) if f.name != "mmsi")
+"""The per-report arrays of `VesselReports`."""
+
+
+def concatenated(parts: list[VesselReports], mmsi: int) -> VesselReports:
+    """The reports of several vessels one after another under `mmsi` (not sorted by time)."""
+    return VesselReports(
+        mmsi, **{n: np.concatenate([getattr(p, n) for p in parts] or [np.empty(0)]) for n in ARRAYS}
+    )
+
+
 def heard_as_one(parts: list[VesselReports], mmsi: int) -> VesselReports:
     """The reports of several vessel ids as one vessel `mmsi`, by time: what a receiver heard
     under one MMSI before ingest split its two transmitters (`aisdati.tracks.schema.
@@ -113,10 +124,9 @@ def heard_as_one(parts: list[VesselReports], mmsi: int) -> VesselReports:
     second transmitter's; heard as one, they are its jumps again."""
     if len(parts) == 1:
         return parts[0]
-    names = ("time_s", "lon", "lat", "sog", "cog", "heading", "status", "track_id")
-    joined = {n: np.concatenate([getattr(p, n) for p in parts]) for n in names}
-    order = np.argsort(joined["time_s"], kind="stable")
-    return VesselReports(mmsi, **{n: a[order] for n, a in joined.items()})
+    joined = concatenated(parts, mmsi)
+    order = np.argsort(joined.time_s, kind="stable")
+    return VesselReports(mmsi, **{n: getattr(joined, n)[order] for n in ARRAYS})
 
 
 def _per_second(unit: str) -> float:
